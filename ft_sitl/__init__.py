@@ -1,0 +1,6 @@
+"""ft-sitl: the FLYINGTRUST quadrotor benchmark as a PX4-style software-in-the-loop simulator."""
+
+__version__ = "0.1.0"
+
+G = 9.80665
+"""Standard gravity (m/s^2), used everywhere a weight or TWR is computed."""

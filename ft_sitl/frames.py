@@ -1,0 +1,79 @@
+"""The one place that converts between frames.
+
+ft-sitl works in ENU (world: x east, y north, z up) and FLU (body: x forward, y left,
+z up). MAVLink and PX4 use NED (world: x north, y east, z down) and FRD (body: x forward,
+y right, z down). Geodetic conversions (local <-> latitude/longitude/altitude) join this
+module with the MAVLink layer.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+# q_ned_enu: the fixed rotation that takes ENU vectors into NED (x<->y swap, z flip).
+_Q_NED_ENU = np.array([0.0, math.sqrt(0.5), math.sqrt(0.5), 0.0])
+# q_flu_frd: body FRD -> FLU is a rotation of pi about x.
+_Q_FLU_FRD = np.array([0.0, 1.0, 0.0, 0.0])
+
+
+def enu_to_ned(v_enu) -> np.ndarray:
+    """Vector(s) in ENU to NED. Works on shape (3,) or (..., 3)."""
+    v = np.asarray(v_enu, dtype=float)
+    return np.stack([v[..., 1], v[..., 0], -v[..., 2]], axis=-1)
+
+
+def ned_to_enu(v_ned) -> np.ndarray:
+    """Vector(s) in NED to ENU (the same swap is its own inverse)."""
+    return enu_to_ned(v_ned)
+
+
+def flu_to_frd(v_flu) -> np.ndarray:
+    """Body vector(s) in FLU to FRD."""
+    v = np.asarray(v_flu, dtype=float)
+    return np.stack([v[..., 0], -v[..., 1], -v[..., 2]], axis=-1)
+
+
+def frd_to_flu(v_frd) -> np.ndarray:
+    return flu_to_frd(v_frd)
+
+
+def yaw_enu_to_ned(yaw_enu: float) -> float:
+    """ENU yaw (counter-clockwise from east) to NED yaw (clockwise from north), wrapped."""
+    return wrap_pi(math.pi / 2.0 - yaw_enu)
+
+
+def yaw_ned_to_enu(yaw_ned: float) -> float:
+    return wrap_pi(math.pi / 2.0 - yaw_ned)
+
+
+def wrap_pi(a: float) -> float:
+    """Wrap an angle to [-pi, pi)."""
+    return (a + math.pi) % (2.0 * math.pi) - math.pi
+
+
+def _qmul(a, b):
+    w1, x1, y1, z1 = a
+    w2, x2, y2, z2 = b
+    return np.array(
+        [
+            w1 * w2 - x1 * x2 - y1 * y2 - z1 * z2,
+            w1 * x2 + x1 * w2 + y1 * z2 - z1 * y2,
+            w1 * y2 - x1 * z2 + y1 * w2 + z1 * x2,
+            w1 * z2 + x1 * y2 - y1 * x2 + z1 * w2,
+        ]
+    )
+
+
+def q_enu_flu_to_ned_frd(q_world_body) -> np.ndarray:
+    """Attitude q_enu_flu (ENU world, FLU body) to q_ned_frd (PX4's attitude quaternion)."""
+    q = _qmul(_qmul(_Q_NED_ENU, np.asarray(q_world_body, dtype=float)), _Q_FLU_FRD)
+    return q if q[0] >= 0 else -q
+
+
+def q_ned_frd_to_enu_flu(q_ned_frd) -> np.ndarray:
+    q_enu_ned = _Q_NED_ENU * np.array([1.0, -1.0, -1.0, -1.0])
+    q_frd_flu = _Q_FLU_FRD * np.array([1.0, -1.0, -1.0, -1.0])
+    q = _qmul(_qmul(q_enu_ned, np.asarray(q_ned_frd, dtype=float)), q_frd_flu)
+    return q if q[0] >= 0 else -q
