@@ -4,3 +4,7 @@ __version__ = "0.1.0"
 
 G = 9.80665
 """Standard gravity (m/s^2), used everywhere a weight or TWR is computed."""
+
+from ft_sitl import _jit_cache  # noqa: E402
+
+JIT_CACHE_DIR = _jit_cache.configure()

@@ -1,0 +1,36 @@
+"""Where numba keeps compiled kernels, keyed by the kernels' source.
+
+numba invalidates a cached function only when its own file changes, not when a kernel it
+calls from another module does: run_steps (lockstep.py) inlines the controller
+(cascade.py) and the plant (dynamics.py), and would keep stale machine code after an
+edit of either. So every kernel caches into one directory named after a hash of all
+kernel sources; any edit starts a fresh cache. Set NUMBA_CACHE_DIR to move the root.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import os
+from pathlib import Path
+
+_KERNEL_MODULES = (
+    "physics/quaternion.py",
+    "physics/dynamics.py",
+    "autopilot/cascade.py",
+    "lockstep.py",
+)
+
+
+def configure() -> Path:
+    import numba
+
+    pkg = Path(__file__).resolve().parent
+    h = hashlib.sha256()
+    for rel in _KERNEL_MODULES:
+        h.update((pkg / rel).read_bytes())
+    root = os.environ.get("NUMBA_CACHE_DIR") or os.path.join(
+        os.environ.get("XDG_CACHE_HOME") or os.path.expanduser("~/.cache"), "ft-sitl", "numba"
+    )
+    path = Path(root) / h.hexdigest()[:16]
+    numba.config.CACHE_DIR = str(path)
+    return path

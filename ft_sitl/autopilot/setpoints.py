@@ -1,0 +1,153 @@
+"""Offboard setpoints in the forms PX4 accepts, validated before they reach the cascade.
+
+Every constructor takes world ENU / body FLU values in SI units (the MAVLink layer
+converts from NED/FRD in :mod:`ft_sitl.frames`). A value that is required and not finite
+raises :class:`SetpointError`; the caller keeps flying its last valid setpoint.
+Optional feed-forward terms left out (None) are "not controlled", PX4's NaN.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+from ft_sitl.autopilot import cascade as c
+
+
+class SetpointError(ValueError):
+    """A setpoint with a missing, non-finite or out-of-range value."""
+
+
+def _vec(name: str, v, *, required: bool, allow_nan: bool = False) -> np.ndarray:
+    if v is None:
+        if required:
+            raise SetpointError(f"{name}: required")
+        return np.full(3, np.nan)
+    try:
+        arr = np.asarray(v, dtype=float).reshape(-1)
+    except (TypeError, ValueError):
+        raise SetpointError(f"{name}: {v!r} is not a 3-vector of numbers") from None
+    if arr.shape != (3,):
+        raise SetpointError(f"{name}: needs 3 components, got {arr.size}")
+    bad = np.isinf(arr) | (np.isnan(arr) if not allow_nan else np.zeros(3, bool))
+    if bad.any():
+        raise SetpointError(f"{name}: {arr.tolist()} has non-finite component(s)")
+    if required and np.isnan(arr).all():
+        raise SetpointError(f"{name}: all components are NaN")
+    return arr
+
+
+def _scalar(name: str, v, *, lo: float = -math.inf, hi: float = math.inf) -> float:
+    if v is None:
+        return math.nan
+    if isinstance(v, bool):
+        raise SetpointError(f"{name}: {v!r} is not a number")
+    try:
+        f = float(v)
+    except (TypeError, ValueError):
+        raise SetpointError(f"{name}: {v!r} is not a number") from None
+    if not math.isfinite(f):
+        raise SetpointError(f"{name}: {f} is not finite")
+    if not lo <= f <= hi:
+        raise SetpointError(f"{name}: {f} is outside [{lo}, {hi}]")
+    return f
+
+
+@dataclass(frozen=True)
+class Setpoint:
+    """A packed, validated setpoint row for the cascade (see cascade.SP_*)."""
+
+    row: np.ndarray
+
+    @property
+    def kind(self) -> int:
+        return int(self.row[c.SP_KIND])
+
+    # --- constructors --------------------------------------------------------------
+    @staticmethod
+    def _base(kind: int) -> np.ndarray:
+        row = np.full(c.N_SP, np.nan)
+        row[c.SP_KIND] = kind
+        return row
+
+    @classmethod
+    def off(cls) -> Setpoint:
+        """Motors stopped (disarmed)."""
+        return cls(cls._base(c.KIND_OFF))
+
+    @classmethod
+    def idle(cls) -> Setpoint:
+        """Armed on the ground: rotors at idle speed."""
+        return cls(cls._base(c.KIND_IDLE))
+
+    @classmethod
+    def trajectory(cls, position=None, velocity=None, acceleration=None, yaw=None,
+                   yaw_rate=None) -> Setpoint:
+        """PX4 trajectory setpoint: per axis, position wins, then velocity, then acceleration.
+
+        Components may be NaN individually (that axis not controlled at that level), as
+        in PX4's trajectory_setpoint; at least one of the three must control each axis.
+        """
+        row = cls._base(c.KIND_TRAJECTORY)
+        pos = _vec("position", position, required=False, allow_nan=True)
+        vel = _vec("velocity", velocity, required=False, allow_nan=True)
+        acc = _vec("acceleration", acceleration, required=False, allow_nan=True)
+        uncontrolled = np.isnan(pos) & np.isnan(vel) & np.isnan(acc)
+        if uncontrolled.any():
+            axes = ", ".join("xyz"[i] for i in np.flatnonzero(uncontrolled))
+            raise SetpointError(f"trajectory: axis {axes} has no position, velocity or "
+                                "acceleration setpoint")
+        row[c.SP_POS : c.SP_POS + 3] = pos
+        row[c.SP_VEL : c.SP_VEL + 3] = vel
+        row[c.SP_ACC : c.SP_ACC + 3] = acc
+        row[c.SP_YAW] = _scalar("yaw", yaw)
+        row[c.SP_YAWRATE] = _scalar("yaw_rate", yaw_rate)
+        return cls(row)
+
+    @classmethod
+    def position(cls, position, velocity=None, acceleration=None, yaw=None,
+                 yaw_rate=None) -> Setpoint:
+        """Position with optional velocity / acceleration feed-forward."""
+        _vec("position", position, required=True)
+        return cls.trajectory(position, velocity, acceleration, yaw, yaw_rate)
+
+    @classmethod
+    def velocity(cls, velocity, acceleration=None, yaw=None, yaw_rate=None) -> Setpoint:
+        _vec("velocity", velocity, required=True)
+        return cls.trajectory(None, velocity, acceleration, yaw, yaw_rate)
+
+    @classmethod
+    def acceleration(cls, acceleration, yaw=None, yaw_rate=None) -> Setpoint:
+        _vec("acceleration", acceleration, required=True)
+        return cls.trajectory(None, None, acceleration, yaw, yaw_rate)
+
+    @classmethod
+    def attitude(cls, q_world_body, thrust: float) -> Setpoint:
+        """Attitude quaternion (w, x, y, z; ENU/FLU) and normalised collective thrust 0..1."""
+        row = cls._base(c.KIND_ATTITUDE)
+        try:
+            q = np.asarray(q_world_body, dtype=float).reshape(-1)
+        except (TypeError, ValueError):
+            raise SetpointError(f"attitude: {q_world_body!r} is not a quaternion") from None
+        if q.shape != (4,) or not np.isfinite(q).all():
+            raise SetpointError(f"attitude: {q.tolist()} is not a finite quaternion (w, x, y, z)")
+        nq = float(np.linalg.norm(q))
+        if abs(nq - 1.0) > 1e-3:
+            raise SetpointError(f"attitude: quaternion norm {nq:.6f} is not 1")
+        row[c.SP_Q : c.SP_Q + 4] = q / nq
+        row[c.SP_THRUST] = _scalar("thrust", thrust, lo=0.0, hi=1.0)
+        if math.isnan(row[c.SP_THRUST]):
+            raise SetpointError("thrust: required")
+        return cls(row)
+
+    @classmethod
+    def body_rates(cls, rates_body, thrust: float) -> Setpoint:
+        """Body rates (rad/s, FLU) and normalised collective thrust 0..1."""
+        row = cls._base(c.KIND_RATES)
+        row[c.SP_RATES : c.SP_RATES + 3] = _vec("rates", rates_body, required=True)
+        row[c.SP_THRUST] = _scalar("thrust", thrust, lo=0.0, hi=1.0)
+        if math.isnan(row[c.SP_THRUST]):
+            raise SetpointError("thrust: required")
+        return cls(row)

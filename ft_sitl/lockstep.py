@@ -1,0 +1,179 @@
+"""Lockstep simulation of a batch of vehicles: the virtual flight controller's cascade and
+the plant, stepped together on one integer-microsecond clock.
+
+This is what the in-process mission runner and the MAVLink layer build on: the
+controller computes rotor commands from the current state, the plant advances by one
+physics step, and nothing else runs in between. A single vehicle is a batch of one.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from dataclasses import dataclass
+
+import numpy as np
+from numba import njit
+
+from ft_sitl.autopilot import cascade as c
+from ft_sitl.autopilot.gains import build_gains, mixer
+from ft_sitl.autopilot.params import ParamSet
+from ft_sitl.autopilot.setpoints import Setpoint
+from ft_sitl.physics import dynamics as d
+from ft_sitl.physics.platform import Platform
+from ft_sitl.physics.quaternion import qfrom_euler, qto_euler
+
+
+@njit(cache=True)
+def run_steps(n_steps, dt, x, sp, gn, a, cs, prm, alloc, env, status, w_cmd, rec, rec_every):
+    """Advance every vehicle n_steps physics steps; record the state every rec_every steps."""
+    for i in range(x.shape[0]):
+        xi = x[i]
+        for k in range(n_steps):
+            c.controller_step_one(xi, sp[i], gn[i], a[i], cs[i], dt, w_cmd[i])
+            d.plant_step_one(xi, w_cmd[i], prm[i], alloc[i], env[i], status[i], dt)
+            if rec_every > 0 and (k + 1) % rec_every == 0:
+                rec[(k + 1) // rec_every - 1, i, :] = xi
+
+
+@dataclass
+class Recording:
+    """States sampled during a run: t_s (K,), x (K, N, nx)."""
+
+    t_s: np.ndarray
+    x: np.ndarray
+
+    def positions(self, i: int = 0) -> np.ndarray:
+        return self.x[:, i, d.X_POS : d.X_POS + 3]
+
+    def eulers(self, i: int = 0) -> np.ndarray:
+        return np.array([qto_euler(q) for q in self.x[:, i, d.X_QUAT : d.X_QUAT + 4]])
+
+    def omegas(self, i: int = 0) -> np.ndarray:
+        return self.x[:, i, d.X_OMEGA : d.X_OMEGA + 3]
+
+
+class Simulation:
+    """N vehicles (any catalog or user platforms of one rotor count) flown in lockstep."""
+
+    def __init__(
+        self,
+        platforms: Platform | Sequence[Platform],
+        *,
+        params: ParamSet | Sequence[ParamSet] | None = None,
+        physics_hz: int = 1000,
+    ):
+        if isinstance(platforms, Platform):
+            platforms = [platforms]
+        self.platforms = list(platforms)
+        if not isinstance(physics_hz, int) or physics_hz <= 0 or 1_000_000 % physics_hz:
+            raise ValueError(
+                f"physics_hz: {physics_hz!r} must be a positive integer dividing 1,000,000 "
+                "(the clock counts whole microseconds)"
+            )
+        self.dt_us = 1_000_000 // physics_hz
+        self.dt = self.dt_us * 1e-6
+        n = len(self.platforms)
+        if params is None:
+            params = ParamSet()
+        self.params = [params] * n if isinstance(params, ParamSet) else list(params)
+        if len(self.params) != n:
+            raise ValueError(f"params: {len(self.params)} parameter sets for {n} vehicles")
+        self.plant = d.PlantBatch.from_platforms(self.platforms)
+        self.n_rotors = self.platforms[0].n_rotors
+        self.mix = np.stack([mixer(p) for p in self.platforms])
+        self.sp = np.stack([Setpoint.off().row for _ in range(n)])
+        self.ctrl = np.zeros((n, c.N_CTRL))
+        self.w_cmd = np.zeros((n, self.n_rotors))
+        self.gains = np.zeros((n, c.N_GAINS))
+        self.refresh_gains()
+        self.time_us = 0
+        self.steps = 0
+
+    # --- configuration ------------------------------------------------------------
+    def refresh_gains(self) -> None:
+        """Rebuild gain rows after parameters changed."""
+        for i, (p, ps) in enumerate(zip(self.platforms, self.params)):
+            self.gains[i] = build_gains(p, ps, self.dt)
+
+    @property
+    def n(self) -> int:
+        return len(self.platforms)
+
+    @property
+    def x(self) -> np.ndarray:
+        return self.plant.x
+
+    def place(self, i: int, position, yaw: float = 0.0, *, ground_z: float | None = None):
+        """Put vehicle i at rest at a position (ENU, m) and heading (rad)."""
+        x = self.plant.x[i]
+        x[:] = 0.0
+        x[d.X_POS : d.X_POS + 3] = position
+        x[d.X_QUAT : d.X_QUAT + 4] = qfrom_euler(0.0, 0.0, yaw)
+        x[d.X_ROTOR :] = 0.0
+        if ground_z is not None:
+            self.plant.env[i, d.E_GROUND_Z] = ground_z
+        self.ctrl[i] = 0.0
+        self.plant.status[i] = 0.0
+
+    def start_hovering(self, i: int, position, yaw: float = 0.0) -> None:
+        """Put vehicle i in the air at hover (rotors at hover speed) holding position."""
+        self.place(i, position, yaw)
+        self.plant.x[i, d.X_ROTOR :] = self.platforms[i].hover_rotor_speed_rad_s
+        self.set_setpoint(i, Setpoint.position(position, yaw=yaw))
+
+    def set_setpoint(self, i: int, sp: Setpoint) -> None:
+        self.sp[i] = sp.row
+
+    # --- running -----------------------------------------------------------------
+    def step(self, n_steps: int = 1, record_every: int = 0) -> np.ndarray | None:
+        if n_steps < 0:
+            raise ValueError("n_steps must be >= 0")
+        rec = np.empty((n_steps // record_every if record_every else 0, self.n, self.x.shape[1]))
+        run_steps(
+            n_steps, self.dt, self.plant.x, self.sp, self.gains, self.mix, self.ctrl,
+            self.plant.prm, self.plant.alloc, self.plant.env, self.plant.status, self.w_cmd,
+            rec, record_every,
+        )
+        self.time_us += n_steps * self.dt_us
+        self.steps += n_steps
+        return rec if record_every else None
+
+    def run(self, duration_s: float, record_hz: float = 0.0) -> Recording | None:
+        """Run for duration_s of simulated time, optionally sampling the state."""
+        n_steps = round(duration_s / self.dt)
+        every = round(1.0 / (record_hz * self.dt)) if record_hz > 0 else 0
+        t0 = self.time_us * 1e-6
+        rec = self.step(n_steps, every)
+        if rec is None:
+            return None
+        t = t0 + self.dt * every * np.arange(1, rec.shape[0] + 1)
+        return Recording(t, rec)
+
+    # --- read-outs ----------------------------------------------------------------
+    def position(self, i: int = 0) -> np.ndarray:
+        return self.plant.x[i, d.X_POS : d.X_POS + 3].copy()
+
+    def velocity(self, i: int = 0) -> np.ndarray:
+        return self.plant.x[i, d.X_VEL : d.X_VEL + 3].copy()
+
+    def attitude(self, i: int = 0) -> np.ndarray:
+        return self.plant.x[i, d.X_QUAT : d.X_QUAT + 4].copy()
+
+    def euler(self, i: int = 0) -> np.ndarray:
+        return qto_euler(self.attitude(i))
+
+    def rotor_speeds(self, i: int = 0) -> np.ndarray:
+        return self.plant.x[i, d.X_ROTOR :].copy()
+
+    def saturation_fraction(self, i: int = 0) -> float:
+        """Fraction of controller steps so far in which any rotor sat at a limit."""
+        return float(self.ctrl[i, c.C_SAT_STEPS] / self.steps) if self.steps else 0.0
+
+    def on_ground(self, i: int = 0) -> bool:
+        return bool(self.plant.status[i, d.S_CONTACT])
+
+    def max_impact_speed(self, i: int = 0) -> float:
+        return float(self.plant.status[i, d.S_IMPACT_MAX])
+
+    def energy_j(self, i: int = 0) -> float:
+        return float(self.plant.status[i, d.S_ENERGY])
