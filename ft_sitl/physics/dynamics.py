@@ -9,7 +9,8 @@ State of one vehicle (world ENU, body FLU), a fixed-layout float64 row:
     [13:]   w_rotor     rotor speeds (rad/s), one per rotor in layout order
 
 A step is a sequence of named stages (ArduPilot SIM_Motor / PX4 SIH style):
-motors (first-order lag, separate spin-up/spin-down constants, saturation) -> forces and
+motors (first-order lag, separate spin-up/spin-down constants, saturation to
+[idle, max] while commanded, stopped for a zero command) -> forces and
 torques (c_T w^2, c_M w^2 through the allocation matrix, rotor and body drag, gravity)
 -> equations of motion (semi-implicit Euler, exact quaternion exponential, renormalised)
 -> ground contact. A single vehicle is a batch of one: there is no second copy of
@@ -129,7 +130,9 @@ def plant_step_one(x, w_cmd, prm, alloc, env, status, dt):
     power = 0.0
     for i in range(n):
         c = w_cmd[i]
-        if not (c >= wmin):  # also catches NaN: a NaN command idles the motor
+        if not (c > 0.0):  # zero, negative or NaN: the ESC stops the motor (disarmed)
+            c = 0.0
+        elif c < wmin:  # armed: never below idle
             c = wmin
         elif c > wmax:
             c = wmax

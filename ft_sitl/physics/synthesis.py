@@ -28,7 +28,7 @@ import math
 import numpy as np
 
 from ft_sitl import G
-from ft_sitl.physics.layouts import allocation_matrix, get_layout, max_axis_torques
+from ft_sitl.physics.layouts import LAYOUTS, allocation_matrix, get_layout, max_axis_torques
 from ft_sitl.physics.platform import Platform, PlatformError, validate
 
 RHO_AIR = 1.225  # kg/m^3, ISA sea level
@@ -74,6 +74,10 @@ def synthesise(
             raise PlatformError(f"{where}: {key}: {v!r} is not a finite number")
         if not lo <= v <= hi:
             raise PlatformError(f"{where}: {key}: {v!r} is outside the allowed range [{lo}, {hi}]")
+    if layout not in LAYOUTS:
+        raise PlatformError(
+            f"{where}: layout: {layout!r} is not one of {', '.join(sorted(LAYOUTS))}"
+        )
     lay = get_layout(layout)
     n = lay.n_rotors
     weight = mass_kg * G

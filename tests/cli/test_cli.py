@@ -1,0 +1,103 @@
+"""The ft-sitl command as a user runs it: the installed console script, real processes."""
+
+import json
+import shutil
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+EXE = shutil.which("ft-sitl", path=str(Path(sys.executable).parent))
+
+
+def run(*args, check=True):
+    assert EXE, "the ft-sitl console script is not installed next to this Python"
+    proc = subprocess.run([EXE, *args], capture_output=True, text=True, timeout=300)
+    if check:
+        assert proc.returncode == 0, proc.stderr
+    return proc
+
+
+def test_help_lists_every_subcommand():
+    out = run("--help").stdout
+    for cmd in ("demo", "platforms", "params"):
+        assert cmd in out
+    for sub in ("list", "show", "check", "generate"):
+        assert sub in run("platforms", "--help").stdout
+        assert run("platforms", sub, "--help").stdout.startswith("usage: ft-sitl platforms")
+    assert "--json" in run("platforms", "show", "--help").stdout
+
+
+def test_platforms_list_json_has_the_36_with_recomputed_indicators(table1_rows):
+    rows = json.loads(run("platforms", "list", "--json").stdout)
+    assert [r["name"] for r in rows] == [r["name"] for r in table1_rows]
+    for r, t in zip(rows, table1_rows):
+        assert round(r["twr_max"], 1) == float(t["twr_max"])
+        assert round(r["alpha_z_max_rad_s2"], 1) == float(t["alpha_z_max_rad_s2"])
+    virt = json.loads(run("platforms", "list", "--json", "--category", "virtual").stdout)
+    assert len(virt) == 18
+
+
+def test_platforms_show_text_and_json():
+    out = run("platforms", "show", "0.98kg-EGO Planner DIY").stdout
+    assert "TWR_max 4.600" in out and "inertia_kg_m2" in out
+    data = json.loads(run("platforms", "show", "0.98kg-EGO Planner DIY", "--json").stdout)
+    assert data["physical"]["mass_kg"] == 0.98
+    assert round(data["indicators"]["alpha_xy_max_rad_s2"], 1) == 1083.3
+
+
+def test_unknown_platform_is_a_one_line_error_with_suggestions():
+    proc = run("platforms", "show", "0.98kg-EGO Planer DIY", check=False)
+    assert proc.returncode == 2
+    assert proc.stderr.count("\n") == 1
+    assert "unknown platform" in proc.stderr and "0.98kg-EGO Planner DIY" in proc.stderr
+
+
+def test_check_and_use_a_user_platform_file(tmp_path):
+    f = tmp_path / "mine.yaml"
+    f.write_text("platform:\n  name: mine\n  layout: quad_plus\n  mass_kg: 2.0\n"
+                 "  twr_max: 2.5\n  alpha_xy_max_rad_s2: 150\n  alpha_z_max_rad_s2: 9\n")
+    assert "ok  mine" in run("platforms", "check", str(f)).stdout
+    rows = json.loads(run("platforms", "list", "--json", "--platform-file", str(f)).stdout)
+    assert rows[-1]["name"] == "mine" and rows[-1]["category"] == "user"
+    bad = tmp_path / "bad.toml"
+    bad.write_text('[platform]\nname = "x"\nlayout = "quad_x"\nmass_kg = 1\ntwr_max = 3\n'
+                   'alpha_xy_max_rad_s2 = 100\nalpha_z_max_rad_s2 = 8\ncolour = "red"\n')
+    proc = run("platforms", "check", str(bad), check=False)
+    assert proc.returncode == 2 and "'colour'" in proc.stderr and str(bad) in proc.stderr
+
+
+def test_generate_is_reproducible_and_writes_a_loadable_file(tmp_path):
+    a = run("platforms", "generate", "--count", "3", "--seed", "4", "--json").stdout
+    b = run("platforms", "generate", "--count", "3", "--seed", "4", "--json").stdout
+    assert a == b and len(json.loads(a)) == 3
+    out = tmp_path / "gen.toml"
+    run("platforms", "generate", "--count", "3", "--seed", "4", "--out", str(out))
+    assert "ok" in run("platforms", "check", str(out)).stdout
+    proc = run("platforms", "generate", "--out", str(out), check=False)
+    assert proc.returncode == 2 and "exists" in proc.stderr
+
+
+def test_params_list_json():
+    rows = {r["name"]: r for r in json.loads(run("params", "list", "--json").stdout)}
+    assert rows["MPC_XY_VEL_MAX"]["default"] == 4.0
+    assert rows["MPC_TILTMAX_AIR"]["max"] == 89.0
+
+
+def test_demo_flies_and_lands(tmp_path):
+    png = tmp_path / "demo.png"
+    data = json.loads(run("demo", "--json", "--plot", str(png)).stdout)
+    assert data["landed"] is True
+    names = [p["name"] for p in data["phases"]]
+    assert names == ["arm", "takeoff", "leg", "turn", "descend", "disarm"]
+    leg = data["phases"][2]
+    assert leg["end_position_enu_m"][0] == pytest.approx(8.0, abs=0.3)
+    assert leg["max_speed_m_s"] <= 4.0 * 1.05
+    assert data["max_impact_speed_m_s"] < 1.0
+    assert png.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+
+
+def test_bad_arguments_exit_2():
+    assert run("platforms", "generate", "--count", "zero", check=False).returncode == 2
+    assert run("nonsense", check=False).returncode == 2

@@ -1,0 +1,17 @@
+from pathlib import Path
+
+import pytest
+
+SHARED = Path(__file__).resolve().parents[1].parent / "shared"
+TABLE1 = SHARED / "spec" / "platforms_table1.csv"
+
+
+@pytest.fixture(scope="session")
+def table1_rows():
+    """The paper's Table 1, as shipped in shared/spec (the source the catalog was built from)."""
+    import csv
+
+    if not TABLE1.exists():
+        pytest.fail(f"{TABLE1} is missing: the tests check the catalog against the paper's table")
+    with open(TABLE1, newline="", encoding="utf-8") as fh:
+        return list(csv.DictReader(fh))
