@@ -175,5 +175,9 @@ class Simulation:
     def max_impact_speed(self, i: int = 0) -> float:
         return float(self.plant.status[i, d.S_IMPACT_MAX])
 
+    def hard_impact(self, i: int = 0) -> bool:
+        """True once vehicle i has hit the ground faster than HARD_IMPACT_SPEED_M_S."""
+        return self.max_impact_speed(i) > d.HARD_IMPACT_SPEED_M_S
+
     def energy_j(self, i: int = 0) -> float:
         return float(self.plant.status[i, d.S_ENERGY])

@@ -63,6 +63,10 @@ N_ENV = 4
 S_CONTACT, S_IMPACT_LAST, S_IMPACT_MAX, S_ENERGY, S_SPECIFIC_FORCE = 0, 1, 2, 3, 4
 N_STATUS = 7  # specific force (accelerometer, body FLU) occupies 4:7
 
+HARD_IMPACT_SPEED_M_S = 2.0
+"""Vertical touchdown speed above which a ground contact counts as a hard impact (crash):
+typical landing gear of 0.5-5 kg multirotors is rated for 1-2 m/s."""
+
 
 def plant_params(p: Platform) -> np.ndarray:
     """Pack a platform into the kernel's parameter row."""

@@ -199,3 +199,32 @@ def test_normalised_gain_mode_flies_a_mid_range_platform():
     sim.run(12.0)
     assert sim.position(0) == pytest.approx([1.0, 0.0, 2.0], abs=0.05)
     assert sim.euler(0)[2] == pytest.approx(0.5, abs=0.02)
+
+
+def test_landing_is_soft_and_a_motor_cut_in_flight_is_a_hard_impact():
+    sim = Simulation([catalog()["2.50kg-HLY"]] * 2)
+    for i in range(2):
+        sim.start_hovering(i, [0.0, 0.0, 3.0])
+    sim.set_setpoint(0, Setpoint.velocity([0.0, 0.0, -0.8], yaw=0.0))
+    sim.set_setpoint(1, Setpoint.off())
+    sim.run(6.0)
+    assert sim.on_ground(0) and sim.on_ground(1)
+    assert sim.max_impact_speed(0) == pytest.approx(0.8, abs=0.1)
+    assert not sim.hard_impact(0)
+    assert sim.hard_impact(1) and sim.max_impact_speed(1) > 6.0
+    assert sim.position(1)[2] == 0.0
+
+
+def test_a_plus_layout_user_platform_flies(tmp_path):
+    from ft_sitl.physics.catalog import load_platform_file
+
+    f = tmp_path / "plus.toml"
+    f.write_text('[platform]\nname = "plus"\nlayout = "quad_plus"\nmass_kg = 1.3\n'
+                 "twr_max = 2.8\nalpha_xy_max_rad_s2 = 180\nalpha_z_max_rad_s2 = 12\n")
+    (p,) = load_platform_file(f)
+    sim = Simulation(p)
+    sim.place(0, [0.0, 0.0, 0.0])
+    sim.set_setpoint(0, Setpoint.position([2.0, -1.0, 2.0], yaw=1.0))
+    sim.run(12.0)
+    assert sim.position(0) == pytest.approx([2.0, -1.0, 2.0], abs=0.03)
+    assert sim.euler(0)[2] == pytest.approx(1.0, abs=0.02)
