@@ -27,19 +27,32 @@ from ft_sitl.autopilot.params import ParamSet
 from ft_sitl.physics.platform import Platform
 
 
+# gain-row entries that are a PX4 parameter as it is (units already SI)
+_DIRECT = {
+    c.G_KP_XY: "MPC_XY_P",
+    c.G_KP_Z: "MPC_Z_P",
+    c.G_KV_XY_P: "MPC_XY_VEL_P_ACC",
+    c.G_KV_XY_I: "MPC_XY_VEL_I_ACC",
+    c.G_KV_XY_D: "MPC_XY_VEL_D_ACC",
+    c.G_KV_Z_P: "MPC_Z_VEL_P_ACC",
+    c.G_KV_Z_I: "MPC_Z_VEL_I_ACC",
+    c.G_KV_Z_D: "MPC_Z_VEL_D_ACC",
+    c.G_KATT_R: "MC_ROLL_P",
+    c.G_KATT_P: "MC_PITCH_P",
+    c.G_VMAX_XY: "MPC_XY_VEL_MAX",
+    c.G_VMAX_UP: "MPC_Z_VEL_MAX_UP",
+    c.G_VMAX_DN: "MPC_Z_VEL_MAX_DN",
+    c.G_AMAX_XY: "MPC_ACC_HOR_MAX",
+    c.G_AMAX_UP: "MPC_ACC_UP_MAX",
+    c.G_AMAX_DN: "MPC_ACC_DOWN_MAX",
+}
+
+
 def build_gains(platform: Platform, params: ParamSet, dt: float) -> np.ndarray:
     gn = np.zeros(c.N_GAINS)
-    gn[c.G_KP_XY] = params["MPC_XY_P"]
-    gn[c.G_KP_Z] = params["MPC_Z_P"]
-    gn[c.G_KV_XY_P] = params["MPC_XY_VEL_P_ACC"]
-    gn[c.G_KV_XY_I] = params["MPC_XY_VEL_I_ACC"]
-    gn[c.G_KV_XY_D] = params["MPC_XY_VEL_D_ACC"]
-    gn[c.G_KV_Z_P] = params["MPC_Z_VEL_P_ACC"]
-    gn[c.G_KV_Z_I] = params["MPC_Z_VEL_I_ACC"]
-    gn[c.G_KV_Z_D] = params["MPC_Z_VEL_D_ACC"]
+    for index, name in _DIRECT.items():
+        gn[index] = params[name]
     yaw_w = params["MC_YAW_WEIGHT"]
-    gn[c.G_KATT_R] = params["MC_ROLL_P"]
-    gn[c.G_KATT_P] = params["MC_PITCH_P"]
     # PX4 divides the yaw gain by the yaw weight, which the reduced attitude scales down
     gn[c.G_KATT_Y] = params["MC_YAW_P"] / yaw_w if yaw_w > 1e-3 else 0.0
     gn[c.G_YAW_W] = yaw_w
@@ -60,12 +73,6 @@ def build_gains(platform: Platform, params: ParamSet, dt: float) -> np.ndarray:
             params["MC_RR_INT_LIM"], params["MC_PR_INT_LIM"], params["MC_YR_INT_LIM"],
         ]
         gn[c.G_TSCALE : c.G_TSCALE + 3] = platform.max_torques()
-    gn[c.G_VMAX_XY] = params["MPC_XY_VEL_MAX"]
-    gn[c.G_VMAX_UP] = params["MPC_Z_VEL_MAX_UP"]
-    gn[c.G_VMAX_DN] = params["MPC_Z_VEL_MAX_DN"]
-    gn[c.G_AMAX_XY] = params["MPC_ACC_HOR_MAX"]
-    gn[c.G_AMAX_UP] = params["MPC_ACC_UP_MAX"]
-    gn[c.G_AMAX_DN] = params["MPC_ACC_DOWN_MAX"]
     gn[c.G_TILT_MAX] = math.radians(params["MPC_TILTMAX_AIR"])
     gn[c.G_FMIN] = params["MPC_THR_MIN"] * platform.thrust_max_n
     gn[c.G_FMAX] = params["MPC_THR_MAX"] * platform.thrust_max_n
