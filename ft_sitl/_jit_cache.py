@@ -14,6 +14,7 @@ import os
 from pathlib import Path
 
 _KERNEL_MODULES = (
+    "__init__.py",  # G is frozen into the kernels
     "physics/quaternion.py",
     "physics/dynamics.py",
     "autopilot/cascade.py",
@@ -33,4 +34,23 @@ def configure() -> Path:
     )
     path = Path(root) / h.hexdigest()[:16]
     numba.config.CACHE_DIR = str(path)
+    _prune(Path(root), keep=path)
     return path
+
+
+def _prune(root: Path, keep: Path, max_age_s: float = 14 * 86400) -> None:
+    """Remove cache directories of other kernel versions unused for two weeks."""
+    import shutil
+    import time
+
+    try:
+        entries = list(root.iterdir())
+    except OSError:
+        return
+    now = time.time()
+    for entry in entries:
+        try:
+            if entry != keep and entry.is_dir() and now - entry.stat().st_mtime > max_age_s:
+                shutil.rmtree(entry, ignore_errors=True)
+        except OSError:
+            continue

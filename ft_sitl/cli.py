@@ -135,9 +135,14 @@ def cmd_demo(args) -> int:
     from ft_sitl.demo import plot_demo, run_demo
 
     p = _registry(args).get(args.platform)
+    if args.plot and not args.plot.parent.is_dir():
+        raise CliError(f"--plot: directory {args.plot.parent} does not exist")
     result = run_demo(p)
     if args.plot:
-        plot_demo(result, str(args.plot))
+        try:
+            plot_demo(result, str(args.plot))
+        except (OSError, ValueError) as exc:
+            raise CliError(f"--plot: cannot write {args.plot}: {exc}") from None
     if args.json:
         print(json.dumps(result.summary(), indent=2))
         return 0

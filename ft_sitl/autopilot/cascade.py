@@ -42,8 +42,8 @@ G_RATE_P, G_RATE_I, G_RATE_D, G_RATE_ILIM, G_TSCALE = 12, 15, 18, 21, 24
     G_FMIN, G_FMAX,
 ) = range(27, 36)
 G_RATE_MAX = 36
-G_TROT_MIN, G_TROT_MAX, G_CT, G_MASS, G_POS_DIV = 39, 40, 41, 42, 43
-N_GAINS = 44
+G_TROT_MIN, G_TROT_MAX, G_CT, G_MASS, G_POS_DIV, G_AIRMODE = 39, 40, 41, 42, 43, 44
+N_GAINS = 45
 
 # --- controller state row ---------------------------------------------------------------
 C_VEL_INT, C_RATE_INT, C_RATE_PREV, C_VEL_PREV, C_ACC_EST = 0, 3, 6, 9, 12
@@ -284,9 +284,11 @@ def rate_control(x, gn, cs, dt):
 def allocate(f, tx, ty, tz, a, gn, cs, w_out):
     """Rotor thrusts from collective and torques with sequential desaturation.
 
-    1. Collective + roll/pitch. If some rotor leaves [T_min, T_max], shift the collective
-       (roll/pitch exact, thrust gives way: the headroom rule). If the roll/pitch spread
-       alone does not fit, scale roll/pitch down until it does, centred in the range.
+    1. Collective + roll/pitch. If some rotor goes above T_max, lower the collective
+       (roll/pitch exact, thrust gives way: the headroom rule); what still does not fit
+       (a rotor below T_min) is taken from roll/pitch. With MC_AIRMODE 1 the collective
+       may also rise, and roll/pitch are scaled only when their spread alone exceeds
+       the rotor range.
     2. Yaw on top, scaled down as far as needed to stay within [T_min, T_max + 15 %],
        then the collective is lowered to bring every rotor back under T_max
        (PX4's MINIMUM_YAW_MARGIN: some yaw authority even at full thrust).
@@ -307,18 +309,39 @@ def allocate(f, tx, ty, tz, a, gn, cs, w_out):
         lo = max(lo, (tmin - t[i]) / a[i, 0])
         hi = min(hi, (tmax - t[i]) / a[i, 0])
     sat_rp = 0.0
-    if lo <= hi:
-        k = _clamp(0.0, lo, hi)
-        for i in range(n):
-            t[i] += k * a[i, 0]
+    if gn[G_AIRMODE] > 0.0:
+        # airmode (MC_AIRMODE 1): the collective may rise as well as fall for roll/pitch
+        if lo <= hi:
+            k = _clamp(0.0, lo, hi)
+            for i in range(n):
+                t[i] += k * a[i, 0]
+        else:
+            # a[i,0] is the same for every rotor of a symmetric frame: scale the spread
+            a0 = a[0, 0]
+            s = (tmax - tmin) / (a0 * (rp_max - rp_min))
+            centre = 0.5 * (tmax + tmin) - 0.5 * s * a0 * (rp_max + rp_min)
+            for i in range(n):
+                t[i] = centre + s * (a[i, 1] * tx + a[i, 2] * ty)
+            sat_rp = 1.0
     else:
-        # a[i,0] is the same for every rotor of a symmetric frame: scale the spread
-        a0 = a[0, 0]
-        s = (tmax - tmin) / (a0 * (rp_max - rp_min))
-        centre = 0.5 * (tmax + tmin) - 0.5 * s * a0 * (rp_max + rp_min)
+        # PX4 default (MC_AIRMODE 0): the collective may only be lowered; what still does
+        # not fit is taken from roll/pitch, scaled about the (lowered) collective
+        k = min(0.0, hi)
+        s = 1.0
         for i in range(n):
-            t[i] = centre + s * (a[i, 1] * tx + a[i, 2] * ty)
-        sat_rp = 1.0
+            base = a[i, 0] * (f + k)
+            rp = t[i] - a[i, 0] * f
+            v = base + rp
+            if v > tmax and rp > 0.0:
+                s = min(s, (tmax - base) / rp)
+            elif v < tmin and rp < 0.0:
+                s = min(s, (tmin - base) / rp)
+        s = max(0.0, s)
+        for i in range(n):
+            base = a[i, 0] * (f + k)
+            t[i] = base + s * (t[i] - a[i, 0] * f)
+        if s < 1.0:
+            sat_rp = 1.0
     # yaw: allowed 15 % above T_max, then the collective is lowered (never raised) to fit
     tmax_y = tmax + YAW_MARGIN * (tmax - tmin)
     s_y = 1.0
@@ -378,14 +401,17 @@ def controller_step_one(x, sp, gn, a, cs, dt, w_out):
             yr if math.isfinite(yr) else 0.0, gn, cs,
         )
         f = cs[C_FSP]
-    elif kind == KIND_ATTITUDE:
+    else:
+        # not under position control: keep the velocity memory fresh for the D term
         cs[C_POS_COUNT] = 0.0
+        for i in range(3):
+            cs[C_VEL_PREV + i] = x[X_VEL + i]
+    if kind == KIND_ATTITUDE:
         attitude_control(
             x, sp[SP_Q], sp[SP_Q + 1], sp[SP_Q + 2], sp[SP_Q + 3], 0.0, gn, cs
         )
         f = sp[SP_THRUST] * gn[G_TROT_MAX] * a.shape[0]
-    else:  # KIND_RATES
-        cs[C_POS_COUNT] = 0.0
+    elif kind == KIND_RATES:
         for i in range(3):
             cs[C_RATE_SP + i] = _clamp(
                 sp[SP_RATES + i], -gn[G_RATE_MAX + i], gn[G_RATE_MAX + i]

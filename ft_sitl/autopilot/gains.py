@@ -22,10 +22,10 @@ import math
 
 import numpy as np
 
+from ft_sitl import G
 from ft_sitl.autopilot import cascade as c
-from ft_sitl.autopilot.params import ParamSet
+from ft_sitl.autopilot.params import ParamError, ParamSet
 from ft_sitl.physics.platform import Platform
-
 
 # gain-row entries that are a PX4 parameter as it is (units already SI)
 _DIRECT = {
@@ -49,6 +49,13 @@ _DIRECT = {
 
 
 def build_gains(platform: Platform, params: ParamSet, dt: float) -> np.ndarray:
+    hover = platform.mass_kg * G / platform.thrust_max_n
+    if hover <= params["MPC_THR_MIN"]:
+        raise ParamError(
+            f"platform {platform.name!r} hovers at {hover:.1%} of its maximum thrust, at or "
+            f"below MPC_THR_MIN ({params['MPC_THR_MIN']:.0%}): in position control it could "
+            "not descend; lower MPC_THR_MIN"
+        )
     gn = np.zeros(c.N_GAINS)
     for index, name in _DIRECT.items():
         gn[index] = params[name]
@@ -83,6 +90,7 @@ def build_gains(platform: Platform, params: ParamSet, dt: float) -> np.ndarray:
     gn[c.G_TROT_MAX] = platform.rotor_thrust_max_n
     gn[c.G_CT] = platform.thrust_coefficient
     gn[c.G_MASS] = platform.mass_kg
+    gn[c.G_AIRMODE] = params["MC_AIRMODE"]
     gn[c.G_POS_DIV] = max(1, round(1.0 / (params["FT_POS_LOOP_HZ"] * dt)))
     return gn
 

@@ -55,6 +55,12 @@ _SPECS = [
     ParamSpec("MC_ROLLRATE_MAX", 220.0, 0.0, 1800.0, "deg/s", "maximum roll rate"),
     ParamSpec("MC_PITCHRATE_MAX", 220.0, 0.0, 1800.0, "deg/s", "maximum pitch rate"),
     ParamSpec("MC_YAWRATE_MAX", 200.0, 0.0, 1800.0, "deg/s", "maximum yaw rate"),
+    ParamSpec(
+        "MC_AIRMODE", 0, 0, 1, "enum",
+        "0: collective may only be lowered to keep roll/pitch authority; "
+        "1: it may also be raised (roll/pitch airmode)",
+        is_int=True,
+    ),
     # --- rate control, PX4 normalised gains (used when FT_GAIN_MODE = 1) ---------------
     ParamSpec("MC_ROLLRATE_P", 0.15, 0.01, 0.5, "norm s/rad", "roll rate P (normalised mode)"),
     ParamSpec("MC_ROLLRATE_I", 0.2, 0.0, 10.0, "norm/rad", "roll rate I (normalised mode)"),

@@ -155,6 +155,9 @@ def platform_from_mapping(entry: dict, where: str, *, allow_paper_keys: bool = F
         return validate(p, where)
     except PlatformError as exc:
         msg = str(exc)
+        inner = f"platform {name!r}: "
+        if msg.startswith(inner):  # synthesise/validate name the platform; we name more
+            msg = msg[len(inner):]
         raise PlatformError(msg if msg.startswith(where) else f"{where}: {msg}") from None
 
 

@@ -258,6 +258,10 @@ def plant_step_one(x, w_cmd, prm, alloc, env, status, dt):
             x[X_QUAT + 1] = 0.0
             x[X_QUAT + 2] = 0.0
             x[X_QUAT + 3] = math.sin(0.5 * yaw)
+            # the accelerometer feels the ground's reaction: 1 g up, level
+            status[S_SPECIFIC_FORCE] = 0.0
+            status[S_SPECIFIC_FORCE + 1] = 0.0
+            status[S_SPECIFIC_FORCE + 2] = G
         elif vz < 0.0:
             x[X_VEL + 2] = 0.0
     else:

@@ -31,6 +31,7 @@ from ft_sitl import G
 from ft_sitl.physics.layouts import LAYOUTS, allocation_matrix, get_layout, max_axis_torques
 from ft_sitl.physics.platform import Platform, PlatformError, validate
 
+TWR_RANGE = (1.05, 8.0)  # above 8, hover needs less than PX4's MPC_THR_MIN (12 %) of thrust
 RHO_AIR = 1.225  # kg/m^3, ISA sea level
 ARM_COEFF_M = 0.15
 ARM_MASS_EXPONENT = 0.4
@@ -64,16 +65,19 @@ def synthesise(
 ) -> Platform:
     """Full physical parameters reproducing (mass, TWR_max, alpha_xy, alpha_z) exactly."""
     where = f"platform {name!r}"
-    for key, v, lo, hi in (
-        ("mass_kg", mass_kg, 0.05, 50.0),
-        ("twr_max", twr_max, 1.05, 20.0),
-        ("alpha_xy_max_rad_s2", alpha_xy_max_rad_s2, 1.0, 20000.0),
-        ("alpha_z_max_rad_s2", alpha_z_max_rad_s2, 0.1, 5000.0),
+    for key, v, lo, hi, unit in (
+        ("mass_kg", mass_kg, 0.05, 50.0, "kg"),
+        ("twr_max", twr_max, TWR_RANGE[0], TWR_RANGE[1], ""),
+        ("alpha_xy_max_rad_s2", alpha_xy_max_rad_s2, 1.0, 20000.0, "rad/s^2"),
+        ("alpha_z_max_rad_s2", alpha_z_max_rad_s2, 0.1, 5000.0, "rad/s^2"),
     ):
         if isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v):
             raise PlatformError(f"{where}: {key}: {v!r} is not a finite number")
         if not lo <= v <= hi:
-            raise PlatformError(f"{where}: {key}: {v!r} is outside the allowed range [{lo}, {hi}]")
+            u = f" {unit}" if unit else ""
+            raise PlatformError(
+                f"{where}: {key}: {v!r}{u} is outside the allowed range [{lo}, {hi}]{u}"
+            )
     if layout not in LAYOUTS:
         raise PlatformError(
             f"{where}: layout: {layout!r} is not one of {', '.join(sorted(LAYOUTS))}"
@@ -187,7 +191,7 @@ def generate_virtual(
         w = rng.dirichlet(np.ones(k))
         mass, twr, axy, az = np.exp(w @ feats[idx])
         mass = round(float(mass), 2)
-        name = f"{mass:.2f}kg-{prefix} {len(out) + 1}"
+        name = f"{mass:.2f}kg-{prefix}{seed}-{len(out) + 1}"
         try:
             p = synthesise(
                 name,

@@ -228,3 +228,26 @@ def test_a_plus_layout_user_platform_flies(tmp_path):
     sim.run(12.0)
     assert sim.position(0) == pytest.approx([2.0, -1.0, 2.0], abs=0.03)
     assert sim.euler(0)[2] == pytest.approx(1.0, abs=0.02)
+
+
+def test_without_airmode_the_collective_is_never_raised_for_roll():
+    p = catalog()["1.50kg-DJI"]
+    for airmode in (0, 1):
+        sim = Simulation(p, params=ParamSet({"MC_AIRMODE": airmode, "FT_RATE_BW_RP": 200}))
+        sim.start_hovering(0, [0.0, 0.0, 50.0])
+        sim.set_setpoint(0, Setpoint.body_rates([3.0, 0.0, 0.0], 0.02))  # thrust near idle
+        sim.step(1)
+        thrust = p.thrust_coefficient * sim.w_cmd[0] ** 2
+        if airmode == 0:
+            assert thrust.sum() <= 0.02 * p.thrust_max_n + 4 * p.rotor_thrust_min_n
+        else:
+            assert thrust.max() > 0.2 * p.rotor_thrust_max_n
+
+
+def test_a_platform_that_cannot_descend_under_mpc_thr_min_is_refused():
+    from ft_sitl.physics.synthesis import synthesise
+
+    p = synthesise("rocket", 0.6, 7.9, 800.0, 40.0)
+    with pytest.raises(ParamError, match="hovers at 12.7% .* MPC_THR_MIN"):
+        Simulation(p, params=ParamSet({"MPC_THR_MIN": 0.15}))
+    Simulation(p)  # the default 12 % leaves it controllable
