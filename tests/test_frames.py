@@ -31,3 +31,16 @@ def test_attitude_quaternion_conversion_rotates_vectors_consistently():
     assert np.allclose(frames.enu_to_ned(v_enu), v_ned)
     back = frames.q_ned_frd_to_enu_flu(q_ned_frd)
     assert np.allclose(back, q_enu_flu)
+
+
+def test_geodesy_round_trip_and_scale():
+    ref = frames.GeoReference(*frames.PX4_SITL_HOME)
+    assert np.allclose(ref.to_local(*frames.PX4_SITL_HOME), 0.0)
+    for p in ([100.0, 0.0, 5.0], [0.0, -250.0, 0.0], [1234.5, 987.6, -3.0]):
+        lat, lon, alt = ref.to_global(p)
+        assert np.allclose(ref.to_local(lat, lon, alt), p, atol=1e-6)
+    # 1e-3 deg of latitude is ~111.2 m north
+    north = ref.to_local(frames.PX4_SITL_HOME[0] + 1e-3, frames.PX4_SITL_HOME[1], 488.0)
+    assert north[1] == pytest.approx(111.19, abs=0.05) and abs(north[0]) < 1e-6
+    with pytest.raises(ValueError, match="latitude"):
+        frames.GeoReference(95.0, 0.0, 0.0)

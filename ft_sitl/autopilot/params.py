@@ -74,6 +74,23 @@ _SPECS = [
     ParamSpec("MC_RR_INT_LIM", 0.3, 0.0, 1.0, "norm", "roll rate integrator limit"),
     ParamSpec("MC_PR_INT_LIM", 0.3, 0.0, 1.0, "norm", "pitch rate integrator limit"),
     ParamSpec("MC_YR_INT_LIM", 0.3, 0.0, 1.0, "norm", "yaw rate integrator limit"),
+    # --- commander, navigator, failsafes ---------------------------------------------
+    ParamSpec("MIS_TAKEOFF_ALT", 2.5, 0.0, 80.0, "m", "take-off altitude above home"),
+    ParamSpec("RTL_RETURN_ALT", 60.0, 0.0, 150.0, "m", "return altitude above home"),
+    ParamSpec("MPC_TKO_SPEED", 1.5, 1.0, 5.0, "m/s", "take-off climb rate"),
+    ParamSpec("MPC_LAND_SPEED", 0.7, 0.6, 3.0, "m/s", "landing descent rate"),
+    ParamSpec("MPC_XY_CRUISE", 5.0, 3.0, 20.0, "m/s", "horizontal speed in auto modes"),
+    ParamSpec("NAV_ACC_RAD", 2.0, 0.05, 200.0, "m", "default waypoint acceptance radius"),
+    ParamSpec("COM_OF_LOSS_T", 1.0, 0.0, 60.0, "s", "offboard setpoint loss timeout"),
+    ParamSpec("COM_DISARM_LAND", 2.0, -1.0, 20.0, "s", "auto-disarm after landing (<0: off)"),
+    ParamSpec("COM_DISARM_PRFLT", 10.0, -1.0, 20.0, "s", "auto-disarm if no take-off (<0: off)"),
+    ParamSpec("BAT_LOW_THR", 0.15, 0.12, 0.5, "norm", "low battery warning level"),
+    ParamSpec("BAT_CRIT_THR", 0.07, 0.05, 0.25, "norm", "critical battery level (RTL)"),
+    ParamSpec("BAT_EMERGEN_THR", 0.05, 0.03, 0.1, "norm", "emergency battery level (land)"),
+    ParamSpec(
+        "FT_BAT_ENDURANCE", 1200.0, 10.0, 36000.0, "s",
+        "hover endurance that sizes the simulated battery (ft-sitl)",
+    ),
     # --- ft-sitl: gain mode and rate-loop bandwidths (FT_GAIN_MODE = 0) ----------------
     ParamSpec(
         "FT_GAIN_MODE",

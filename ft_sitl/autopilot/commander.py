@@ -1,0 +1,679 @@
+"""The commander and navigator of the virtual PX4, transport-free.
+
+One :class:`Commander` per vehicle owns what PX4's commander, navigator and flight tasks
+own: arming with pre-arm checks, the flight mode, landed-state detection, auto-disarm,
+take-off / hold / land / return / reposition, offboard rules and failsafes, mission
+execution and the battery. Every control tick it turns all that into one
+:class:`~ft_sitl.autopilot.setpoints.Setpoint` for the cascade.
+
+The MAVLink layer and the in-process mission runner call the same methods, so a script
+flying over MAVSDK and a trial flying in-process see identical behaviour. Positions are
+local ENU metres from the home point; times are integer microseconds of simulated time.
+"""
+
+from __future__ import annotations
+
+import math
+from collections import deque
+from dataclasses import dataclass, field
+from enum import IntEnum
+
+import numpy as np
+
+from ft_sitl import G
+from ft_sitl.autopilot.params import ParamSet
+from ft_sitl.autopilot.setpoints import Setpoint
+from ft_sitl.physics.platform import Platform
+
+# PX4 custom modes: main mode, and the sub mode for AUTO
+MAIN_MANUAL, MAIN_ALTCTL, MAIN_POSCTL, MAIN_AUTO, MAIN_ACRO, MAIN_OFFBOARD, MAIN_STABILIZED = (
+    1, 2, 3, 4, 5, 6, 7,
+)
+SUB_READY, SUB_TAKEOFF, SUB_LOITER, SUB_MISSION, SUB_RTL, SUB_LAND = 1, 2, 3, 4, 5, 6
+
+MODE_NAMES = {
+    (MAIN_MANUAL, 0): "MANUAL",
+    (MAIN_ALTCTL, 0): "ALTCTL",
+    (MAIN_POSCTL, 0): "POSCTL",
+    (MAIN_AUTO, SUB_READY): "AUTO.READY",
+    (MAIN_AUTO, SUB_TAKEOFF): "AUTO.TAKEOFF",
+    (MAIN_AUTO, SUB_LOITER): "AUTO.LOITER",
+    (MAIN_AUTO, SUB_MISSION): "AUTO.MISSION",
+    (MAIN_AUTO, SUB_RTL): "AUTO.RTL",
+    (MAIN_AUTO, SUB_LAND): "AUTO.LAND",
+    (MAIN_ACRO, 0): "ACRO",
+    (MAIN_OFFBOARD, 0): "OFFBOARD",
+    (MAIN_STABILIZED, 0): "STABILIZED",
+}
+MODE_BY_NAME = {v: k for k, v in MODE_NAMES.items()}
+
+
+class Result(IntEnum):
+    """MAV_RESULT values, so the MAVLink layer can send them as they are."""
+
+    ACCEPTED = 0
+    TEMPORARILY_REJECTED = 1
+    DENIED = 2
+    UNSUPPORTED = 3
+    FAILED = 4
+    IN_PROGRESS = 5
+
+
+class LandedState(IntEnum):
+    """MAV_LANDED_STATE values."""
+
+    UNDEFINED = 0
+    ON_GROUND = 1
+    IN_AIR = 2
+    TAKEOFF = 3
+    LANDING = 4
+
+
+class Severity(IntEnum):
+    """MAV_SEVERITY values for status texts."""
+
+    EMERGENCY = 0
+    ALERT = 1
+    CRITICAL = 2
+    ERROR = 3
+    WARNING = 4
+    NOTICE = 5
+    INFO = 6
+
+
+# MAV_CMD ids of the mission items the navigator executes
+CMD_NAV_WAYPOINT = 16
+CMD_NAV_RETURN_TO_LAUNCH = 20
+CMD_NAV_LAND = 21
+CMD_NAV_TAKEOFF = 22
+CMD_NAV_DELAY = 93
+CMD_DO_CHANGE_SPEED = 178
+
+
+@dataclass(frozen=True)
+class MissionItem:
+    """One mission item, positions already in local ENU metres (NaN: keep current)."""
+
+    command: int
+    position: tuple[float, float, float] = (math.nan, math.nan, math.nan)
+    hold_s: float = 0.0
+    acceptance_radius_m: float = 0.0
+    yaw_rad: float = math.nan
+    speed_m_s: float = math.nan
+    autocontinue: bool = True
+
+
+@dataclass
+class Battery:
+    """A simple battery: energy drawn through the motors at a fixed efficiency.
+
+    Capacity is sized so the platform hovers for FT_BAT_ENDURANCE seconds; voltage
+    falls linearly from 4.2 V to 3.5 V per cell with charge used, minus a sag with load.
+    """
+
+    capacity_j: float
+    cells: int
+    efficiency: float = 0.7
+    used_j: float = 0.0
+
+    @classmethod
+    def for_platform(cls, platform: Platform, endurance_s: float) -> Battery:
+        w = platform.hover_rotor_speed_rad_s
+        hover_power = (platform.n_rotors * platform.torque_thrust_ratio_m
+                       * platform.thrust_coefficient * w**3)
+        cells = max(2, min(12, round(2 + 2 * platform.mass_kg)))
+        return cls(capacity_j=hover_power / 0.7 * endurance_s, cells=cells)
+
+    def draw(self, mech_energy_j: float) -> None:
+        self.used_j = mech_energy_j / self.efficiency
+
+    @property
+    def remaining(self) -> float:
+        return max(0.0, 1.0 - self.used_j / self.capacity_j)
+
+    def voltage(self, current_a: float = 0.0) -> float:
+        cell = 3.5 + 0.7 * self.remaining
+        return self.cells * cell - 0.002 * current_a * self.cells
+
+    def current_a(self, power_w: float) -> float:
+        return power_w / self.efficiency / max(self.voltage(), 1.0)
+
+
+@dataclass
+class VehicleState:
+    """What the commander knows of the vehicle each tick (from the estimator stage)."""
+
+    position: np.ndarray
+    velocity: np.ndarray
+    yaw: float
+    on_ground: bool
+    tilt: float = 0.0
+
+
+@dataclass
+class _Nav:
+    """The current automatic target."""
+
+    target: np.ndarray | None = None
+    yaw: float = math.nan
+    phase: str = ""
+    t_phase_us: int = 0
+
+
+@dataclass
+class Commander:
+    platform: Platform
+    params: ParamSet
+    time_us: int = 0
+    armed: bool = False
+    main_mode: int = MAIN_POSCTL
+    sub_mode: int = 0
+    landed_state: LandedState = LandedState.ON_GROUND
+    home: np.ndarray = field(default_factory=lambda: np.zeros(3))
+    home_yaw: float = 0.0
+    cruise_speed: float = math.nan
+    mission: list[MissionItem] = field(default_factory=list)
+    mission_seq: int = 0
+    mission_state: int = 2  # MISSION_STATE: 1 no mission, 2 not started, 3 active, 4 paused, 5 done
+    statustexts: deque = field(default_factory=lambda: deque(maxlen=64))
+    reached: deque = field(default_factory=lambda: deque(maxlen=64))
+    battery: Battery | None = None
+    terminated: bool = False
+
+    def __post_init__(self):
+        self._nav = _Nav()
+        self._offboard_sp: Setpoint | None = None
+        self._offboard_t_us = -(10**12)
+        self._armed_t_us = 0
+        self._landed_since_us: int | None = 0
+        self._took_off = False
+        self._state: VehicleState | None = None
+        self._last_sp = Setpoint.off()
+        self._hold_sp: np.ndarray | None = None
+        self._item_started = False
+        self._item_hold_until: int | None = None
+        if self.battery is None:
+            self.battery = Battery.for_platform(self.platform, self.params["FT_BAT_ENDURANCE"])
+        self.mission_state = 1
+        self._bat_warned = 0
+
+    # --- helpers -------------------------------------------------------------------
+    @property
+    def mode_name(self) -> str:
+        return MODE_NAMES.get((self.main_mode, self.sub_mode), "UNKNOWN")
+
+    def text(self, severity: Severity, msg: str) -> None:
+        self.statustexts.append((int(severity), msg))
+
+    def _deny(self, msg: str, result: Result = Result.DENIED) -> Result:
+        self.text(Severity.CRITICAL, msg)
+        return result
+
+    def _pos(self) -> np.ndarray:
+        return self._state.position.copy() if self._state is not None else self.home.copy()
+
+    def _yaw(self) -> float:
+        return self._state.yaw if self._state is not None else self.home_yaw
+
+    def _set_mode(self, main: int, sub: int = 0) -> None:
+        self.main_mode, self.sub_mode = main, sub
+
+    def _hold_here(self) -> None:
+        self._nav = _Nav(target=self._pos(), yaw=self._yaw(), phase="hold",
+                         t_phase_us=self.time_us)
+
+    # --- arming --------------------------------------------------------------------
+    def offboard_fresh(self) -> bool:
+        return (self._offboard_sp is not None and
+                self.time_us - self._offboard_t_us <= self.params["COM_OF_LOSS_T"] * 1e6)
+
+    def arm(self, force: bool = False) -> Result:
+        if self.armed:
+            return Result.ACCEPTED
+        if not force:
+            if self.terminated:
+                return self._deny("Arming denied: flight terminated, reboot required")
+            if self.landed_state != LandedState.ON_GROUND:
+                return self._deny("Arming denied: vehicle not landed")
+            if self.battery.remaining < self.params["BAT_CRIT_THR"]:
+                return self._deny("Arming denied: battery critically low")
+            if self.main_mode == MAIN_OFFBOARD and not self.offboard_fresh():
+                return self._deny("Arming denied: no offboard setpoints")
+            if self.main_mode == MAIN_AUTO and self.sub_mode == SUB_MISSION and not self.mission:
+                return self._deny("Arming denied: no valid mission")
+        self.armed = True
+        self._armed_t_us = self.time_us
+        self._took_off = False
+        self._landed_since_us = self.time_us if self.landed_state == LandedState.ON_GROUND \
+            else None
+        if self.main_mode in (MAIN_POSCTL, MAIN_ALTCTL, MAIN_MANUAL, MAIN_STABILIZED,
+                              MAIN_ACRO) or (self.main_mode == MAIN_AUTO
+                                             and self.sub_mode == SUB_LOITER):
+            self._hold_here()
+        self.text(Severity.INFO, "Armed by external command")
+        return Result.ACCEPTED
+
+    def disarm(self, force: bool = False) -> Result:
+        if not self.armed:
+            return Result.ACCEPTED
+        if not force and self.landed_state not in (LandedState.ON_GROUND,):
+            return self._deny("Disarming denied: not landed")
+        self._disarm("Disarmed by external command")
+        return Result.ACCEPTED
+
+    def _disarm(self, why: str) -> None:
+        self.armed = False
+        self.text(Severity.INFO, why)
+        if self.main_mode == MAIN_AUTO and self.sub_mode in (SUB_LAND, SUB_RTL, SUB_TAKEOFF):
+            self._set_mode(MAIN_AUTO, SUB_LOITER)
+
+    def terminate(self) -> Result:
+        """MAV_CMD_DO_FLIGHTTERMINATION: motors off now, wherever the vehicle is."""
+        self.terminated = True
+        self.armed = False
+        self.text(Severity.EMERGENCY, "Flight termination active")
+        return Result.ACCEPTED
+
+    # --- modes ----------------------------------------------------------------------
+    def set_mode(self, main: int, sub: int = 0) -> Result:
+        key = (main, sub if main == MAIN_AUTO else 0)
+        if key not in MODE_NAMES:
+            return self._deny(f"Mode {main}/{sub} is not supported", Result.UNSUPPORTED)
+        main, sub = key
+        if main == MAIN_OFFBOARD and not self.offboard_fresh():
+            return self._deny("Switching to Offboard is currently not available",
+                              Result.TEMPORARILY_REJECTED)
+        if main == MAIN_AUTO and sub == SUB_MISSION and not self.mission:
+            return self._deny("Switching to Mission is currently not available: no mission",
+                              Result.TEMPORARILY_REJECTED)
+        if main == MAIN_AUTO and sub == SUB_READY:
+            sub = SUB_LOITER
+        if (main, sub) == (self.main_mode, self.sub_mode):
+            return Result.ACCEPTED
+        self._set_mode(main, sub)
+        if main in (MAIN_POSCTL, MAIN_ALTCTL, MAIN_MANUAL, MAIN_STABILIZED, MAIN_ACRO):
+            self._hold_here()
+        elif main == MAIN_AUTO:
+            self._enter_auto(sub)
+        return Result.ACCEPTED
+
+    def _enter_auto(self, sub: int) -> None:
+        if sub == SUB_LOITER:
+            self._hold_here()
+        elif sub == SUB_TAKEOFF:
+            alt = self.home[2] + self.params["MIS_TAKEOFF_ALT"]
+            self._start_takeoff(alt)
+        elif sub == SUB_LAND:
+            self._nav = _Nav(target=self._pos(), yaw=self._yaw(), phase="land",
+                             t_phase_us=self.time_us)
+            self.text(Severity.INFO, "Landing at current position")
+        elif sub == SUB_RTL:
+            self._start_rtl()
+        elif sub == SUB_MISSION:
+            if self.mission_state in (2, 5) or self.mission_seq >= len(self.mission):
+                if self.mission_seq >= len(self.mission):
+                    self.mission_seq = 0
+            self.mission_state = 3
+            self._item_started = False
+            self._item_hold_until = None
+
+    def takeoff(self, altitude_m: float | None = None) -> Result:
+        """NAV_TAKEOFF: climb to the altitude (local z, m) or MIS_TAKEOFF_ALT above home."""
+        if altitude_m is not None and not math.isfinite(altitude_m):
+            altitude_m = None
+        alt = self.home[2] + self.params["MIS_TAKEOFF_ALT"] if altitude_m is None else altitude_m
+        self._set_mode(MAIN_AUTO, SUB_TAKEOFF)
+        self._start_takeoff(alt)
+        return Result.ACCEPTED
+
+    def _start_takeoff(self, alt: float) -> None:
+        p = self._pos()
+        p[2] = max(alt, p[2])
+        self._nav = _Nav(target=p, yaw=self._yaw(), phase="takeoff", t_phase_us=self.time_us)
+        self.text(Severity.INFO, f"Takeoff to {alt - self.home[2]:.1f} m above home")
+
+    def land(self) -> Result:
+        self._set_mode(MAIN_AUTO, SUB_LAND)
+        self._enter_auto(SUB_LAND)
+        return Result.ACCEPTED
+
+    def return_to_launch(self) -> Result:
+        self._set_mode(MAIN_AUTO, SUB_RTL)
+        self._start_rtl()
+        return Result.ACCEPTED
+
+    def _start_rtl(self) -> None:
+        p = self._pos()
+        climb = max(p[2], self.home[2] + self.params["RTL_RETURN_ALT"])
+        self._nav = _Nav(target=np.array([p[0], p[1], climb]), yaw=self._yaw(),
+                         phase="rtl_climb", t_phase_us=self.time_us)
+        self.text(Severity.INFO, "RTL: start return at "
+                  f"{climb - self.home[2]:.0f} m above home")
+
+    def hold(self) -> Result:
+        return self.set_mode(MAIN_AUTO, SUB_LOITER)
+
+    def reposition(self, position: np.ndarray, yaw: float = math.nan) -> Result:
+        """DO_REPOSITION: fly to a local position and hold there (mode AUTO.LOITER)."""
+        if not self.armed or self.landed_state == LandedState.ON_GROUND:
+            return self._deny("Reposition denied: not flying", Result.TEMPORARILY_REJECTED)
+        target = self._pos()
+        for i in range(3):
+            if math.isfinite(position[i]):
+                target[i] = position[i]
+        self._set_mode(MAIN_AUTO, SUB_LOITER)
+        self._nav = _Nav(target=target, yaw=yaw if math.isfinite(yaw) else self._yaw(),
+                         phase="goto", t_phase_us=self.time_us)
+        return Result.ACCEPTED
+
+    def change_speed(self, speed_m_s: float) -> Result:
+        if not math.isfinite(speed_m_s) or speed_m_s <= 0:
+            self.cruise_speed = math.nan  # -1 / NaN: back to the default
+        else:
+            self.cruise_speed = speed_m_s
+        return Result.ACCEPTED
+
+    def set_home(self, position: np.ndarray) -> Result:
+        self.home = np.asarray(position, dtype=float).copy()
+        return Result.ACCEPTED
+
+    # --- offboard ------------------------------------------------------------------
+    def offboard_setpoint(self, sp: Setpoint) -> None:
+        """A validated offboard setpoint arrived (it keeps the stream fresh)."""
+        self._offboard_sp = sp
+        self._offboard_t_us = self.time_us
+
+    # --- mission -------------------------------------------------------------------
+    def set_mission(self, items: list[MissionItem]) -> None:
+        self.mission = list(items)
+        self.mission_seq = 0
+        self.mission_state = 2 if items else 1
+        self._item_started = False
+        if not items and self.main_mode == MAIN_AUTO and self.sub_mode == SUB_MISSION:
+            self._set_mode(MAIN_AUTO, SUB_LOITER)
+            self._hold_here()
+
+    def set_mission_current(self, seq: int) -> Result:
+        if not 0 <= seq < max(1, len(self.mission)):
+            return Result.DENIED
+        self.mission_seq = seq
+        self._item_started = False
+        self._item_hold_until = None
+        if self.mission_state == 5:
+            self.mission_state = 2
+        return Result.ACCEPTED
+
+    # --- the tick ----------------------------------------------------------------------
+    def update(self, time_us: int, state: VehicleState, mech_energy_j: float) -> Setpoint:
+        """Advance the commander to time_us and return the cascade's setpoint."""
+        self.time_us = time_us
+        self._state = state
+        self.battery.draw(mech_energy_j)
+        self._update_landed(state)
+        self._battery_failsafe()
+        if not self.armed:
+            return self._emit(Setpoint.off())
+        if self._auto_disarm():
+            return self._emit(Setpoint.off())
+        sp = self._mode_setpoint(state)
+        return self._emit(sp)
+
+    def _emit(self, sp: Setpoint) -> Setpoint:
+        self._last_sp = sp
+        return sp
+
+    def _update_landed(self, s: VehicleState) -> None:
+        if s.on_ground:
+            if self.landed_state != LandedState.ON_GROUND:
+                self.landed_state = LandedState.ON_GROUND
+                self._landed_since_us = self.time_us
+                if self._took_off:
+                    self.text(Severity.INFO, "Landing detected")
+        elif self.armed:
+            if self.landed_state == LandedState.ON_GROUND:
+                self._took_off = True
+                self._landed_since_us = None
+            if self.main_mode == MAIN_AUTO and self.sub_mode == SUB_TAKEOFF:
+                self.landed_state = LandedState.TAKEOFF
+            elif self.main_mode == MAIN_AUTO and (
+                self.sub_mode == SUB_LAND or (self.sub_mode == SUB_RTL
+                                              and self._nav.phase == "rtl_land")):
+                self.landed_state = LandedState.LANDING
+            else:
+                self.landed_state = LandedState.IN_AIR
+        else:
+            self.landed_state = LandedState.IN_AIR
+
+    def _auto_disarm(self) -> bool:
+        if self.landed_state != LandedState.ON_GROUND or self._landed_since_us is None:
+            return False
+        waited = (self.time_us - self._landed_since_us) * 1e-6
+        if self._took_off:
+            limit = self.params["COM_DISARM_LAND"]
+            why = "Disarmed by landing"
+        else:
+            limit = self.params["COM_DISARM_PRFLT"]
+            why = "Disarmed: no takeoff"
+            if self.main_mode == MAIN_AUTO and self.sub_mode in (SUB_TAKEOFF, SUB_MISSION):
+                return False
+            if self.main_mode == MAIN_OFFBOARD:
+                return False
+        if limit >= 0 and waited > limit:
+            self._disarm(why)
+            return True
+        return False
+
+    def _battery_failsafe(self) -> None:
+        rem = self.battery.remaining
+        if rem < self.params["BAT_EMERGEN_THR"] and self._bat_warned < 3:
+            self._bat_warned = 3
+            self.text(Severity.EMERGENCY, "Battery emergency: landing")
+            if self.armed and self.landed_state != LandedState.ON_GROUND:
+                self.land()
+        elif rem < self.params["BAT_CRIT_THR"] and self._bat_warned < 2:
+            self._bat_warned = 2
+            self.text(Severity.CRITICAL, "Battery critical: returning")
+            if self.armed and self.landed_state != LandedState.ON_GROUND:
+                self.return_to_launch()
+        elif rem < self.params["BAT_LOW_THR"] and self._bat_warned < 1:
+            self._bat_warned = 1
+            self.text(Severity.WARNING, "Battery low")
+
+    def _on_ground_idle(self) -> Setpoint:
+        return Setpoint.idle()
+
+    def _mode_setpoint(self, s: VehicleState) -> Setpoint:
+        if self.main_mode == MAIN_OFFBOARD:
+            if not self.offboard_fresh():
+                self.text(Severity.CRITICAL, "Offboard signal lost: holding position")
+                self._set_mode(MAIN_AUTO, SUB_LOITER)
+                self._hold_here()
+            else:
+                sp = self._offboard_sp
+                if s.on_ground and sp.kind == 2 and not self._wants_up(sp, s):
+                    return self._on_ground_idle()
+                return sp
+        if self.main_mode == MAIN_AUTO:
+            return self._auto_setpoint(s)
+        # POSCTL / ALTCTL / MANUAL / STABILIZED / ACRO without sticks: hold
+        if s.on_ground:
+            self._hold_here()
+            return self._on_ground_idle()
+        if self._nav.target is None:
+            self._hold_here()
+        return Setpoint.position(self._nav.target, yaw=self._nav.yaw)
+
+    @staticmethod
+    def _wants_up(sp: Setpoint, s: VehicleState) -> bool:
+        from ft_sitl.autopilot import cascade as c
+
+        row = sp.row
+        pz, vz, az = row[c.SP_POS + 2], row[c.SP_VEL + 2], row[c.SP_ACC + 2]
+        return ((math.isfinite(pz) and pz > s.position[2] + 0.1) or
+                (math.isfinite(vz) and vz > 0.05) or (math.isfinite(az) and az > 0.05))
+
+    # --- automatic flight -------------------------------------------------------------
+    def _cruise(self) -> float:
+        v = self.params["MPC_XY_CRUISE"] if not math.isfinite(self.cruise_speed) \
+            else self.cruise_speed
+        return min(v, self.params["MPC_XY_VEL_MAX"])
+
+    def _fly_to(self, s: VehicleState, target: np.ndarray, yaw: float) -> Setpoint:
+        """Approach a point along the straight line at cruise speed, then hold it."""
+        err = target - s.position
+        dist = float(np.linalg.norm(err[:2]))
+        acc = self.params["MPC_ACC_HOR_MAX"]
+        speed = min(self._cruise(), math.sqrt(2.0 * 0.5 * acc * dist),
+                    self.params["MPC_XY_P"] * dist)
+        if dist > 0.3:
+            vel = np.array([err[0] / dist * speed, err[1] / dist * speed, math.nan])
+            return Setpoint.trajectory(position=[math.nan, math.nan, target[2]],
+                                       velocity=vel, yaw=yaw)
+        return Setpoint.position(target, yaw=yaw)
+
+    def _auto_setpoint(self, s: VehicleState) -> Setpoint:
+        nav = self._nav
+        sub = self.sub_mode
+        if sub == SUB_TAKEOFF:
+            if nav.target is None:
+                self._start_takeoff(self.home[2] + self.params["MIS_TAKEOFF_ALT"])
+                nav = self._nav
+            if s.position[2] >= nav.target[2] - 0.1 and not s.on_ground:
+                self.text(Severity.INFO, "Takeoff complete: holding")
+                self._set_mode(MAIN_AUTO, SUB_LOITER)
+                self._nav = _Nav(target=nav.target.copy(), yaw=nav.yaw, phase="hold")
+                return Setpoint.position(nav.target, yaw=nav.yaw)
+            climb = self.params["MPC_TKO_SPEED"]
+            return Setpoint.trajectory(position=[nav.target[0], nav.target[1], math.nan],
+                                       velocity=[math.nan, math.nan, climb], yaw=nav.yaw)
+        if sub == SUB_LAND:
+            return self._land_setpoint(s, nav.target)
+        if sub == SUB_RTL:
+            return self._rtl_setpoint(s)
+        if sub == SUB_MISSION:
+            return self._mission_setpoint(s)
+        # LOITER (hold, reposition)
+        if s.on_ground and not self._took_off:
+            return self._on_ground_idle()
+        if nav.target is None:
+            self._hold_here()
+            nav = self._nav
+        if nav.phase == "goto":
+            return self._fly_to(s, nav.target, nav.yaw)
+        return Setpoint.position(nav.target, yaw=nav.yaw)
+
+    def _land_setpoint(self, s: VehicleState, xy: np.ndarray | None) -> Setpoint:
+        if s.on_ground:
+            return self._on_ground_idle()
+        xy = s.position if xy is None else xy
+        return Setpoint.trajectory(position=[xy[0], xy[1], math.nan],
+                                   velocity=[math.nan, math.nan, -self.params["MPC_LAND_SPEED"]],
+                                   yaw=self._nav.yaw if math.isfinite(self._nav.yaw) else s.yaw)
+
+    def _rtl_setpoint(self, s: VehicleState) -> Setpoint:
+        nav = self._nav
+        if nav.target is None:
+            self._start_rtl()
+            nav = self._nav
+        if nav.phase == "rtl_climb":
+            if s.position[2] >= nav.target[2] - 0.3:
+                nav.phase = "rtl_return"
+                nav.target = np.array([self.home[0], self.home[1], nav.target[2]])
+            else:
+                return Setpoint.position(nav.target, yaw=nav.yaw)
+        if nav.phase == "rtl_return":
+            if np.linalg.norm(nav.target[:2] - s.position[:2]) < 0.5:
+                nav.phase = "rtl_land"
+                self.text(Severity.INFO, "RTL: land at home")
+            else:
+                return self._fly_to(s, nav.target, nav.yaw)
+        return self._land_setpoint(s, self.home)
+
+    def _mission_setpoint(self, s: VehicleState) -> Setpoint:
+        if self.mission_state == 5 or self.mission_seq >= len(self.mission):
+            if self.mission_state != 5:
+                self.mission_state = 5
+                self.text(Severity.INFO, "Mission finished, loitering")
+            if s.on_ground:
+                return self._on_ground_idle()
+            if self._nav.target is None or self._nav.phase != "hold":
+                self._hold_here()
+            return Setpoint.position(self._nav.target, yaw=self._nav.yaw)
+        self.mission_state = 3
+        item = self.mission[self.mission_seq]
+        if not self._item_started:
+            self._start_item(item, s)
+        nav = self._nav
+        done = False
+        sp: Setpoint
+        if item.command == CMD_DO_CHANGE_SPEED:
+            self.change_speed(item.speed_m_s)
+            done = True
+            sp = self._last_sp
+        elif item.command == CMD_NAV_TAKEOFF:
+            if s.position[2] >= nav.target[2] - 0.2 and not s.on_ground:
+                done = True
+            sp = Setpoint.trajectory(position=[nav.target[0], nav.target[1], math.nan],
+                                     velocity=[math.nan, math.nan, self.params["MPC_TKO_SPEED"]],
+                                     yaw=nav.yaw)
+        elif item.command == CMD_NAV_WAYPOINT:
+            radius = item.acceptance_radius_m if item.acceptance_radius_m > 0 \
+                else self.params["NAV_ACC_RAD"]
+            dist = float(np.linalg.norm(nav.target - s.position))
+            sp = self._fly_to(s, nav.target, nav.yaw)
+            if dist <= radius or self._item_hold_until is not None:
+                if self._item_hold_until is None:
+                    self._item_hold_until = self.time_us + int(item.hold_s * 1e6)
+                    self.reached.append(self.mission_seq)
+                done = self.time_us >= self._item_hold_until
+                if done:
+                    self._item_hold_until = None
+                    self.mission_seq += 1
+                    self._item_started = False
+                    return sp
+        elif item.command == CMD_NAV_DELAY:
+            if self._item_hold_until is None:
+                self._item_hold_until = self.time_us + int(max(item.hold_s, 0.0) * 1e6)
+            done = self.time_us >= self._item_hold_until
+            sp = Setpoint.position(nav.target, yaw=nav.yaw) if not s.on_ground \
+                else self._on_ground_idle()
+        elif item.command == CMD_NAV_LAND:
+            sp = self._land_setpoint(s, nav.target)
+            done = s.on_ground
+        elif item.command == CMD_NAV_RETURN_TO_LAUNCH:
+            sp = self._rtl_setpoint(s)
+            done = s.on_ground and nav.phase == "rtl_land"
+        else:  # DO_* items we do not model: accepted and skipped
+            done = True
+            sp = self._last_sp if self._last_sp.kind != 0 else Setpoint.position(
+                s.position, yaw=s.yaw)
+        if done:
+            if item.command != CMD_NAV_WAYPOINT:
+                self.reached.append(self.mission_seq)
+            self._item_hold_until = None
+            self.mission_seq += 1
+            self._item_started = False
+        return sp
+
+    def _start_item(self, item: MissionItem, s: VehicleState) -> None:
+        self._item_started = True
+        self._item_hold_until = None
+        p = s.position.copy()
+        target = np.array([item.position[i] if math.isfinite(item.position[i]) else p[i]
+                           for i in range(3)])
+        yaw = item.yaw_rad if math.isfinite(item.yaw_rad) else s.yaw
+        if item.command == CMD_NAV_TAKEOFF:
+            target = np.array([p[0], p[1], max(target[2], p[2])])
+        if item.command == CMD_NAV_WAYPOINT and not math.isfinite(item.yaw_rad):
+            d = target[:2] - p[:2]
+            if np.linalg.norm(d) > 1.0:
+                yaw = math.atan2(d[1], d[0])  # PX4 default: head toward the waypoint
+        if item.command == CMD_NAV_RETURN_TO_LAUNCH:
+            self._start_rtl()
+            return
+        self._nav = _Nav(target=target, yaw=yaw, phase="mission", t_phase_us=self.time_us)
+
+
+def hover_thrust(platform: Platform) -> float:
+    """Normalised collective thrust that holds a hover."""
+    return platform.mass_kg * G / platform.thrust_max_n

@@ -1,0 +1,109 @@
+"""Vehicles with their flight controllers: a lockstep Simulation plus one Commander each.
+
+The commander runs at COMMANDER_HZ of simulated time; the cascade and the plant at the
+physics rate in between. An offboard setpoint that arrives while a vehicle is in
+OFFBOARD reaches the cascade at once, not at the next commander tick, so the latency
+from a setpoint to the first physics step that uses it is one physics step.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+
+import numpy as np
+
+from ft_sitl.autopilot.commander import MAIN_OFFBOARD, Commander, VehicleState
+from ft_sitl.autopilot.params import ParamSet
+from ft_sitl.autopilot.setpoints import Setpoint
+from ft_sitl.lockstep import Simulation
+from ft_sitl.physics import dynamics as d
+from ft_sitl.physics.platform import Platform
+from ft_sitl.physics.quaternion import qto_euler, tilt_angle
+
+COMMANDER_HZ = 50
+
+
+class Fleet:
+    def __init__(
+        self,
+        platforms: Platform | Sequence[Platform],
+        *,
+        params: Sequence[ParamSet] | None = None,
+        spawn: Sequence[Sequence[float]] | None = None,
+        physics_hz: int = 1000,
+    ):
+        if isinstance(platforms, Platform):
+            platforms = [platforms]
+        platforms = list(platforms)
+        n = len(platforms)
+        self.params = list(params) if params is not None else [ParamSet() for _ in range(n)]
+        self.sim = Simulation(platforms, params=self.params, physics_hz=physics_hz)
+        self.commanders = [Commander(p, ps) for p, ps in zip(platforms, self.params)]
+        spawn = spawn if spawn is not None else [[0.0, 0.0, 0.0]] * n
+        for i, pos in enumerate(spawn):
+            self.sim.place(i, pos)
+            self.sim.plant.status[i, d.S_CONTACT] = 1.0
+            self.commanders[i].set_home(np.asarray(pos, dtype=float))
+        self.steps_per_tick = max(1, round(1.0 / (COMMANDER_HZ * self.sim.dt)))
+        self._tick_all()
+
+    @property
+    def n(self) -> int:
+        return self.sim.n
+
+    @property
+    def time_us(self) -> int:
+        return self.sim.time_us
+
+    def state(self, i: int) -> VehicleState:
+        x = self.sim.x[i]
+        q = x[d.X_QUAT : d.X_QUAT + 4]
+        return VehicleState(
+            position=x[d.X_POS : d.X_POS + 3].copy(),
+            velocity=x[d.X_VEL : d.X_VEL + 3].copy(),
+            yaw=float(qto_euler(q)[2]),
+            on_ground=self.sim.on_ground(i),
+            tilt=float(tilt_angle(q)),
+        )
+
+    def refresh_params(self) -> None:
+        """Apply parameter changes to the cascade."""
+        self.sim.refresh_gains()
+
+    def offboard_setpoint(self, i: int, sp: Setpoint) -> None:
+        cmd = self.commanders[i]
+        cmd.time_us = self.sim.time_us
+        cmd.offboard_setpoint(sp)
+        if cmd.armed and cmd.main_mode == MAIN_OFFBOARD:
+            self.sim.set_setpoint(i, cmd.update(self.sim.time_us, self.state(i),
+                                                self.sim.energy_j(i)))
+
+    def _tick_all(self) -> None:
+        for i, cmd in enumerate(self.commanders):
+            self.sim.set_setpoint(i, cmd.update(self.sim.time_us, self.state(i),
+                                                self.sim.energy_j(i)))
+            if cmd.terminated:
+                self.sim.sp[i] = Setpoint.off().row
+
+    def run_us(self, duration_us: int) -> None:
+        """Advance every vehicle by duration_us (whole physics steps), commanders included."""
+        steps = duration_us // self.sim.dt_us
+        while steps > 0:
+            to_tick = self.steps_per_tick - (self.sim.steps % self.steps_per_tick)
+            k = min(steps, to_tick)
+            self.sim.step(k)
+            steps -= k
+            if self.sim.steps % self.steps_per_tick == 0:
+                self._tick_all()
+
+    def run(self, seconds: float) -> None:
+        self.run_us(round(seconds * 1e6))
+
+    def run_until(self, predicate, timeout_s: float, poll_s: float = 0.1) -> bool:
+        """Run until predicate() is true (checked every poll_s) or timeout_s passes."""
+        t_end = self.sim.time_us + round(timeout_s * 1e6)
+        while self.sim.time_us < t_end:
+            if predicate():
+                return True
+            self.run(poll_s)
+        return bool(predicate())

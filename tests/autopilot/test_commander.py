@@ -1,0 +1,143 @@
+"""Commander behaviour in-process: what a PX4 user expects of arming, modes and failsafes."""
+
+import math
+
+import numpy as np
+import pytest
+
+from ft_sitl.autopilot import commander as cm
+from ft_sitl.autopilot.commander import LandedState, MissionItem, Result
+from ft_sitl.autopilot.fleet import Fleet
+from ft_sitl.autopilot.params import ParamSet
+from ft_sitl.autopilot.setpoints import Setpoint
+from ft_sitl.physics.catalog import catalog
+
+P = catalog()["0.98kg-EGO Planner DIY"]
+
+
+def texts(cmd):
+    return [t for _, t in cmd.statustexts]
+
+
+def test_arm_takeoff_hold_land_and_auto_disarm():
+    f = Fleet(P)
+    c = f.commanders[0]
+    assert c.landed_state == LandedState.ON_GROUND and not c.armed
+    assert c.arm() == Result.ACCEPTED
+    assert c.takeoff() == Result.ACCEPTED
+    assert f.run_until(lambda: c.mode_name == "AUTO.LOITER", 15)
+    assert f.state(0).position[2] == pytest.approx(2.5, abs=0.15)  # MIS_TAKEOFF_ALT
+    assert c.landed_state == LandedState.IN_AIR
+    f.run(3.0)
+    assert f.state(0).position == pytest.approx([0, 0, 2.5], abs=0.05)
+    assert c.land() == Result.ACCEPTED
+    f.run(0.5)
+    assert c.landed_state == LandedState.LANDING
+    assert f.run_until(lambda: c.landed_state == LandedState.ON_GROUND, 10)
+    assert c.armed
+    assert f.run_until(lambda: not c.armed, 3.0)  # COM_DISARM_LAND 2 s
+    assert "Disarmed by landing" in texts(c)
+    assert f.sim.max_impact_speed(0) < 1.0
+
+
+def test_arming_is_refused_in_the_air_and_in_offboard_without_setpoints():
+    f = Fleet(P)
+    c = f.commanders[0]
+    assert c.set_mode(cm.MAIN_OFFBOARD) == Result.TEMPORARILY_REJECTED
+    assert "Offboard" in texts(c)[-1]
+    assert c.set_mode(cm.MAIN_AUTO, cm.SUB_MISSION) == Result.TEMPORARILY_REJECTED
+    c.arm()
+    c.takeoff()
+    f.run(4.0)
+    c.disarm()
+    assert c.armed and "not landed" in texts(c)[-1]
+    assert c.disarm(force=True) == Result.ACCEPTED and not c.armed
+
+
+def test_unarmed_vehicle_disarms_after_the_preflight_timeout():
+    f = Fleet(P)
+    c = f.commanders[0]
+    c.arm()
+    f.run(9.0)
+    assert c.armed
+    f.run(1.5)
+    assert not c.armed and "no takeoff" in texts(c)[-1]
+
+
+def test_offboard_entry_flight_and_loss_failsafe():
+    f = Fleet(P)
+    c = f.commanders[0]
+    sp = Setpoint.position([0.0, 0.0, 2.0], yaw=0.0)
+    f.offboard_setpoint(0, sp)
+    assert c.set_mode(cm.MAIN_OFFBOARD) == Result.ACCEPTED
+    assert c.arm() == Result.ACCEPTED
+    for _ in range(150):  # stream at 20 Hz for 7.5 s
+        f.offboard_setpoint(0, Setpoint.position([3.0, 1.0, 2.0], yaw=0.5))
+        f.run(0.05)
+    assert f.state(0).position == pytest.approx([3.0, 1.0, 2.0], abs=0.1)
+    assert c.mode_name == "OFFBOARD"
+    f.run(1.5)  # stream stops: COM_OF_LOSS_T 1 s
+    assert c.mode_name == "AUTO.LOITER"
+    assert "Offboard signal lost" in texts(c)[-1]
+    hold = f.state(0).position
+    f.run(2.0)
+    assert f.state(0).position == pytest.approx(hold, abs=0.15)
+
+
+def test_rtl_climbs_returns_and_lands_at_home():
+    ps = ParamSet({"RTL_RETURN_ALT": 6.0})
+    f = Fleet(P, params=[ps])
+    c = f.commanders[0]
+    c.arm()
+    c.takeoff()
+    f.run_until(lambda: c.mode_name == "AUTO.LOITER", 15)
+    assert c.reposition(np.array([12.0, -5.0, 3.0])) == Result.ACCEPTED
+    assert f.run_until(lambda: np.linalg.norm(f.state(0).position - [12, -5, 3]) < 0.2, 20)
+    c.return_to_launch()
+    peak = 0.0
+    for _ in range(400):
+        f.run(0.1)
+        peak = max(peak, f.state(0).position[2])
+        if not c.armed:
+            break
+    assert peak == pytest.approx(6.0, abs=0.3)
+    assert not c.armed
+    assert f.state(0).position[:2] == pytest.approx([0.0, 0.0], abs=0.3)
+
+
+def test_mission_runs_its_items_and_finishes():
+    f = Fleet(P)
+    c = f.commanders[0]
+    nan = math.nan
+    c.set_mission([
+        MissionItem(cm.CMD_NAV_TAKEOFF, (nan, nan, 3.0)),
+        MissionItem(cm.CMD_DO_CHANGE_SPEED, speed_m_s=2.0),
+        MissionItem(cm.CMD_NAV_WAYPOINT, (10.0, 0.0, 3.0), hold_s=1.0, acceptance_radius_m=0.5),
+        MissionItem(2000),  # a camera item: accepted and skipped
+        MissionItem(cm.CMD_NAV_WAYPOINT, (10.0, 8.0, 4.0)),
+        MissionItem(cm.CMD_NAV_LAND, (10.0, 8.0, nan)),
+    ])
+    assert c.arm() == Result.ACCEPTED
+    assert c.set_mode(cm.MAIN_AUTO, cm.SUB_MISSION) == Result.ACCEPTED
+    vmax = 0.0
+    for _ in range(600):
+        f.run(0.1)
+        vmax = max(vmax, float(np.linalg.norm(f.state(0).velocity[:2])))
+        if c.mission_state == 5 and not c.armed:
+            break
+    assert list(c.reached) == [0, 1, 2, 3, 4, 5]
+    assert c.mission_state == 5
+    assert vmax <= 2.0 * 1.1  # DO_CHANGE_SPEED honoured
+    assert f.state(0).position[:2] == pytest.approx([10.0, 8.0], abs=0.3)
+    assert not c.armed
+
+
+def test_battery_drains_with_flight():
+    f = Fleet(P, params=[ParamSet({"FT_BAT_ENDURANCE": 60.0})])
+    c = f.commanders[0]
+    v0 = c.battery.voltage()
+    c.arm()
+    c.takeoff()
+    f.run(20.0)
+    assert 0.5 < c.battery.remaining < 0.8
+    assert c.battery.voltage() < v0
