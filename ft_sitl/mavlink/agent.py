@@ -1,0 +1,829 @@
+"""One vehicle's MAVLink side: what PX4's mavlink module does, transport-free.
+
+:class:`VehicleAgent` turns incoming MAVLink messages into commander calls and answers
+(COMMAND_ACK, PARAM_VALUE, mission protocol), and produces the telemetry streams at
+their rates. It never touches a socket: the server hands it decoded messages with the
+link they came on and sends what it returns. Conversions between the wire's NED/FRD and
+the simulator's ENU/FLU happen only through :mod:`ft_sitl.frames`.
+"""
+
+from __future__ import annotations
+
+import math
+import struct
+from dataclasses import dataclass, field
+
+import numpy as np
+from pymavlink.dialects.v20 import common as mav
+
+from ft_sitl import frames
+from ft_sitl.autopilot import commander as cm
+from ft_sitl.autopilot.commander import MissionItem, Result
+from ft_sitl.autopilot.fleet import Fleet
+from ft_sitl.autopilot.params import PARAMS, ParamError
+from ft_sitl.autopilot.setpoints import Setpoint, SetpointError
+from ft_sitl.physics import dynamics as d
+from ft_sitl.physics.quaternion import qto_euler
+
+COMPID = mav.MAV_COMP_ID_AUTOPILOT1
+FORCE_MAGIC = 21196
+
+CAPABILITIES = (
+    mav.MAV_PROTOCOL_CAPABILITY_MISSION_FLOAT
+    | mav.MAV_PROTOCOL_CAPABILITY_PARAM_FLOAT
+    | mav.MAV_PROTOCOL_CAPABILITY_MISSION_INT
+    | mav.MAV_PROTOCOL_CAPABILITY_COMMAND_INT
+    | mav.MAV_PROTOCOL_CAPABILITY_PARAM_ENCODE_BYTEWISE
+    | mav.MAV_PROTOCOL_CAPABILITY_SET_ATTITUDE_TARGET
+    | mav.MAV_PROTOCOL_CAPABILITY_SET_POSITION_TARGET_LOCAL_NED
+    | mav.MAV_PROTOCOL_CAPABILITY_SET_POSITION_TARGET_GLOBAL_INT
+    | mav.MAV_PROTOCOL_CAPABILITY_FLIGHT_TERMINATION
+    | mav.MAV_PROTOCOL_CAPABILITY_MAVLINK2
+)
+
+# PX4 stream rates (Hz) per link mode; SET_MESSAGE_INTERVAL overrides per link.
+ONBOARD_RATES = {
+    mav.MAVLINK_MSG_ID_HEARTBEAT: 1.0,
+    mav.MAVLINK_MSG_ID_ATTITUDE: 100.0,
+    mav.MAVLINK_MSG_ID_ATTITUDE_QUATERNION: 50.0,
+    mav.MAVLINK_MSG_ID_LOCAL_POSITION_NED: 30.0,
+    mav.MAVLINK_MSG_ID_GLOBAL_POSITION_INT: 50.0,
+    mav.MAVLINK_MSG_ID_ODOMETRY: 30.0,
+    mav.MAVLINK_MSG_ID_HIGHRES_IMU: 50.0,
+    mav.MAVLINK_MSG_ID_EXTENDED_SYS_STATE: 5.0,
+    mav.MAVLINK_MSG_ID_SYS_STATUS: 5.0,
+    mav.MAVLINK_MSG_ID_VFR_HUD: 10.0,
+    mav.MAVLINK_MSG_ID_ALTITUDE: 10.0,
+    mav.MAVLINK_MSG_ID_HOME_POSITION: 0.5,
+    mav.MAVLINK_MSG_ID_BATTERY_STATUS: 0.5,
+    mav.MAVLINK_MSG_ID_GPS_RAW_INT: 5.0,
+    mav.MAVLINK_MSG_ID_MISSION_CURRENT: 1.0,
+}
+NORMAL_RATES = {
+    mav.MAVLINK_MSG_ID_HEARTBEAT: 1.0,
+    mav.MAVLINK_MSG_ID_ATTITUDE: 20.0,
+    mav.MAVLINK_MSG_ID_ATTITUDE_QUATERNION: 10.0,
+    mav.MAVLINK_MSG_ID_LOCAL_POSITION_NED: 1.0,
+    mav.MAVLINK_MSG_ID_GLOBAL_POSITION_INT: 5.0,
+    mav.MAVLINK_MSG_ID_EXTENDED_SYS_STATE: 1.0,
+    mav.MAVLINK_MSG_ID_SYS_STATUS: 1.0,
+    mav.MAVLINK_MSG_ID_VFR_HUD: 4.0,
+    mav.MAVLINK_MSG_ID_ALTITUDE: 1.0,
+    mav.MAVLINK_MSG_ID_HOME_POSITION: 0.5,
+    mav.MAVLINK_MSG_ID_BATTERY_STATUS: 0.5,
+    mav.MAVLINK_MSG_ID_GPS_RAW_INT: 1.0,
+    mav.MAVLINK_MSG_ID_MISSION_CURRENT: 1.0,
+}
+
+SENSORS = (
+    mav.MAV_SYS_STATUS_SENSOR_3D_GYRO
+    | mav.MAV_SYS_STATUS_SENSOR_3D_ACCEL
+    | mav.MAV_SYS_STATUS_SENSOR_3D_MAG
+    | mav.MAV_SYS_STATUS_SENSOR_ABSOLUTE_PRESSURE
+    | mav.MAV_SYS_STATUS_SENSOR_GPS
+    | mav.MAV_SYS_STATUS_SENSOR_ANGULAR_RATE_CONTROL
+    | mav.MAV_SYS_STATUS_SENSOR_ATTITUDE_STABILIZATION
+    | mav.MAV_SYS_STATUS_SENSOR_YAW_POSITION
+    | mav.MAV_SYS_STATUS_SENSOR_Z_ALTITUDE_CONTROL
+    | mav.MAV_SYS_STATUS_SENSOR_XY_POSITION_CONTROL
+    | mav.MAV_SYS_STATUS_SENSOR_MOTOR_OUTPUTS
+    | mav.MAV_SYS_STATUS_PREARM_CHECK
+)
+
+MISSION_TIMEOUT_US = 1_500_000  # wall time between re-requests during a transfer
+MISSION_RETRIES = 5
+
+
+@dataclass
+class Outgoing:
+    """A message to send: on a link index (None: every link) to a peer (None: all peers)."""
+
+    msg: mav.MAVLink_message
+    link: int | None = None
+    peer: tuple | None = None
+
+
+@dataclass
+class _Transfer:
+    """An upload in progress (client -> vehicle)."""
+
+    count: int
+    link: int
+    peer: tuple
+    items: list = field(default_factory=list)
+    last_request_wall_us: int = 0
+    retries: int = 0
+
+
+def _param_type(name: str) -> int:
+    return mav.MAV_PARAM_TYPE_INT32 if PARAMS[name].is_int else mav.MAV_PARAM_TYPE_REAL32
+
+
+def _param_wire(name: str, value: float) -> float:
+    """The float field of PARAM_VALUE: ints are sent bytewise (int32 bits in the float)."""
+    if PARAMS[name].is_int:
+        return struct.unpack("<f", struct.pack("<i", int(value)))[0]
+    return float(value)
+
+
+def _param_from_wire(name: str, value: float, ptype: int) -> float:
+    if PARAMS[name].is_int and ptype in (mav.MAV_PARAM_TYPE_INT32, mav.MAV_PARAM_TYPE_UINT32,
+                                         mav.MAV_PARAM_TYPE_INT8, mav.MAV_PARAM_TYPE_UINT8,
+                                         mav.MAV_PARAM_TYPE_INT16, mav.MAV_PARAM_TYPE_UINT16):
+        return float(struct.unpack("<i", struct.pack("<f", value))[0])
+    return float(value)
+
+
+class VehicleAgent:
+    """The MAVLink face of vehicle ``index`` of a :class:`Fleet` (sysid index + 1)."""
+
+    def __init__(self, fleet: Fleet, index: int, geo: frames.GeoReference, n_links: int,
+                 link_modes: list[str]):
+        self.fleet = fleet
+        self.i = index
+        self.sysid = index + 1
+        self.geo = geo
+        self.cmd: cm.Commander = fleet.commanders[index]
+        self.params = fleet.params[index]
+        self.rates: list[dict[int, float]] = [
+            dict(ONBOARD_RATES if m == "onboard" else NORMAL_RATES) for m in link_modes
+        ]
+        self.next_due: list[dict[int, int]] = [dict.fromkeys(r, 0) for r in self.rates]
+        self.n_links = n_links
+        self._texts_sent = 0
+        self._reached_sent = 0
+        self._upload: _Transfer | None = None
+        self._download_items: list = []
+        self._raw_mission: list = []  # MISSION_ITEM_INT messages as uploaded
+        self._last_mission_current: tuple | None = None
+        self._boot_wall_us = 0
+
+    # --- helpers --------------------------------------------------------------------
+    @property
+    def sim(self):
+        return self.fleet.sim
+
+    def _boot_ms(self) -> int:
+        return self.fleet.time_us // 1000
+
+    def _state(self):
+        return self.fleet.state(self.i)
+
+    def _ack(self, command: int, result: int, m, link: int, peer) -> Outgoing:
+        return Outgoing(mav.MAVLink_command_ack_message(
+            command, int(result), 0, 0, m.get_srcSystem(), m.get_srcComponent()), link, peer)
+
+    def texts(self) -> list[Outgoing]:
+        out = []
+        t = list(self.cmd.statustexts)
+        for severity, text in t[self._texts_sent:] if len(t) >= self._texts_sent else t:
+            out.append(Outgoing(mav.MAVLink_statustext_message(
+                severity, text[:50].encode("ascii", "replace"))))
+        self._texts_sent = len(t)
+        if self.cmd.statustexts.maxlen and len(t) == self.cmd.statustexts.maxlen:
+            self.cmd.statustexts.clear()
+            self._texts_sent = 0
+        return out
+
+    # --- telemetry --------------------------------------------------------------------
+    def heartbeat(self) -> mav.MAVLink_heartbeat_message:
+        c = self.cmd
+        base = mav.MAV_MODE_FLAG_CUSTOM_MODE_ENABLED
+        if c.armed:
+            base |= mav.MAV_MODE_FLAG_SAFETY_ARMED
+        if c.main_mode in (cm.MAIN_AUTO, cm.MAIN_OFFBOARD):
+            base |= (mav.MAV_MODE_FLAG_AUTO_ENABLED | mav.MAV_MODE_FLAG_GUIDED_ENABLED
+                     | mav.MAV_MODE_FLAG_STABILIZE_ENABLED)
+        else:
+            base |= mav.MAV_MODE_FLAG_MANUAL_INPUT_ENABLED
+            if c.main_mode != cm.MAIN_MANUAL and c.main_mode != cm.MAIN_ACRO:
+                base |= mav.MAV_MODE_FLAG_STABILIZE_ENABLED
+            if c.main_mode == cm.MAIN_POSCTL:
+                base |= mav.MAV_MODE_FLAG_GUIDED_ENABLED
+        if c.terminated:
+            status = mav.MAV_STATE_FLIGHT_TERMINATION
+        elif c.armed:
+            status = mav.MAV_STATE_ACTIVE
+        else:
+            status = mav.MAV_STATE_STANDBY
+        custom = (c.main_mode << 16) | (c.sub_mode << 24)
+        return mav.MAVLink_heartbeat_message(mav.MAV_TYPE_QUADROTOR, mav.MAV_AUTOPILOT_PX4,
+                                             base, custom, status, 3)
+
+    def autopilot_version(self) -> mav.MAVLink_autopilot_version_message:
+        # flight_sw_version 1.15.0 release (major<<24 | minor<<16 | patch<<8 | 255)
+        return mav.MAVLink_autopilot_version_message(
+            CAPABILITIES, (1 << 24) | (15 << 16) | (0 << 8) | 255, 0, 0, 0,
+            [0] * 8, [0] * 8, [0] * 8, 0, 0, 0x46540000 + self.sysid, [0] * 18)
+
+    def home_position(self) -> mav.MAVLink_home_position_message:
+        h = self.cmd.home
+        lat, lon, alt = self.geo.to_global(h)
+        ned = frames.enu_to_ned(h)
+        return mav.MAVLink_home_position_message(
+            int(round(lat * 1e7)), int(round(lon * 1e7)), int(round(alt * 1000)),
+            float(ned[0]), float(ned[1]), float(ned[2]), [1.0, 0.0, 0.0, 0.0], 0.0, 0.0, 0.0,
+            self.fleet.time_us)
+
+    def build(self, msg_id: int):
+        """The current value of a telemetry message, or None if we do not produce it."""
+        s = self._state()
+        x = self.sim.x[self.i]
+        t_ms = self._boot_ms()
+        t_us = self.fleet.time_us
+        if msg_id == mav.MAVLINK_MSG_ID_HEARTBEAT:
+            return self.heartbeat()
+        q_ned = frames.q_enu_flu_to_ned_frd(x[d.X_QUAT:d.X_QUAT + 4])
+        w_frd = frames.flu_to_frd(x[d.X_OMEGA:d.X_OMEGA + 3])
+        p_ned = frames.enu_to_ned(s.position)
+        v_ned = frames.enu_to_ned(s.velocity)
+        if msg_id == mav.MAVLINK_MSG_ID_ATTITUDE:
+            rpy = qto_euler(q_ned)
+            return mav.MAVLink_attitude_message(t_ms, *(float(v) for v in rpy),
+                                                *(float(v) for v in w_frd))
+        if msg_id == mav.MAVLINK_MSG_ID_ATTITUDE_QUATERNION:
+            return mav.MAVLink_attitude_quaternion_message(
+                t_ms, *(float(v) for v in q_ned), *(float(v) for v in w_frd), [0.0] * 4)
+        if msg_id == mav.MAVLINK_MSG_ID_LOCAL_POSITION_NED:
+            return mav.MAVLink_local_position_ned_message(
+                t_ms, *(float(v) for v in p_ned), *(float(v) for v in v_ned))
+        if msg_id == mav.MAVLINK_MSG_ID_GLOBAL_POSITION_INT:
+            lat, lon, alt = self.geo.to_global(s.position)
+            rel = s.position[2] - self.cmd.home[2]
+            hdg = math.degrees(frames.yaw_enu_to_ned(s.yaw)) % 360.0
+            return mav.MAVLink_global_position_int_message(
+                t_ms, int(round(lat * 1e7)), int(round(lon * 1e7)), int(round(alt * 1000)),
+                int(round(rel * 1000)), *(int(round(v * 100)) for v in v_ned),
+                int(round(hdg * 100)) % 36000)
+        if msg_id == mav.MAVLINK_MSG_ID_ODOMETRY:
+            v_body = frames.flu_to_frd(_rotate_inv(x[d.X_QUAT:d.X_QUAT + 4], s.velocity))
+            return mav.MAVLink_odometry_message(
+                t_us, mav.MAV_FRAME_LOCAL_NED, mav.MAV_FRAME_BODY_FRD,
+                *(float(v) for v in p_ned), [float(v) for v in q_ned],
+                *(float(v) for v in v_body), *(float(v) for v in w_frd),
+                [math.nan] * 21, [math.nan] * 21, 0, mav.MAV_ESTIMATOR_TYPE_NAIVE, 100)
+        if msg_id == mav.MAVLINK_MSG_ID_HIGHRES_IMU:
+            f_frd = frames.flu_to_frd(
+                self.sim.plant.status[self.i, d.S_SPECIFIC_FORCE:d.S_SPECIFIC_FORCE + 3])
+            alt = self.geo.alt_m + s.position[2]
+            pressure = 1013.25 * (1 - 2.25577e-5 * alt) ** 5.25588
+            return mav.MAVLink_highres_imu_message(
+                t_us, *(float(v) for v in f_frd), *(float(v) for v in w_frd),
+                0.21, 0.0, 0.43, pressure, 0.0, float(alt), 20.0, 0x1FFF, 0)
+        if msg_id == mav.MAVLINK_MSG_ID_EXTENDED_SYS_STATE:
+            return mav.MAVLink_extended_sys_state_message(
+                mav.MAV_VTOL_STATE_UNDEFINED, int(self.cmd.landed_state))
+        if msg_id == mav.MAVLINK_MSG_ID_SYS_STATUS:
+            bat = self.cmd.battery
+            power = self._shaft_power()
+            current = bat.current_a(power)
+            health = SENSORS if not self.cmd.terminated else SENSORS & ~mav.MAV_SYS_STATUS_PREARM_CHECK
+            return mav.MAVLink_sys_status_message(
+                SENSORS, SENSORS, health, 200, int(bat.voltage(current) * 1000),
+                int(current * 100), int(round(bat.remaining * 100)), 0, 0, 0, 0, 0, 0)
+        if msg_id == mav.MAVLINK_MSG_ID_VFR_HUD:
+            speed = float(np.linalg.norm(s.velocity[:2]))
+            hdg = int(math.degrees(frames.yaw_enu_to_ned(s.yaw)) % 360.0)
+            thr = float(self.fleet.sim.w_cmd[self.i].mean() /
+                        self.fleet.sim.platforms[self.i].rotor_speed_max_rad_s) ** 2
+            return mav.MAVLink_vfr_hud_message(speed, speed, hdg, int(thr * 100),
+                                               float(self.geo.alt_m + s.position[2]),
+                                               float(s.velocity[2]))
+        if msg_id == mav.MAVLINK_MSG_ID_ALTITUDE:
+            amsl = float(self.geo.alt_m + s.position[2])
+            rel = float(s.position[2] - self.cmd.home[2])
+            return mav.MAVLink_altitude_message(t_us, amsl, amsl, rel, float(-p_ned[2]),
+                                                float(s.position[2]), float(s.position[2]))
+        if msg_id == mav.MAVLINK_MSG_ID_HOME_POSITION:
+            return self.home_position()
+        if msg_id == mav.MAVLINK_MSG_ID_BATTERY_STATUS:
+            bat = self.cmd.battery
+            current = bat.current_a(self._shaft_power())
+            cell = bat.voltage(current) / bat.cells
+            volts = [int(cell * 1000)] * min(bat.cells, 10) + [65535] * (10 - min(bat.cells, 10))
+            return mav.MAVLink_battery_status_message(
+                0, mav.MAV_BATTERY_FUNCTION_ALL, mav.MAV_BATTERY_TYPE_LIPO, 2500, volts,
+                int(current * 100), int(bat.used_j / 3.6 / max(bat.voltage(), 1.0)), -1,
+                int(round(bat.remaining * 100)))
+        if msg_id == mav.MAVLINK_MSG_ID_GPS_RAW_INT:
+            lat, lon, alt = self.geo.to_global(s.position)
+            return mav.MAVLink_gps_raw_int_message(
+                t_us, mav.GPS_FIX_TYPE_3D_FIX, int(round(lat * 1e7)), int(round(lon * 1e7)),
+                int(round(alt * 1000)), 80, 120, int(np.linalg.norm(s.velocity[:2]) * 100),
+                65535, 12)
+        if msg_id == mav.MAVLINK_MSG_ID_MISSION_CURRENT:
+            return self.mission_current()
+        if msg_id == mav.MAVLINK_MSG_ID_AUTOPILOT_VERSION:
+            return self.autopilot_version()
+        return None
+
+    def _shaft_power(self) -> float:
+        p = self.sim.platforms[self.i]
+        w = self.sim.x[self.i, d.X_ROTOR:]
+        return float(np.sum(p.torque_thrust_ratio_m * p.thrust_coefficient * w**3))
+
+    def mission_current(self) -> mav.MAVLink_mission_current_message:
+        c = self.cmd
+        n = len(c.mission)
+        state = c.mission_state
+        if state == 3 and not (c.main_mode == cm.MAIN_AUTO and c.sub_mode == cm.SUB_MISSION):
+            state = 4  # paused
+        mode = 1 if c.main_mode == cm.MAIN_AUTO and c.sub_mode == cm.SUB_MISSION else 0
+        return mav.MAVLink_mission_current_message(min(c.mission_seq, max(n - 1, 0)) if n else 0,
+                                                   n, state, mode)
+
+    def due_telemetry(self, link: int) -> list[Outgoing]:
+        """Messages whose interval has elapsed on this link, by simulated time."""
+        out = []
+        now = self.fleet.time_us
+        due = self.next_due[link]
+        for msg_id, hz in self.rates[link].items():
+            if hz <= 0 or now < due[msg_id]:
+                continue
+            period = int(1e6 / hz)
+            due[msg_id] = max(due[msg_id] + period, now)
+            m = self.build(msg_id)
+            if m is not None:
+                out.append(Outgoing(m, link))
+        return out
+
+    def events(self) -> list[Outgoing]:
+        """Status texts, reached items and mission progress changes since the last call."""
+        out = self.texts()
+        reached = list(self.cmd.reached)
+        for seq in reached[self._reached_sent:]:
+            out.append(Outgoing(mav.MAVLink_mission_item_reached_message(seq)))
+        self._reached_sent = len(reached)
+        mc = self.mission_current()
+        key = (mc.seq, mc.total, mc.mission_state, mc.mission_mode)
+        if key != self._last_mission_current:
+            self._last_mission_current = key
+            out.append(Outgoing(mc))
+        return out
+
+    # --- incoming -------------------------------------------------------------------
+    def for_us(self, m) -> bool:
+        ts = getattr(m, "target_system", None)
+        tc = getattr(m, "target_component", None)
+        if ts is None:
+            return True
+        if ts not in (0, self.sysid):
+            return False
+        return tc is None or tc in (0, COMPID)
+
+    def handle(self, m, link: int, peer, wall_us: int) -> list[Outgoing]:
+        """React to one decoded message; returns the replies (none for most streams)."""
+        t = m.get_type()
+        handler = _HANDLERS.get(t)
+        if handler is None or not self.for_us(m):
+            return []
+        return handler(self, m, link, peer, wall_us)
+
+    # commands --------------------------------------------------------------------------
+    def _on_command(self, m, link, peer, wall_us):
+        is_int = m.get_type() == "COMMAND_INT"
+        p = [m.param1, m.param2, m.param3, m.param4]
+        if is_int:
+            p += [m.x, m.y, m.z]
+        else:
+            p += [m.param5, m.param6, m.param7]
+        try:
+            result, extra = self._command(m.command, p, is_int, getattr(m, "frame", 0), link,
+                                          peer)
+        except (ValueError, SetpointError) as exc:
+            self.cmd.text(cm.Severity.CRITICAL, f"Command {m.command} rejected: {exc}")
+            result, extra = Result.DENIED, []
+        return [self._ack(m.command, result, m, link, peer), *extra]
+
+    def _command(self, command: int, p, is_int: bool, frame: int, link, peer):
+        c = self.cmd
+        if command == mav.MAV_CMD_COMPONENT_ARM_DISARM:
+            force = abs(p[1] - FORCE_MAGIC) < 0.5
+            if not math.isfinite(p[0]):
+                return Result.DENIED, []
+            return (c.arm(force) if p[0] > 0.5 else c.disarm(force)), []
+        if command == mav.MAV_CMD_NAV_TAKEOFF:
+            alt = p[6]
+            local = None if not math.isfinite(alt) else alt - self.geo.alt_m
+            return c.takeoff(local), []
+        if command == mav.MAV_CMD_NAV_LAND:
+            return c.land(), []
+        if command == mav.MAV_CMD_NAV_RETURN_TO_LAUNCH:
+            return c.return_to_launch(), []
+        if command == mav.MAV_CMD_DO_SET_MODE:
+            if not (math.isfinite(p[1]) and math.isfinite(p[2])):
+                return Result.DENIED, []
+            if not int(p[0]) & mav.MAV_MODE_FLAG_CUSTOM_MODE_ENABLED:
+                return Result.UNSUPPORTED, []
+            return c.set_mode(int(p[1]), int(p[2])), []
+        if command == mav.MAV_CMD_DO_REPOSITION:
+            if is_int:
+                lat, lon = p[4] * 1e-7, p[5] * 1e-7
+            else:
+                lat, lon = p[4], p[5]
+            alt = p[6]
+            if not (math.isfinite(lat) and math.isfinite(lon)) or (lat == 0 and lon == 0):
+                target = np.array([math.nan, math.nan, math.nan])
+            else:
+                target = self.geo.to_local(lat, lon, self.geo.alt_m)
+                target[2] = math.nan
+            if math.isfinite(alt):
+                target[2] = self._alt_to_local(alt, frame)
+            yaw = frames.yaw_ned_to_enu(p[3]) if math.isfinite(p[3]) else math.nan
+            if math.isfinite(p[0]) and p[0] > 0:
+                c.change_speed(p[0])
+            return c.reposition(target, yaw), []
+        if command == mav.MAV_CMD_DO_CHANGE_SPEED:
+            return c.change_speed(p[1]), []
+        if command == mav.MAV_CMD_MISSION_START:
+            if not c.mission:
+                return Result.DENIED, []
+            if math.isfinite(p[0]) and p[0] >= 0:
+                c.set_mission_current(int(p[0]))
+            return c.set_mode(cm.MAIN_AUTO, cm.SUB_MISSION), []
+        if command == mav.MAV_CMD_SET_MESSAGE_INTERVAL:
+            msg_id = int(p[0]) if math.isfinite(p[0]) else -1
+            if self.build_probe(msg_id) is None:
+                return Result.DENIED, []
+            interval = p[1]
+            if not math.isfinite(interval) or interval == 0:
+                hz = (ONBOARD_RATES if link == 0 else NORMAL_RATES).get(msg_id, 0.0)
+            elif interval < 0:
+                hz = 0.0
+            else:
+                hz = 1e6 / interval
+            self.rates[link][msg_id] = min(hz, 500.0)
+            self.next_due[link].setdefault(msg_id, 0)
+            return Result.ACCEPTED, []
+        if command == mav.MAV_CMD_REQUEST_MESSAGE:
+            msg_id = int(p[0]) if math.isfinite(p[0]) else -1
+            m = self.build(msg_id) if msg_id != mav.MAVLINK_MSG_ID_PARAM_VALUE else None
+            if m is None:
+                return Result.UNSUPPORTED, []
+            return Result.ACCEPTED, [Outgoing(m, link, peer)]
+        if command == mav.MAV_CMD_REQUEST_AUTOPILOT_CAPABILITIES:
+            return Result.ACCEPTED, [Outgoing(self.autopilot_version(), link, peer)]
+        if command == mav.MAV_CMD_GET_HOME_POSITION:
+            return Result.ACCEPTED, [Outgoing(self.home_position(), link, peer)]
+        if command == mav.MAV_CMD_DO_SET_HOME:
+            if p[0] > 0.5:
+                pos = self._state().position
+            else:
+                if is_int:
+                    lat, lon = p[4] * 1e-7, p[5] * 1e-7
+                else:
+                    lat, lon = p[4], p[5]
+                if not all(math.isfinite(v) for v in (lat, lon, p[6])):
+                    return Result.DENIED, []
+                pos = self.geo.to_local(lat, lon, p[6])
+            c.set_home(pos)
+            return Result.ACCEPTED, [Outgoing(self.home_position())]
+        if command == mav.MAV_CMD_DO_FLIGHTTERMINATION:
+            if p[0] > 0.5:
+                return c.terminate(), []
+            return Result.ACCEPTED, []
+        if command == mav.MAV_CMD_PREFLIGHT_REBOOT_SHUTDOWN:
+            if c.armed:
+                return Result.DENIED, []
+            return Result.ACCEPTED, []
+        return Result.UNSUPPORTED, []
+
+    def build_probe(self, msg_id: int):
+        try:
+            return self.build(msg_id)
+        except Exception:  # noqa: BLE001 - a message we cannot build is unsupported
+            return None
+
+    def _alt_to_local(self, alt: float, frame: int) -> float:
+        if frame in (mav.MAV_FRAME_GLOBAL_RELATIVE_ALT, mav.MAV_FRAME_GLOBAL_RELATIVE_ALT_INT):
+            return self.cmd.home[2] + alt
+        return alt - self.geo.alt_m
+
+    def _on_set_mode(self, m, link, peer, wall_us):
+        if m.target_system != self.sysid:
+            return []
+        main = (m.custom_mode >> 16) & 0xFF
+        sub = (m.custom_mode >> 24) & 0xFF
+        self.cmd.set_mode(main, sub)
+        return []
+
+    # offboard -----------------------------------------------------------------------
+    def _offboard(self, sp: Setpoint) -> None:
+        self.fleet.offboard_setpoint(self.i, sp)
+
+    def _reject_setpoint(self, why: str) -> list:
+        self.cmd.text(cm.Severity.WARNING, f"Offboard setpoint rejected: {why}"[:50])
+        return []
+
+    def _on_local_ned(self, m, link, peer, wall_us):
+        mask = m.type_mask
+        frame = m.coordinate_frame
+        if frame not in (mav.MAV_FRAME_LOCAL_NED, mav.MAV_FRAME_BODY_NED,
+                         mav.MAV_FRAME_LOCAL_OFFSET_NED, mav.MAV_FRAME_BODY_OFFSET_NED):
+            return self._reject_setpoint(f"frame {frame} not supported")
+        pos = None if mask & 0b111 == 0b111 else [m.x, m.y, m.z]
+        vel = None if mask & 0b111000 == 0b111000 else [m.vx, m.vy, m.vz]
+        acc = None if mask & 0b111000000 == 0b111000000 else [m.afx, m.afy, m.afz]
+        s = self._state()
+        try:
+            pos, vel, acc = (None if v is None else _finite3(v, name)
+                             for v, name in ((pos, "position"), (vel, "velocity"),
+                                             (acc, "acceleration")))
+        except SetpointError as exc:
+            return self._reject_setpoint(str(exc))
+        rot = frame in (mav.MAV_FRAME_BODY_NED, mav.MAV_FRAME_BODY_OFFSET_NED)
+        yaw_ned = frames.yaw_enu_to_ned(s.yaw)
+
+        def to_enu(v, offset):
+            if v is None:
+                return None
+            v = np.asarray(v, dtype=float)
+            if rot:  # body-NED: x forward, y right along the current heading
+                c, sn = math.cos(yaw_ned), math.sin(yaw_ned)
+                v = np.array([c * v[0] - sn * v[1], sn * v[0] + c * v[1], v[2]])
+            out = frames.ned_to_enu(v)
+            return out + s.position if offset else out
+
+        offset = frame in (mav.MAV_FRAME_LOCAL_OFFSET_NED, mav.MAV_FRAME_BODY_OFFSET_NED)
+        yaw = None if mask & (1 << 10) else m.yaw
+        yaw_rate = None if mask & (1 << 11) else m.yaw_rate
+        if yaw is not None and not math.isfinite(yaw):
+            return self._reject_setpoint("yaw is not finite")
+        if yaw_rate is not None and not math.isfinite(yaw_rate):
+            return self._reject_setpoint("yaw rate is not finite")
+        if pos is None and vel is None and acc is None:
+            return self._reject_setpoint("type_mask ignores position, velocity and accel")
+        try:
+            sp = Setpoint.trajectory(
+                to_enu(pos, offset), to_enu(vel, False), to_enu(acc, False),
+                yaw=None if yaw is None else frames.yaw_ned_to_enu(yaw),
+                yaw_rate=None if yaw_rate is None else -yaw_rate)
+        except SetpointError as exc:
+            return self._reject_setpoint(str(exc))
+        self._offboard(sp)
+        return []
+
+    def _on_global_int(self, m, link, peer, wall_us):
+        mask = m.type_mask
+        s = self._state()
+        pos = None
+        if mask & 0b111 != 0b111:
+            lat, lon = m.lat_int * 1e-7, m.lon_int * 1e-7
+            if not math.isfinite(m.alt):
+                return self._reject_setpoint("altitude is not finite")
+            p = self.geo.to_local(lat, lon, self.geo.alt_m)
+            p[2] = self._alt_to_local(m.alt, m.coordinate_frame)
+            pos = p
+        try:
+            vel = None if mask & 0b111000 == 0b111000 else frames.ned_to_enu(
+                _finite3([m.vx, m.vy, m.vz], "velocity"))
+            acc = None if mask & 0b111000000 == 0b111000000 else frames.ned_to_enu(
+                _finite3([m.afx, m.afy, m.afz], "acceleration"))
+            yaw = None if mask & (1 << 10) else frames.yaw_ned_to_enu(m.yaw)
+            yaw_rate = None if mask & (1 << 11) else -m.yaw_rate
+            if pos is None and vel is None and acc is None:
+                return self._reject_setpoint("type_mask ignores everything")
+            sp = Setpoint.trajectory(pos, vel, acc, yaw=yaw, yaw_rate=yaw_rate)
+        except SetpointError as exc:
+            return self._reject_setpoint(str(exc))
+        del s
+        self._offboard(sp)
+        return []
+
+    def _on_attitude_target(self, m, link, peer, wall_us):
+        mask = m.type_mask
+        thrust = m.thrust
+        if mask & (1 << 6) or not math.isfinite(thrust) or not 0.0 <= thrust <= 1.0:
+            return self._reject_setpoint("thrust must be within 0..1")
+        try:
+            if mask & (1 << 7):  # attitude ignored: body rates
+                rates = _finite3([m.body_roll_rate, m.body_pitch_rate, m.body_yaw_rate], "rates")
+                sp = Setpoint.body_rates(frames.frd_to_flu(rates), thrust)
+            else:
+                q = np.asarray(m.q, dtype=float)
+                if not np.isfinite(q).all() or abs(np.linalg.norm(q) - 1.0) > 1e-2:
+                    return self._reject_setpoint("attitude quaternion is not a unit quaternion")
+                q_enu = frames.q_ned_frd_to_enu_flu(q / np.linalg.norm(q))
+                sp = Setpoint.attitude(q_enu, thrust)
+        except SetpointError as exc:
+            return self._reject_setpoint(str(exc))
+        self._offboard(sp)
+        return []
+
+    # parameters ---------------------------------------------------------------------
+    def _param_value(self, name: str, index: int) -> mav.MAVLink_param_value_message:
+        return mav.MAVLink_param_value_message(
+            name.encode("ascii"), _param_wire(name, self.params[name]), _param_type(name),
+            len(PARAMS), index)
+
+    def _on_param_request_list(self, m, link, peer, wall_us):
+        return [Outgoing(self._param_value(n, k), link, peer) for k, n in enumerate(PARAMS)]
+
+    def _param_name(self, raw) -> str:
+        if isinstance(raw, bytes):
+            raw = raw.decode("ascii", "replace")
+        return raw.split("\x00", 1)[0]
+
+    def _on_param_request_read(self, m, link, peer, wall_us):
+        names = list(PARAMS)
+        if m.param_index >= 0:
+            if m.param_index >= len(names):
+                return []
+            name = names[m.param_index]
+        else:
+            name = self._param_name(m.param_id)
+            if name not in PARAMS:
+                return []
+        return [Outgoing(self._param_value(name, names.index(name)), link, peer)]
+
+    def _on_param_set(self, m, link, peer, wall_us):
+        name = self._param_name(m.param_id)
+        if name not in PARAMS:
+            self.cmd.text(cm.Severity.WARNING, f"Param {name[:16]} unknown: not set")
+            return []
+        value = _param_from_wire(name, m.param_value, m.param_type)
+        try:
+            self.params.set(name, value)
+            self.fleet.refresh_params()
+        except ParamError as exc:
+            self.cmd.text(cm.Severity.WARNING, str(exc)[:50])
+        idx = list(PARAMS).index(name)
+        return [Outgoing(self._param_value(name, idx))]
+
+    # missions -----------------------------------------------------------------------
+    def _mission_ack(self, m, result: int, link, peer, mission_type=0) -> Outgoing:
+        return Outgoing(mav.MAVLink_mission_ack_message(
+            m.get_srcSystem(), m.get_srcComponent(), result, mission_type), link, peer)
+
+    def _on_mission_count(self, m, link, peer, wall_us):
+        mtype = getattr(m, "mission_type", 0)
+        if mtype != mav.MAV_MISSION_TYPE_MISSION:
+            return [self._mission_ack(m, mav.MAV_MISSION_UNSUPPORTED, link, peer, mtype)]
+        if self.cmd.armed and self.cmd.main_mode == cm.MAIN_AUTO \
+                and self.cmd.sub_mode == cm.SUB_MISSION and m.count > 0:
+            pass  # PX4 accepts a new mission while flying one; it restarts from item 0
+        if m.count == 0:
+            self._raw_mission = []
+            self.cmd.set_mission([])
+            return [self._mission_ack(m, mav.MAV_MISSION_ACCEPTED, link, peer)]
+        if m.count > 10000:
+            return [self._mission_ack(m, mav.MAV_MISSION_NO_SPACE, link, peer)]
+        self._upload = _Transfer(m.count, link, peer, last_request_wall_us=wall_us)
+        self._upload_src = (m.get_srcSystem(), m.get_srcComponent())
+        return [self._request_item(0)]
+
+    def _request_item(self, seq: int) -> Outgoing:
+        up = self._upload
+        sysid, compid = self._upload_src
+        return Outgoing(mav.MAVLink_mission_request_int_message(sysid, compid, seq, 0),
+                        up.link, up.peer)
+
+    def _on_mission_item_int(self, m, link, peer, wall_us):
+        up = self._upload
+        if up is None:
+            return []
+        expected = len(up.items)
+        if m.seq != expected:
+            return [self._request_item(expected)]  # out of order: ask again for ours
+        up.items.append(m)
+        up.last_request_wall_us = wall_us
+        up.retries = 0
+        if len(up.items) < up.count:
+            return [self._request_item(len(up.items))]
+        try:
+            items = [self._to_mission_item(it) for it in up.items]
+        except ValueError as exc:
+            self._upload = None
+            self.cmd.text(cm.Severity.CRITICAL, f"Mission rejected: {exc}"[:50])
+            return [self._mission_ack(m, mav.MAV_MISSION_INVALID, link, peer)]
+        self._raw_mission = list(up.items)
+        self._upload = None
+        self.cmd.set_mission(items)
+        return [self._mission_ack(m, mav.MAV_MISSION_ACCEPTED, link, peer)]
+
+    def _to_mission_item(self, it) -> MissionItem:
+        nan = math.nan
+        if it.frame in (mav.MAV_FRAME_GLOBAL_INT, mav.MAV_FRAME_GLOBAL_RELATIVE_ALT_INT,
+                        mav.MAV_FRAME_GLOBAL, mav.MAV_FRAME_GLOBAL_RELATIVE_ALT):
+            scale = 1e-7 if it.frame in (mav.MAV_FRAME_GLOBAL_INT,
+                                         mav.MAV_FRAME_GLOBAL_RELATIVE_ALT_INT) else 1.0
+            lat, lon = it.x * scale, it.y * scale
+            if (lat == 0 and lon == 0) or not (math.isfinite(lat) and math.isfinite(lon)):
+                xy = (nan, nan)
+            else:
+                p = self.geo.to_local(lat, lon, self.geo.alt_m)
+                xy = (p[0], p[1])
+            z = self._alt_to_local(it.z, it.frame) if math.isfinite(it.z) else nan
+            pos = (xy[0], xy[1], z)
+        elif it.frame == mav.MAV_FRAME_LOCAL_NED:
+            pos = tuple(frames.ned_to_enu([it.x, it.y, it.z]))
+        elif it.frame == mav.MAV_FRAME_MISSION:
+            pos = (nan, nan, nan)
+        else:
+            raise ValueError(f"item {it.seq}: frame {it.frame} not supported")
+        if it.command == mav.MAV_CMD_NAV_WAYPOINT:
+            yaw = frames.yaw_ned_to_enu(math.radians(it.param4)) if math.isfinite(it.param4) \
+                else nan
+            return MissionItem(it.command, pos, hold_s=max(0.0, _f(it.param1)),
+                               acceptance_radius_m=max(0.0, _f(it.param2)), yaw_rad=yaw,
+                               autocontinue=bool(it.autocontinue))
+        if it.command == mav.MAV_CMD_NAV_DELAY:
+            return MissionItem(it.command, pos, hold_s=_f(it.param1))
+        if it.command == mav.MAV_CMD_DO_CHANGE_SPEED:
+            return MissionItem(it.command, speed_m_s=it.param2)
+        return MissionItem(it.command, pos)
+
+    def _on_mission_request_list(self, m, link, peer, wall_us):
+        mtype = getattr(m, "mission_type", 0)
+        if mtype != mav.MAV_MISSION_TYPE_MISSION:
+            return [Outgoing(mav.MAVLink_mission_count_message(
+                m.get_srcSystem(), m.get_srcComponent(), 0, mtype), link, peer)]
+        return [Outgoing(mav.MAVLink_mission_count_message(
+            m.get_srcSystem(), m.get_srcComponent(), len(self._raw_mission), 0), link, peer)]
+
+    def _on_mission_request(self, m, link, peer, wall_us):
+        if getattr(m, "mission_type", 0) != mav.MAV_MISSION_TYPE_MISSION:
+            return []
+        if not 0 <= m.seq < len(self._raw_mission):
+            return [self._mission_ack(m, mav.MAV_MISSION_INVALID_SEQUENCE, link, peer)]
+        it = self._raw_mission[m.seq]
+        return [Outgoing(mav.MAVLink_mission_item_int_message(
+            m.get_srcSystem(), m.get_srcComponent(), it.seq, it.frame, it.command,
+            1 if it.seq == self.cmd.mission_seq else 0, it.autocontinue, it.param1, it.param2,
+            it.param3, it.param4, it.x, it.y, it.z, 0), link, peer)]
+
+    def _on_mission_clear_all(self, m, link, peer, wall_us):
+        mtype = getattr(m, "mission_type", 0)
+        if mtype in (mav.MAV_MISSION_TYPE_MISSION, mav.MAV_MISSION_TYPE_ALL):
+            self._raw_mission = []
+            self._upload = None
+            self.cmd.set_mission([])
+        return [self._mission_ack(m, mav.MAV_MISSION_ACCEPTED, link, peer, mtype)]
+
+    def _on_mission_set_current(self, m, link, peer, wall_us):
+        if self.cmd.set_mission_current(m.seq) != Result.ACCEPTED:
+            self.cmd.text(cm.Severity.WARNING, f"Mission item {m.seq} does not exist")
+        return [Outgoing(self.mission_current())]
+
+    def _on_mission_ack(self, m, link, peer, wall_us):
+        return []
+
+    def poll(self, wall_us: int) -> list[Outgoing]:
+        """Wall-clock duties: re-request mission items, give up abandoned uploads."""
+        up = self._upload
+        if up is None or wall_us - up.last_request_wall_us < MISSION_TIMEOUT_US:
+            return []
+        up.retries += 1
+        up.last_request_wall_us = wall_us
+        if up.retries > MISSION_RETRIES:
+            self._upload = None
+            self.cmd.text(cm.Severity.WARNING, "Mission upload timed out")
+            sysid, compid = self._upload_src
+            return [Outgoing(mav.MAVLink_mission_ack_message(
+                sysid, compid, mav.MAV_MISSION_OPERATION_CANCELLED, 0), up.link, up.peer)]
+        return [self._request_item(len(up.items))]
+
+    def _on_timesync(self, m, link, peer, wall_us):
+        if m.tc1 != 0:
+            return []
+        return [Outgoing(mav.MAVLink_timesync_message(self.fleet.time_us * 1000, m.ts1,
+                                                      m.get_srcSystem(), m.get_srcComponent()),
+                         link, peer)]
+
+
+def _f(v: float) -> float:
+    return v if math.isfinite(v) else 0.0
+
+
+def _finite3(v, name: str) -> list[float]:
+    if not all(math.isfinite(x) for x in v):
+        raise SetpointError(f"{name} has non-finite components")
+    return [float(x) for x in v]
+
+
+def _rotate_inv(q, v):
+    from ft_sitl.physics.quaternion import qrotate_inv
+
+    return qrotate_inv(np.asarray(q, dtype=float), np.asarray(v, dtype=float))
+
+
+_HANDLERS = {
+    "COMMAND_LONG": VehicleAgent._on_command,
+    "COMMAND_INT": VehicleAgent._on_command,
+    "SET_MODE": VehicleAgent._on_set_mode,
+    "SET_POSITION_TARGET_LOCAL_NED": VehicleAgent._on_local_ned,
+    "SET_POSITION_TARGET_GLOBAL_INT": VehicleAgent._on_global_int,
+    "SET_ATTITUDE_TARGET": VehicleAgent._on_attitude_target,
+    "PARAM_REQUEST_LIST": VehicleAgent._on_param_request_list,
+    "PARAM_REQUEST_READ": VehicleAgent._on_param_request_read,
+    "PARAM_SET": VehicleAgent._on_param_set,
+    "MISSION_COUNT": VehicleAgent._on_mission_count,
+    "MISSION_ITEM_INT": VehicleAgent._on_mission_item_int,
+    "MISSION_REQUEST_LIST": VehicleAgent._on_mission_request_list,
+    "MISSION_REQUEST_INT": VehicleAgent._on_mission_request,
+    "MISSION_REQUEST": VehicleAgent._on_mission_request,
+    "MISSION_CLEAR_ALL": VehicleAgent._on_mission_clear_all,
+    "MISSION_SET_CURRENT": VehicleAgent._on_mission_set_current,
+    "MISSION_ACK": VehicleAgent._on_mission_ack,
+    "TIMESYNC": VehicleAgent._on_timesync,
+}

@@ -1,0 +1,263 @@
+"""The SITL server: N vehicles on UDP with PX4 SITL's port conventions.
+
+Vehicle i (sysid i+1, compid 1) has two links, as PX4 SITL instance i does:
+
+* API/offboard link ("onboard" stream rates): listens on 14580+i, sends to
+  127.0.0.1:14540+i -- where MAVSDK's ``udpin://0.0.0.0:14540`` listens;
+* GCS link ("normal" rates): listens on 18570+i, sends to 127.0.0.1:14550 -- QGC,
+  MAVProxy.
+
+The vehicle sends first (heartbeats to the default remote), then also answers every peer
+that has talked to it in the last 10 s. The physics runs in lockstep; the server paces
+it against the wall clock at a speed factor and measures the factor it achieves.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import hashlib
+import math
+import struct
+import time
+from dataclasses import dataclass, field
+from pathlib import Path
+
+from pymavlink.dialects.v20 import common as mav
+
+from ft_sitl import frames
+from ft_sitl.autopilot.fleet import Fleet
+from ft_sitl.mavlink.agent import Outgoing, VehicleAgent
+
+API_LISTEN_BASE = 14580
+API_REMOTE_BASE = 14540
+GCS_LISTEN_BASE = 18570
+GCS_REMOTE_PORT = 14550
+PEER_TIMEOUT_S = 10.0
+CHUNK_US = 4000  # simulated time advanced between telemetry/IO service
+
+
+def signing_secret(key: str) -> bytes:
+    """A 32-byte MAVLink 2 signing secret from a passphrase (SHA-256, as MAVProxy does)."""
+    return hashlib.sha256(key.encode("utf-8")).digest()
+
+
+class Tlog:
+    """A MAVLink telemetry log: each packet prefixed by a big-endian uint64 of wall us."""
+
+    def __init__(self, path: Path):
+        self._fh = open(path, "ab")  # noqa: SIM115 - closed in close()
+
+    def write(self, data: bytes) -> None:
+        self._fh.write(struct.pack(">Q", int(time.time() * 1e6)) + data)
+
+    def close(self) -> None:
+        self._fh.close()
+
+
+@dataclass
+class Link:
+    vehicle: int
+    index: int  # 0 API (onboard), 1 GCS (normal)
+    listen: tuple[str, int]
+    default_remote: tuple[str, int]
+    sysid: int
+    secret: bytes | None = None
+    peers: dict = field(default_factory=dict)
+    transport: asyncio.DatagramTransport | None = None
+    rx_packets: int = 0
+    rx_errors: int = 0
+
+    def __post_init__(self):
+        self.parser = mav.MAVLink(None, 0, 0)
+        self.parser.robust_parsing = True
+        self.encoder = mav.MAVLink(None, self.sysid, mav.MAV_COMP_ID_AUTOPILOT1)
+        if self.secret is not None:
+            for m in (self.parser, self.encoder):
+                m.signing.secret_key = self.secret
+                m.signing.link_id = self.index
+                m.signing.timestamp = int((time.time() - 1420070400) * 1e5)
+                m.signing.allow_unsigned_callback = lambda _mav, _msgid: False
+            self.encoder.signing.sign_outgoing = True
+
+    def destinations(self, now: float) -> list[tuple]:
+        alive = [a for a, t in self.peers.items() if now - t <= PEER_TIMEOUT_S]
+        for a in list(self.peers):
+            if a not in alive:
+                del self.peers[a]
+        return list(dict.fromkeys([self.default_remote, *alive]))
+
+    def encode(self, msg) -> bytes:
+        buf = msg.pack(self.encoder)
+        self.encoder.seq = (self.encoder.seq + 1) % 256
+        return buf
+
+
+class _Protocol(asyncio.DatagramProtocol):
+    def __init__(self, server: SitlServer, link: Link):
+        self.server = server
+        self.link = link
+
+    def datagram_received(self, data: bytes, addr) -> None:
+        self.server.on_datagram(self.link, data, addr)
+
+    def error_received(self, exc) -> None:  # ICMP port unreachable etc.: peer not there yet
+        pass
+
+
+class SitlServer:
+    def __init__(self, fleet: Fleet, geo: frames.GeoReference, *, bind: str = "127.0.0.1",
+                 remote_host: str = "127.0.0.1", speed_factor: float = 1.0,
+                 tlog: Path | None = None, signing_key: str | None = None,
+                 base_instance: int = 0):
+        if not (math.isfinite(speed_factor) and 0.01 <= speed_factor <= 1000):
+            raise ValueError(f"speed factor: {speed_factor!r} must be within [0.01, 1000]")
+        self.fleet = fleet
+        self.geo = geo
+        self.bind = bind
+        self.speed_factor = speed_factor
+        self.secret = signing_secret(signing_key) if signing_key else None
+        self.tlog = Tlog(tlog) if tlog else None
+        self.links: list[Link] = []
+        self.agents: list[VehicleAgent] = []
+        for i in range(fleet.n):
+            k = base_instance + i
+            links = [
+                Link(i, 0, (bind, API_LISTEN_BASE + k), (remote_host, API_REMOTE_BASE + k),
+                     i + 1, self.secret),
+                Link(i, 1, (bind, GCS_LISTEN_BASE + k), (remote_host, GCS_REMOTE_PORT),
+                     i + 1, self.secret),
+            ]
+            self.links.extend(links)
+            self.agents.append(VehicleAgent(fleet, i, geo, 2, ["onboard", "normal"]))
+        self._stop = asyncio.Event()
+        self.achieved_speed_factor = 0.0
+        self.bad_packets = 0
+        self._last_hb_wall = [0.0] * fleet.n
+
+    def urls(self) -> list[dict]:
+        out = []
+        for i in range(self.fleet.n):
+            api, gcs = self.links[2 * i], self.links[2 * i + 1]
+            out.append({
+                "sysid": i + 1,
+                "mavsdk": f"udpin://0.0.0.0:{api.default_remote[1]}",
+                "pymavlink": f"udpin:0.0.0.0:{api.default_remote[1]}",
+                "api_listen": f"{api.listen[0]}:{api.listen[1]}",
+                "gcs": f"udpin:0.0.0.0:{gcs.default_remote[1]} (or udpout:{gcs.listen[0]}:"
+                       f"{gcs.listen[1]})",
+            })
+        return out
+
+    # --- I/O -------------------------------------------------------------------------
+    def on_datagram(self, link: Link, data: bytes, addr) -> None:
+        now = time.monotonic()
+        if self.tlog:
+            self.tlog.write(data)
+        try:
+            msgs = link.parser.parse_buffer(data) or []
+        except Exception:  # noqa: BLE001 - pymavlink raises on some corrupt input
+            self.bad_packets += 1
+            link.parser = _fresh_parser(link)
+            return
+        agent = self.agents[link.vehicle]
+        wall_us = int(now * 1e6)
+        for m in msgs:
+            if m.get_type() == "BAD_DATA":
+                self.bad_packets += 1
+                continue
+            if m.get_srcSystem() == agent.sysid and m.get_srcComponent() == 1:
+                continue  # our own echo
+            link.peers[addr] = now
+            link.rx_packets += 1
+            try:
+                replies = agent.handle(m, link.index, addr, wall_us)
+            except Exception as exc:  # noqa: BLE001 - a bad message must never stop the vehicle
+                self.bad_packets += 1
+                agent.cmd.text(4, f"Dropped {m.get_type()}: {type(exc).__name__}"[:50])
+                continue
+            self.send_all(link.vehicle, replies)
+
+    def send_all(self, vehicle: int, outs: list[Outgoing]) -> None:
+        if not outs:
+            return
+        now = time.monotonic()
+        for out in outs:
+            links = [self.links[2 * vehicle + out.link]] if out.link is not None \
+                else self.links[2 * vehicle: 2 * vehicle + 2]
+            for link in links:
+                if link.transport is None:
+                    continue
+                data = link.encode(out.msg)
+                dests = [out.peer] if out.peer is not None else link.destinations(now)
+                for dest in dests:
+                    link.transport.sendto(data, dest)
+                if self.tlog:
+                    self.tlog.write(data)
+
+    # --- running ---------------------------------------------------------------------
+    async def start(self) -> None:
+        loop = asyncio.get_running_loop()
+        for link in self.links:
+            transport, _ = await loop.create_datagram_endpoint(
+                lambda link=link: _Protocol(self, link), local_addr=link.listen)
+            link.transport = transport
+
+    def stop(self) -> None:
+        self._stop.set()
+
+    def close(self) -> None:
+        for link in self.links:
+            if link.transport is not None:
+                link.transport.close()
+                link.transport = None
+        if self.tlog:
+            self.tlog.close()
+            self.tlog = None
+
+    def service(self) -> None:
+        """Send what is due after a chunk of simulated time."""
+        for a in self.agents:
+            outs = a.events()
+            for li in range(2):
+                outs.extend(a.due_telemetry(li))
+            self.send_all(a.i, outs)
+
+    async def run(self, duration_s: float | None = None) -> None:
+        """Serve until stop() (or duration_s of wall time). Call start() first."""
+        if self.links[0].transport is None:
+            await self.start()
+        wall0 = time.monotonic()
+        sim0 = self.fleet.time_us
+        self.service()
+        try:
+            while not self._stop.is_set():
+                now = time.monotonic()
+                if duration_s is not None and now - wall0 >= duration_s:
+                    break
+                target = sim0 + (now - wall0) * self.speed_factor * 1e6
+                busy_until = now + 0.02
+                while self.fleet.time_us + CHUNK_US <= target and time.monotonic() < busy_until:
+                    self.fleet.run_us(CHUNK_US)
+                    self.service()
+                wall_us = int(time.monotonic() * 1e6)
+                for a in self.agents:
+                    self.send_all(a.i, a.poll(wall_us))
+                    # heartbeats also by wall clock, so slow speed factors stay connected
+                    if time.monotonic() - self._last_hb_wall[a.i] >= 1.0:
+                        self._last_hb_wall[a.i] = time.monotonic()
+                        self.send_all(a.i, [Outgoing(a.heartbeat())])
+                elapsed = time.monotonic() - wall0
+                if elapsed > 0:
+                    self.achieved_speed_factor = (self.fleet.time_us - sim0) / 1e6 / elapsed
+                await asyncio.sleep(0.001)
+        finally:
+            pass
+
+
+def _fresh_parser(link: Link) -> mav.MAVLink:
+    p = mav.MAVLink(None, 0, 0)
+    p.robust_parsing = True
+    if link.secret is not None:
+        p.signing.secret_key = link.secret
+        p.signing.allow_unsigned_callback = lambda _mav, _msgid: False
+    return p
