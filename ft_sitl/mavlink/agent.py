@@ -277,7 +277,9 @@ class VehicleAgent:
             bat = self.cmd.battery
             power = self._shaft_power()
             current = bat.current_a(power)
-            health = SENSORS if not self.cmd.terminated else SENSORS & ~mav.MAV_SYS_STATUS_PREARM_CHECK
+            health = SENSORS
+            if self.cmd.terminated or self.cmd.battery.remaining < self.params["BAT_CRIT_THR"]:
+                health &= ~mav.MAV_SYS_STATUS_PREARM_CHECK
             return mav.MAVLink_sys_status_message(
                 SENSORS, SENSORS, health, 200, int(bat.voltage(current) * 1000),
                 int(current * 100), int(round(bat.remaining * 100)), 0, 0, 0, 0, 0, 0)
