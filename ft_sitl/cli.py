@@ -163,6 +163,82 @@ def cmd_demo(args) -> int:
     return 0
 
 
+def _parse_home(text: str):
+    from ft_sitl.frames import GeoReference
+
+    parts = text.split(",")
+    if len(parts) != 3:
+        raise CliError(f"--home: {text!r} must be LAT,LON,ALT (degrees, degrees, metres AMSL)")
+    try:
+        lat, lon, alt = (float(v) for v in parts)
+    except ValueError:
+        raise CliError(f"--home: {text!r} has a value that is not a number") from None
+    try:
+        return GeoReference(lat, lon, alt)
+    except ValueError as exc:
+        raise CliError(f"--home: {exc}") from None
+
+
+def cmd_sitl(args) -> int:
+    import asyncio
+    import ipaddress
+    import signal
+
+    from ft_sitl.autopilot.fleet import Fleet
+    from ft_sitl.frames import PX4_SITL_HOME, GeoReference
+    from ft_sitl.mavlink.server import SitlServer
+
+    if not 1 <= args.instances <= 64:
+        raise CliError(f"--instances: {args.instances} must be within 1..64")
+    geo = _parse_home(args.home) if args.home else GeoReference(*PX4_SITL_HOME)
+    try:
+        loopback = ipaddress.ip_address(args.bind).is_loopback
+    except ValueError:
+        raise CliError(f"--bind: {args.bind!r} is not an IP address") from None
+    p = _registry(args).get(args.platform)
+    fleet = Fleet([p] * args.instances,
+                  spawn=[[0.0, 2.0 * i, 0.0] for i in range(args.instances)])
+    try:
+        server = SitlServer(fleet, geo, bind=args.bind, speed_factor=args.speed_factor,
+                            tlog=args.tlog, signing_key=args.signing_key)
+    except (ValueError, OSError) as exc:
+        raise CliError(str(exc)) from None
+    urls = server.urls()
+    if args.json:
+        print(json.dumps({"platform": p.name, "vehicles": urls}, indent=2), flush=True)
+    else:
+        print(f"ft-sitl {__version__}: {args.instances} x {p.name}, speed factor "
+              f"{args.speed_factor:g}, home {geo.lat_deg:.6f}, {geo.lon_deg:.6f}, "
+              f"{geo.alt_m:.1f} m", flush=True)
+        if not loopback:
+            print(f"warning: listening on {args.bind}, reachable from other machines",
+                  flush=True)
+        for u in urls:
+            print(f"  vehicle sysid {u['sysid']}: MAVSDK {u['mavsdk']}   pymavlink "
+                  f"{u['pymavlink']}   GCS {u['gcs']}", flush=True)
+        print("Ctrl-C stops.", flush=True)
+
+    async def main():
+        try:
+            await server.start()
+        except OSError as exc:
+            raise CliError(f"cannot listen on {args.bind}: {exc.strerror}") from None
+        loop = asyncio.get_running_loop()
+        for sig in (signal.SIGINT, signal.SIGTERM):
+            loop.add_signal_handler(sig, server.stop)
+        try:
+            await server.run(duration_s=args.duration)
+        finally:
+            server.close()
+
+    asyncio.run(main())
+    sim_s = fleet.time_us * 1e-6
+    print(f"stopped after {sim_s:.1f} s simulated; achieved speed factor "
+          f"{server.achieved_speed_factor:.2f} (asked {args.speed_factor:g}); "
+          f"{server.bad_packets} bad packets dropped", file=sys.stderr)
+    return 0
+
+
 def build_parser() -> argparse.ArgumentParser:
     ap = argparse.ArgumentParser(
         prog="ft-sitl",
@@ -209,6 +285,29 @@ def build_parser() -> argparse.ArgumentParser:
     pg.add_argument("--force", action="store_true", help="overwrite --out if it exists")
     pg.add_argument("--json", action="store_true", help="print the generated indicators as JSON")
     pg.set_defaults(func=cmd_platforms_generate)
+
+    sitl = sub.add_parser(
+        "sitl", parents=[pf], help="serve vehicles over MAVLink like PX4 SITL",
+        description="Start N simulated vehicles with PX4 SITL's UDP ports: vehicle i (sysid "
+        "i+1) sends to 127.0.0.1:14540+i (MAVSDK, listens on 14580+i) and to "
+        "127.0.0.1:14550 (GCS, listens on 18570+i).")
+    sitl.add_argument("--platform", default="0.98kg-EGO Planner DIY",
+                      help="platform name (default: %(default)s)")
+    sitl.add_argument("--instances", type=int, default=1, help="number of vehicles (1..64)")
+    sitl.add_argument("--speed-factor", type=float, default=1.0,
+                      help="simulated seconds per wall second (default: 1)")
+    sitl.add_argument("--home", metavar="LAT,LON,ALT",
+                      help="geodetic home (default: PX4 SITL's 47.397742,8.545594,488)")
+    sitl.add_argument("--bind", default="127.0.0.1",
+                      help="address to listen on (default: loopback only)")
+    sitl.add_argument("--tlog", type=Path, metavar="PATH",
+                      help="record all MAVLink traffic as a telemetry log")
+    sitl.add_argument("--signing-key", metavar="KEY",
+                      help="MAVLink 2 signing passphrase: unsigned packets are rejected")
+    sitl.add_argument("--duration", type=float, metavar="S",
+                      help="stop after S wall seconds (default: run until Ctrl-C)")
+    sitl.add_argument("--json", action="store_true", help="print the vehicle URLs as JSON")
+    sitl.set_defaults(func=cmd_sitl)
 
     par = sub.add_parser("params", help="flight-controller parameters")
     parsub = par.add_subparsers(dest="params_command", metavar="ACTION", required=True)

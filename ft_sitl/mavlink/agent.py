@@ -707,9 +707,7 @@ class VehicleAgent:
         nan = math.nan
         if it.frame in (mav.MAV_FRAME_GLOBAL_INT, mav.MAV_FRAME_GLOBAL_RELATIVE_ALT_INT,
                         mav.MAV_FRAME_GLOBAL, mav.MAV_FRAME_GLOBAL_RELATIVE_ALT):
-            scale = 1e-7 if it.frame in (mav.MAV_FRAME_GLOBAL_INT,
-                                         mav.MAV_FRAME_GLOBAL_RELATIVE_ALT_INT) else 1.0
-            lat, lon = it.x * scale, it.y * scale
+            lat, lon = it.x * 1e-7, it.y * 1e-7  # MISSION_ITEM_INT: degE7 in any global frame
             if (lat == 0 and lon == 0) or not (math.isfinite(lat) and math.isfinite(lon)):
                 xy = (nan, nan)
             else:

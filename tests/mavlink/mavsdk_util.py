@@ -1,0 +1,22 @@
+"""Helpers for driving the SITL with the real MAVSDK 4.x native binding (asyncio API)."""
+
+import asyncio
+
+from mavsdk import ComponentType
+from mavsdk.asyncio import Configuration, Mavsdk
+
+
+async def connect(port: int = 14540):
+    m = Mavsdk(Configuration.create_with_component_type(ComponentType.GROUND_STATION))
+    await m.add_any_connection(f"udpin://0.0.0.0:{port}")
+    drone = await m.first_autopilot(timeout_s=10.0)
+    assert drone is not None, "no autopilot discovered"
+    return m, drone
+
+
+async def first(gen, pred=lambda v: True, timeout=20.0):
+    async def scan():
+        async for v in gen:
+            if pred(v):
+                return v
+    return await asyncio.wait_for(scan(), timeout)

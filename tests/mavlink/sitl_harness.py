@@ -1,0 +1,49 @@
+"""Run a real SitlServer (real UDP sockets) in a background thread for the tests."""
+
+import asyncio
+import threading
+from contextlib import contextmanager
+
+from ft_sitl import frames
+from ft_sitl.autopilot.fleet import Fleet
+from ft_sitl.mavlink.server import SitlServer
+from ft_sitl.physics.catalog import get_platform
+
+PLATFORM = "0.98kg-EGO Planner DIY"
+
+
+@contextmanager
+def running_sitl(instances: int = 1, speed_factor: float = 1.0, params=None, **kwargs):
+    p = get_platform(PLATFORM)
+    fleet = Fleet([p] * instances, params=params,
+                  spawn=[[0.0, 2.0 * i, 0.0] for i in range(instances)])
+    server = SitlServer(fleet, frames.GeoReference(*frames.PX4_SITL_HOME),
+                        speed_factor=speed_factor, **kwargs)
+    loop = asyncio.new_event_loop()
+    started = threading.Event()
+    errors = []
+
+    def runner():
+        asyncio.set_event_loop(loop)
+        try:
+            loop.run_until_complete(server.start())
+            started.set()
+            loop.run_until_complete(server.run())
+        except Exception as exc:  # noqa: BLE001 - reported to the test below
+            errors.append(exc)
+            started.set()
+        finally:
+            server.close()
+            loop.close()
+
+    thread = threading.Thread(target=runner, daemon=True)
+    thread.start()
+    assert started.wait(10), "server did not start"
+    assert not errors, errors
+    try:
+        yield server
+    finally:
+        loop.call_soon_threadsafe(server.stop)
+        thread.join(10)
+        assert not thread.is_alive(), "server thread did not stop"
+        assert not errors, errors
