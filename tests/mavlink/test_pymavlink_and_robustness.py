@@ -1,0 +1,209 @@
+"""pymavlink scripts, several vehicles at once, signing, tlog, and hostile input."""
+
+import math
+import time
+
+import numpy as np
+import pytest
+from pymavlink import mavutil
+from pymavlink.dialects.v20 import common as mav
+
+from .sitl_harness import running_sitl
+
+
+def client(port=14540, **kw):
+    c = mavutil.mavlink_connection(f"udpin:127.0.0.1:{port}", source_system=246,
+                                   source_component=191, **kw)
+    assert c.wait_heartbeat(timeout=10) is not None
+    return c
+
+
+def wait_msg(c, type_, cond=lambda m: True, timeout=20.0):
+    end = time.time() + timeout
+    while time.time() < end:
+        m = c.recv_match(type=type_, blocking=True, timeout=0.5)
+        if m is not None and cond(m):
+            return m
+    raise AssertionError(f"no {type_} matching within {timeout} s")
+
+
+def ack_of(c, command, timeout=5.0):
+    return wait_msg(c, "COMMAND_ACK", lambda m: m.command == command, timeout)
+
+
+def test_pymavlink_set_mode_arm_takeoff_land():
+    with running_sitl(speed_factor=2.0):
+        c = client()
+        hb = wait_msg(c, "HEARTBEAT")
+        assert (hb.get_srcSystem(), hb.get_srcComponent()) == (1, 1)
+        assert (hb.type, hb.autopilot) == (mav.MAV_TYPE_QUADROTOR, mav.MAV_AUTOPILOT_PX4)
+        assert c.flightmode == "POSCTL"
+        c.mav.command_long_send(1, 1, mav.MAV_CMD_REQUEST_MESSAGE, 0,
+                                mav.MAVLINK_MSG_ID_AUTOPILOT_VERSION, 0, 0, 0, 0, 0, 0)
+        ver = wait_msg(c, "AUTOPILOT_VERSION")
+        assert ver.capabilities & mav.MAV_PROTOCOL_CAPABILITY_MISSION_INT
+        assert ver.capabilities & mav.MAV_PROTOCOL_CAPABILITY_MAVLINK2
+        c.set_mode("AUTO.LOITER" if "AUTO.LOITER" in c.mode_mapping() else "LOITER")
+        wait_msg(c, "HEARTBEAT", lambda m: m.custom_mode == (4 << 16 | 3 << 24))
+        c.arducopter_arm()
+        assert ack_of(c, mav.MAV_CMD_COMPONENT_ARM_DISARM).result == mav.MAV_RESULT_ACCEPTED
+        c.motors_armed_wait()
+        c.mav.command_long_send(1, 1, mav.MAV_CMD_NAV_TAKEOFF, 0, 0, 0, 0, math.nan,
+                                math.nan, math.nan, 488.0 + 4.0)
+        assert ack_of(c, mav.MAV_CMD_NAV_TAKEOFF).result == mav.MAV_RESULT_ACCEPTED
+        pos = wait_msg(c, "GLOBAL_POSITION_INT", lambda m: m.relative_alt > 3900)
+        assert pos.relative_alt == pytest.approx(4000, abs=200)
+        state = wait_msg(c, "EXTENDED_SYS_STATE")
+        assert state.landed_state == mav.MAV_LANDED_STATE_IN_AIR
+        c.set_mode_rtl()  # MAV_CMD_NAV_RETURN_TO_LAUNCH
+        c.mav.command_long_send(1, 1, mav.MAV_CMD_NAV_LAND, 0, 0, 0, 0, 0, 0, 0, 0)
+        assert ack_of(c, mav.MAV_CMD_NAV_LAND).result == mav.MAV_RESULT_ACCEPTED
+        c.motors_disarmed_wait()
+        # unknown commands are answered, not ignored
+        c.mav.command_long_send(1, 1, 31999, 0, 0, 0, 0, 0, 0, 0, 0)
+        assert ack_of(c, 31999).result == mav.MAV_RESULT_UNSUPPORTED
+
+
+def test_commands_to_other_systems_are_ignored_and_acks_name_the_sender():
+    with running_sitl():
+        c = client()
+        c.mav.command_long_send(7, 1, mav.MAV_CMD_COMPONENT_ARM_DISARM, 0, 1, 0, 0, 0, 0, 0, 0)
+        with pytest.raises(AssertionError):
+            ack_of(c, mav.MAV_CMD_COMPONENT_ARM_DISARM, timeout=1.0)
+        c.mav.command_long_send(1, 0, mav.MAV_CMD_COMPONENT_ARM_DISARM, 0, 1, 0, 0, 0, 0, 0, 0)
+        ack = ack_of(c, mav.MAV_CMD_COMPONENT_ARM_DISARM)
+        assert ack.get_srcSystem() == 1 and ack.get_srcComponent() == 1
+        assert (ack.target_system, ack.target_component) == (246, 191)
+
+
+def test_several_vehicles_from_one_process_each_on_its_own_port():
+    with running_sitl(instances=3) as server:
+        clients = [client(14540 + i) for i in range(3)]
+        for i, c in enumerate(clients):
+            assert c.target_system == i + 1
+            c.arducopter_arm()
+            assert ack_of(c, mav.MAV_CMD_COMPONENT_ARM_DISARM).result == 0
+        assert [cmd.armed for cmd in server.fleet.commanders] == [True] * 3
+        # the GCS link of vehicle 2 answers a client that talks to it first
+        g = mavutil.mavlink_connection("udpout:127.0.0.1:18571", source_system=247)
+        g.mav.heartbeat_send(6, 8, 0, 0, 0)
+        hb = wait_msg(g, "HEARTBEAT", lambda m: m.get_srcSystem() == 2)
+        assert hb.base_mode & mav.MAV_MODE_FLAG_SAFETY_ARMED
+
+
+def test_mission_upload_survives_wrong_sequence_and_abandonment():
+    with running_sitl() as server:
+        c = client()
+        c.mav.mission_count_send(1, 1, 2, 0)
+        req = wait_msg(c, "MISSION_REQUEST_INT")
+        assert req.seq == 0
+        # send item 1 first: the vehicle asks for 0 again
+        c.mav.mission_item_int_send(1, 1, 1, 6, 16, 0, 1, 0, 1, 0, math.nan,
+                                    473977420, 85455940, 5.0, 0)
+        assert wait_msg(c, "MISSION_REQUEST_INT").seq == 0
+        c.mav.mission_item_int_send(1, 1, 0, 6, 16, 0, 1, 0, 1, 0, math.nan,
+                                    473977420, 85455940, 5.0, 0)
+        assert wait_msg(c, "MISSION_REQUEST_INT").seq == 1
+        # abandon: the vehicle re-requests, then gives up with an ack
+        assert wait_msg(c, "MISSION_REQUEST_INT", timeout=4).seq == 1
+        ack = wait_msg(c, "MISSION_ACK", timeout=15)
+        assert ack.type == mav.MAV_MISSION_OPERATION_CANCELLED
+        assert server.fleet.commanders[0].mission == []
+
+
+def test_signing_rejects_unsigned_and_accepts_signed(tmp_path):
+    from ft_sitl.mavlink.server import signing_secret
+
+    with running_sitl(signing_key="correct horse") as server:
+        plain = client()
+        plain.arducopter_arm()
+        time.sleep(1.0)
+        assert not server.fleet.commanders[0].armed
+        signed = mavutil.mavlink_connection("udpin:127.0.0.1:14540", source_system=246,
+                                            source_component=191)
+        signed.setup_signing(signing_secret("correct horse"), sign_outgoing=True)
+        signed.wait_heartbeat(timeout=10)
+        signed.arducopter_arm()
+        ack = ack_of(signed, mav.MAV_CMD_COMPONENT_ARM_DISARM)
+        assert ack.result == mav.MAV_RESULT_ACCEPTED
+        assert server.fleet.commanders[0].armed
+
+
+def test_tlog_records_traffic_that_pymavlink_reads_back(tmp_path):
+    log = tmp_path / "flight.tlog"
+    with running_sitl(tlog=log):
+        c = client()
+        c.arducopter_arm()
+        ack_of(c, mav.MAV_CMD_COMPONENT_ARM_DISARM)
+        time.sleep(0.5)
+    r = mavutil.mavlink_connection(str(log))
+    types = set()
+    while True:
+        m = r.recv_match()
+        if m is None:
+            break
+        types.add(m.get_type())
+    assert {"HEARTBEAT", "COMMAND_LONG", "COMMAND_ACK", "ATTITUDE"} <= types
+
+
+def test_hostile_input_never_crashes_the_vehicle():
+    rng = np.random.default_rng(1234)
+    with running_sitl(speed_factor=4.0) as server:
+        c = client()
+        sock = c.port
+        dest = ("127.0.0.1", 14580)
+        enc = mav.MAVLink(None, 246, 191)
+        good = [
+            mav.MAVLink_command_long_message(1, 1, mav.MAV_CMD_COMPONENT_ARM_DISARM, 0, 1,
+                                             0, 0, 0, 0, 0, 0),
+            mav.MAVLink_command_long_message(1, 1, mav.MAV_CMD_NAV_TAKEOFF, 0, 0, 0, 0,
+                                             math.nan, math.nan, math.nan, math.nan),
+        ]
+        for m in good:
+            sock.sendto(m.pack(enc), dest)
+        bad_values = [math.nan, math.inf, -math.inf, 1e30, -1e30, 0.0]
+        for k in range(600):
+            kind = k % 6
+            if kind == 0:  # random bytes
+                sock.sendto(rng.bytes(int(rng.integers(1, 280))), dest)
+                continue
+            if kind == 1:  # hostile offboard setpoints
+                v = [float(rng.choice(bad_values)) for _ in range(9)]
+                m = mav.MAVLink_set_position_target_local_ned_message(
+                    0, 1, 1, int(rng.integers(0, 16)), int(rng.integers(0, 4096)), *v,
+                    float(rng.choice(bad_values)), float(rng.choice(bad_values)))
+            elif kind == 2:  # commands with hostile params
+                p = [float(rng.choice(bad_values)) for _ in range(7)]
+                m = mav.MAVLink_command_long_message(
+                    1, 1, int(rng.choice([16, 20, 21, 22, 176, 178, 179, 185, 192, 246, 300,
+                                          400, 511, 512, 520])), 0, *p)
+            elif kind == 3:  # attitude targets
+                q = [float(rng.choice(bad_values)) for _ in range(4)]
+                m = mav.MAVLink_set_attitude_target_message(
+                    0, 1, 1, int(rng.integers(0, 256)), q, 0.0, 0.0, 0.0,
+                    float(rng.choice(bad_values)))
+            elif kind == 4:  # parameter sets of unknown names and absurd values
+                m = mav.MAVLink_param_set_message(
+                    1, 1, rng.choice([b"MPC_XY_VEL_MAX", b"NOPE", b"FT_GAIN_MODE"]),
+                    float(rng.choice(bad_values)), int(rng.integers(1, 11)))
+            else:  # mission items out of the blue
+                m = mav.MAVLink_mission_item_int_message(
+                    1, 1, int(rng.integers(0, 5)), int(rng.integers(0, 12)),
+                    int(rng.integers(0, 300)), 0, 1, *[float(rng.choice(bad_values))] * 4,
+                    int(rng.integers(-2**31, 2**31)), int(rng.integers(-2**31, 2**31)),
+                    float(rng.choice(bad_values)), 0)
+            data = bytearray(m.pack(enc))
+            if rng.random() < 0.2:  # corrupt a byte: bad CRC
+                data[int(rng.integers(0, len(data)))] ^= 0xFF
+            if rng.random() < 0.1:  # truncate
+                data = data[: int(rng.integers(1, len(data)))]
+            sock.sendto(bytes(data), dest)
+            if k % 50 == 0:
+                time.sleep(0.05)
+        time.sleep(1.0)
+        # still alive and answering, state finite
+        c.mav.command_long_send(1, 1, mav.MAV_CMD_REQUEST_MESSAGE, 0, 245, 0, 0, 0, 0, 0, 0)
+        assert ack_of(c, mav.MAV_CMD_REQUEST_MESSAGE).result == mav.MAV_RESULT_ACCEPTED
+        assert np.isfinite(server.fleet.sim.x).all()
+        assert np.isfinite(server.fleet.sim.w_cmd).all()
+        assert server.bad_packets > 0
