@@ -77,12 +77,17 @@ def test_commands_to_other_systems_are_ignored_and_acks_name_the_sender():
 
 
 def test_several_vehicles_from_one_process_each_on_its_own_port():
+    # One client at a time: a Python client that stops reading an onboard-rate link
+    # (~400 messages/s, as PX4's) overflows its UDP receive buffer within a second.
     with running_sitl(instances=3) as server:
-        clients = [client(14540 + i) for i in range(3)]
-        for i, c in enumerate(clients):
+        for i in range(3):
+            c = client(14540 + i)
             assert c.target_system == i + 1
             c.arducopter_arm()
             assert ack_of(c, mav.MAV_CMD_COMPONENT_ARM_DISARM).result == 0
+            hb = wait_msg(c, "HEARTBEAT", lambda m: m.base_mode & mav.MAV_MODE_FLAG_SAFETY_ARMED)
+            assert hb.get_srcSystem() == i + 1
+            c.close()
         assert [cmd.armed for cmd in server.fleet.commanders] == [True] * 3
         # the GCS link of vehicle 2 answers a client that talks to it first
         g = mavutil.mavlink_connection("udpout:127.0.0.1:18571", source_system=247)
