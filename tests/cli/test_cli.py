@@ -101,3 +101,45 @@ def test_demo_flies_and_lands(tmp_path):
 def test_bad_arguments_exit_2():
     assert run("platforms", "generate", "--count", "zero", check=False).returncode == 2
     assert run("nonsense", check=False).returncode == 2
+
+
+def test_sitl_serves_prints_urls_and_stops_cleanly_on_ctrl_c(tmp_path):
+    import signal
+    import time
+
+    from pymavlink import mavutil
+
+    log = tmp_path / "run.tlog"
+    proc = subprocess.Popen([EXE, "sitl", "--instances", "2", "--json", "--tlog", str(log)],
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    try:
+        head = ""
+        while True:
+            line = proc.stdout.readline()
+            assert line, proc.stderr.read()
+            head += line
+            if line.startswith("}"):  # the closing brace of the top-level object
+                break
+        info = json.loads(head)
+        assert [v["mavsdk"] for v in info["vehicles"]] == ["udpin://0.0.0.0:14540",
+                                                           "udpin://0.0.0.0:14541"]
+        c = mavutil.mavlink_connection("udpin:127.0.0.1:14541", source_system=246)
+        hb = c.wait_heartbeat(timeout=10)
+        assert hb is not None and hb.get_srcSystem() == 2
+        time.sleep(0.5)
+    finally:
+        proc.send_signal(signal.SIGINT)
+        out, err = proc.communicate(timeout=20)
+    assert proc.returncode == 0, err
+    assert "achieved speed factor" in err and "Traceback" not in err
+    assert log.stat().st_size > 1000
+
+
+def test_sitl_bad_arguments_are_one_line_errors():
+    for args, needle in ((["--home", "1,2"], "--home"), (["--home", "95,0,0"], "latitude"),
+                         (["--instances", "0"], "--instances"), (["--speed-factor", "0"],
+                                                                 "speed factor"),
+                         (["--bind", "localhost:1"], "--bind")):
+        proc = run("sitl", "--duration", "1", *args, check=False)
+        assert proc.returncode == 2, (args, proc.stderr)
+        assert needle in proc.stderr and proc.stderr.count("\n") == 1
