@@ -27,10 +27,12 @@ from ft_sitl.physics.quaternion import qfrom_euler, qto_euler
 def run_steps(n_steps, dt, x, sp, gn, a, cs, prm, alloc, env, status, w_cmd, rec, rec_every):
     """Advance every vehicle n_steps physics steps; record the state every rec_every steps."""
     for i in range(x.shape[0]):
-        xi = x[i]
+        # per-vehicle rows sliced once, not every step
+        xi, spi, gni, ai, csi, wi = x[i], sp[i], gn[i], a[i], cs[i], w_cmd[i]
+        prmi, alloci, envi, sti = prm[i], alloc[i], env[i], status[i]
         for k in range(n_steps):
-            c.controller_step_one(xi, sp[i], gn[i], a[i], cs[i], dt, w_cmd[i])
-            d.plant_step_one(xi, w_cmd[i], prm[i], alloc[i], env[i], status[i], dt)
+            c.controller_step_one(xi, spi, gni, ai, csi, dt, wi)
+            d.plant_step_one(xi, wi, prmi, alloci, envi, sti, dt)
             if rec_every > 0 and (k + 1) % rec_every == 0:
                 rec[(k + 1) // rec_every - 1, i, :] = xi
 

@@ -296,7 +296,7 @@ def allocate(f, tx, ty, tz, a, gn, cs, w_out):
     n = a.shape[0]
     tmin = gn[G_TROT_MIN]
     tmax = gn[G_TROT_MAX]
-    t = np.empty(n)
+    t = w_out  # rotor thrusts are worked out in place, then turned into speeds
     lo = -1e300
     hi = 1e300
     rp_max = -1e300
