@@ -21,6 +21,8 @@ _Q_FLU_FRD = np.array([0.0, 1.0, 0.0, 0.0])
 def enu_to_ned(v_enu) -> np.ndarray:
     """Vector(s) in ENU to NED. Works on shape (3,) or (..., 3)."""
     v = np.asarray(v_enu, dtype=float)
+    if v.ndim == 1:
+        return np.array([v[1], v[0], -v[2]])
     return np.stack([v[..., 1], v[..., 0], -v[..., 2]], axis=-1)
 
 
@@ -32,6 +34,8 @@ def ned_to_enu(v_ned) -> np.ndarray:
 def flu_to_frd(v_flu) -> np.ndarray:
     """Body vector(s) in FLU to FRD."""
     v = np.asarray(v_flu, dtype=float)
+    if v.ndim == 1:
+        return np.array([v[0], -v[1], -v[2]])
     return np.stack([v[..., 0], -v[..., 1], -v[..., 2]], axis=-1)
 
 

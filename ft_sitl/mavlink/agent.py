@@ -104,6 +104,17 @@ class Outgoing:
 
 
 @dataclass
+class _Snapshot:
+    time_us: int
+    state: object
+    x: np.ndarray
+    q_ned: np.ndarray
+    w_frd: np.ndarray
+    p_ned: np.ndarray
+    v_ned: np.ndarray
+
+
+@dataclass
 class _Transfer:
     """An upload in progress (client -> vehicle)."""
 
@@ -156,7 +167,7 @@ class VehicleAgent:
         self._download_items: list = []
         self._raw_mission: list = []  # MISSION_ITEM_INT messages as uploaded
         self._last_mission_current: tuple | None = None
-        self._boot_wall_us = 0
+        self._snap: _Snapshot | None = None
 
     # --- helpers --------------------------------------------------------------------
     @property
@@ -227,16 +238,13 @@ class VehicleAgent:
 
     def build(self, msg_id: int):
         """The current value of a telemetry message, or None if we do not produce it."""
-        s = self._state()
-        x = self.sim.x[self.i]
-        t_ms = self._boot_ms()
-        t_us = self.fleet.time_us
         if msg_id == mav.MAVLINK_MSG_ID_HEARTBEAT:
             return self.heartbeat()
-        q_ned = frames.q_enu_flu_to_ned_frd(x[d.X_QUAT:d.X_QUAT + 4])
-        w_frd = frames.flu_to_frd(x[d.X_OMEGA:d.X_OMEGA + 3])
-        p_ned = frames.enu_to_ned(s.position)
-        v_ned = frames.enu_to_ned(s.velocity)
+        snap = self._snapshot()
+        s, x, q_ned, w_frd, p_ned, v_ned = (snap.state, snap.x, snap.q_ned, snap.w_frd,
+                                            snap.p_ned, snap.v_ned)
+        t_ms = self._boot_ms()
+        t_us = self.fleet.time_us
         if msg_id == mav.MAVLINK_MSG_ID_ATTITUDE:
             rpy = qto_euler(q_ned)
             return mav.MAVLink_attitude_message(t_ms, *(float(v) for v in rpy),
@@ -318,6 +326,20 @@ class VehicleAgent:
         if msg_id == mav.MAVLINK_MSG_ID_AUTOPILOT_VERSION:
             return self.autopilot_version()
         return None
+
+    def _snapshot(self) -> _Snapshot:
+        """The vehicle's state in wire frames, computed once per simulated instant."""
+        snap = self._snap
+        if snap is None or snap.time_us != self.fleet.time_us:
+            s = self._state()
+            x = self.sim.x[self.i].copy()
+            snap = _Snapshot(
+                time_us=self.fleet.time_us, state=s, x=x,
+                q_ned=frames.q_enu_flu_to_ned_frd(x[d.X_QUAT:d.X_QUAT + 4]),
+                w_frd=frames.flu_to_frd(x[d.X_OMEGA:d.X_OMEGA + 3]),
+                p_ned=frames.enu_to_ned(s.position), v_ned=frames.enu_to_ned(s.velocity))
+            self._snap = snap
+        return snap
 
     def _shaft_power(self) -> float:
         p = self.sim.platforms[self.i]

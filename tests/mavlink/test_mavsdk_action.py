@@ -71,3 +71,27 @@ def test_land_and_auto_disarm_and_refused_disarm_in_air():
 
     with running_sitl(speed_factor=2.0):
         asyncio.run(fly())
+
+
+def test_two_vehicles_each_flown_by_its_own_mavsdk_client():
+    async def fly(port, alt):
+        m, drone = await connect(port)
+        action, tel = ActionAsync(drone), TelemetryAsync(drone)
+        await first(tel.subscribe_health(), lambda h: h.is_armable)
+        await action.set_takeoff_altitude(alt)
+        await action.arm()
+        await action.takeoff()
+        pos = await first(tel.subscribe_position(), lambda p: p.relative_altitude_m > alt - 0.1)
+        m.destroy()
+        return pos
+
+    async def both():
+        return await asyncio.gather(fly(14540, 2.0), fly(14541, 4.0))
+
+    with running_sitl(instances=2, speed_factor=2.0) as server:
+        p1, p2 = asyncio.run(both())
+        assert p1.relative_altitude_m == pytest.approx(2.0, abs=0.2)
+        assert p2.relative_altitude_m == pytest.approx(4.0, abs=0.2)
+        assert [c.armed for c in server.fleet.commanders] == [True, True]
+        # vehicle 2 spawned 2 m north of vehicle 1 (ENU y), so its latitude is larger
+        assert p2.latitude_deg > p1.latitude_deg
