@@ -8,15 +8,8 @@ from mavsdk_grpc import System
 from mavsdk_grpc.mission import MissionItem, MissionPlan
 from mavsdk_grpc.offboard import PositionNedYaw, VelocityNedYaw
 
+from .mavsdk_util import first
 from .sitl_harness import running_sitl
-
-
-async def first(gen, pred=lambda v: True, timeout=30.0):
-    async def scan():
-        async for v in gen:
-            if pred(v):
-                return v
-    return await asyncio.wait_for(scan(), timeout)
 
 
 def test_grpc_api_takeoff_offboard_mission_params_land():
