@@ -9,7 +9,7 @@ from mavsdk.asyncio import Configuration, Mavsdk
 async def connect(port: int = 14540):
     m = Mavsdk(Configuration.create_with_component_type(ComponentType.GROUND_STATION))
     await m.add_any_connection(f"udpin://0.0.0.0:{port}")
-    drone = await m.first_autopilot(timeout_s=10.0)
+    drone = await m.first_autopilot(timeout_s=20.0)
     assert drone is not None, "no autopilot discovered"
     return m, drone
 

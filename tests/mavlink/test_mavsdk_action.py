@@ -74,8 +74,7 @@ def test_land_and_auto_disarm_and_refused_disarm_in_air():
 
 
 def test_two_vehicles_each_flown_by_its_own_mavsdk_client():
-    async def fly(port, alt):
-        m, drone = await connect(port)
+    async def fly(m, drone, alt):
         action, tel = ActionAsync(drone), TelemetryAsync(drone)
         await first(tel.subscribe_health(), lambda h: h.is_armable)
         await action.set_takeoff_altitude(alt)
@@ -86,7 +85,9 @@ def test_two_vehicles_each_flown_by_its_own_mavsdk_client():
         return pos
 
     async def both():
-        return await asyncio.gather(fly(14540, 2.0), fly(14541, 4.0))
+        a = await connect(14540)
+        b = await connect(14541)
+        return await asyncio.gather(fly(*a, 2.0), fly(*b, 4.0))
 
     with running_sitl(instances=2, speed_factor=2.0) as server:
         p1, p2 = asyncio.run(both())

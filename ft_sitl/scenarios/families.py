@@ -1,0 +1,877 @@
+"""The seven FLYINGTRUST scenario families (paper Sec. III-B), 10 configurations each.
+
+``build_scenario(family, index, seed=0)`` returns configuration ``index`` (1..10) of a
+family. Every random draw comes from one ``numpy.random.Generator`` seeded with
+``SeedSequence(seed, spawn_key=(crc32(family), index))``: the index and the seed together
+choose the layout, and the same three arguments always give the same mesh, byte for byte.
+
+Common layout (all families)
+----------------------------
+The area spans ``x in [0, width]`` (east) by ``y in [0, length]`` (north); the vehicle
+travels north, from near the short side ``y = 0`` to near ``y = length``.
+
+* takeoff: on the floor at ``(width / 2, 3 m, 0)`` (Maze: the centre of its first cell);
+* start: above takeoff at the start altitude, ``min(2.0 m, ceiling / 2)`` -- 1.5 m for
+  Forest and Random-Angle Cylinder, 1.0 m for Maze, 2.0 m otherwise -- except Sudden-Drop,
+  which starts at the paper's 2.5 m; start yaw faces the goal (pi/2, north);
+* goal: ``(width / 2, length - 3 m, start altitude)`` (Maze: the centre of its last
+  cell), reached within 2 m;
+* bounds: the area times ``[0, ceiling]``; obstacles may rise above the ceiling.
+* At least one obstacle crosses the straight start->goal segment (checked at build time)
+  and a collision-free path exists for the largest catalog platform's collision radius
+  (0.384 m): see :mod:`ft_sitl.scenarios.solvability` and the tests.
+* Random families keep obstacles at least 3 m (horizontally) from the takeoff/start column
+  and the goal.
+
+Families
+--------
+=====================  ===========  =========  =======  ==================================
+family (registry key)  category     area (m)   ceiling  obstacles (what ``index`` changes)
+=====================  ===========  =========  =======  ==================================
+forest                 classic      40 x 60    3 m      49 trunks (density 1/49 per m^2):
+                                                        vertical cylinders, radius
+                                                        0.15-0.30 m, 6-12 m tall; >= 1.5 m
+                                                        between trunks (random layout)
+urban                  classic      60 x 60    10 m     buildings (boxes) on a street grid
+                                                        of 3 or 5 x 3-5 blocks, streets
+                                                        4.5-8 m, 75 % 12-40 m tall, the
+                                                        rest 3-7 m; 4-9 free-standing
+                                                        walls 2-6 m tall (random layout)
+random_angle_cylinder  classic      40 x 60    3 m      67 cylinders (density 1/36),
+                                                        radius 0.25-0.5 m, 8 m long, tilt
+                                                        0-180 deg from vertical, random
+                                                        azimuth; axes >= r1 + r2 + 1 m apart
+narrow_gap             theoretical  50 x 50    4 m      ``index`` walls (5 m tall, 0.3 m
+                                                        thick) across the route, each with
+                                                        one full-height gap 0.85-0.90 m
+                                                        wide, 4-18 m off the centre line on
+                                                        alternating sides: gaps = index
+sudden_drop            theoretical  50 x 50    4 m      ``index`` overhanging blocks, full
+                                    (x 14 m)            width, 1.5-3 m deep, from 1.5 m
+                                                        (the lowest obstacle point) up to
+                                                        14 m; start at 2.5 m
+maze                   theoretical  25 x 40    2 m      a perfect maze (recursive
+                                                        backtracker) of 11 x 17 cells,
+                                                        corridors >= 2.07 m, walls 0.2 m
+                                                        thick, 2.5 m tall, with dead ends
+perlin                 theoretical  40 x 50    4 m      0.25 m voxels filled where Perlin
+                                                        noise (frequency 0.05 per voxel =
+                                                        0.2/m, 2 octaves) is in its top 3 %
+                                                        (fill rate 0.03), merged into one
+                                                        box per run in each voxel column
+=====================  ===========  =========  =======  ==================================
+
+Obstacle counts (``Scenario.obstacle_count``): trees, buildings + walls, cylinders, walls
+(one gap each), blocks, maze wall boxes (collinear wall segments merged), Perlin blobs
+(6-connected groups of filled voxels).
+"""
+
+from __future__ import annotations
+
+import difflib
+import math
+import zlib
+from collections.abc import Callable
+
+import numpy as np
+import trimesh
+
+from ft_sitl import __version__
+from ft_sitl.scenarios.scenario import INDEX_RANGE, Scenario, ScenarioError
+from ft_sitl.scenarios.solvability import segment_segment_distance
+
+START_MARGIN_M = 3.0
+"""Takeoff and goal lie this far inside the area's short sides."""
+CLEAR_RADIUS_M = 3.0
+"""Random obstacles keep this horizontal distance from the takeoff/start column and goal."""
+CYLINDER_SECTIONS = 16
+"""Sides of the prisms that stand for cylinders (circumscribed: they contain the circle)."""
+
+
+def start_altitude(ceiling: float) -> float:
+    """The start (and goal) altitude of every family but Sudden-Drop: min(2 m, ceiling/2)."""
+    return min(2.0, ceiling / 2.0)
+
+
+# --------------------------------------------------------------------------------------
+# mesh building
+# --------------------------------------------------------------------------------------
+
+_BOX_FACES = np.array([
+    [0, 4, 6], [0, 6, 2],  # -x
+    [1, 3, 7], [1, 7, 5],  # +x
+    [0, 1, 5], [0, 5, 4],  # -y
+    [2, 6, 7], [2, 7, 3],  # +y
+    [0, 2, 3], [0, 3, 1],  # -z
+    [4, 5, 7], [4, 7, 6],  # +z
+], dtype=np.int64)
+_BOX_CORNERS = np.array([[(i >> a) & 1 for a in range(3)] for i in range(8)], dtype=bool)
+
+
+class _MeshBuilder:
+    """Closed convex pieces, concatenated without merging vertices (each piece stays its
+    own connected component, which the solvability check relies on)."""
+
+    def __init__(self):
+        self._verts: list[np.ndarray] = []
+        self._faces: list[np.ndarray] = []
+        self._n = 0
+
+    @property
+    def pieces(self) -> int:
+        return len(self._faces)
+
+    def _add(self, verts, faces):
+        self._verts.append(np.asarray(verts, dtype=float))
+        self._faces.append(np.asarray(faces, dtype=np.int64) + self._n)
+        self._n += len(verts)
+
+    def box(self, lo, hi):
+        self.boxes(np.asarray(lo, dtype=float)[None], np.asarray(hi, dtype=float)[None])
+
+    def boxes(self, lo, hi):
+        """Axis-aligned boxes lo[i] .. hi[i] (arrays (n, 3)), each its own piece."""
+        lo, hi = np.asarray(lo, dtype=float), np.asarray(hi, dtype=float)
+        if np.any(hi <= lo):
+            raise ValueError("empty box among the boxes to add")
+        n = len(lo)
+        verts = np.where(_BOX_CORNERS[None], hi[:, None, :], lo[:, None, :]).reshape(-1, 3)
+        faces = _BOX_FACES[None] + 8 * np.arange(n, dtype=np.int64)[:, None, None]
+        self._verts.append(verts)
+        self._faces.extend(np.split(faces.reshape(-1, 3) + self._n, n) if n else [])
+        self._n += len(verts)
+
+    def cylinder(self, p0, p1, radius: float, sections: int = CYLINDER_SECTIONS):
+        """A prism of ``sections`` sides around the axis p0 -> p1 containing the cylinder."""
+        p0, p1 = np.asarray(p0, dtype=float), np.asarray(p1, dtype=float)
+        d = p1 - p0
+        d = d / np.linalg.norm(d)
+        helper = np.array([0.0, 0.0, 1.0]) if abs(d[2]) < 0.9 else np.array([1.0, 0.0, 0.0])
+        u = np.cross(d, helper)
+        u /= np.linalg.norm(u)
+        w = np.cross(d, u)
+        theta = 2.0 * np.pi * np.arange(sections) / sections
+        rc = radius / math.cos(math.pi / sections)
+        ring = rc * (np.cos(theta)[:, None] * u + np.sin(theta)[:, None] * w)
+        verts = np.vstack([p0 + ring, p1 + ring])
+        n = sections
+        k = np.arange(1, n - 1)
+        bottom = np.column_stack([np.zeros(n - 2, dtype=np.int64), k + 1, k])
+        top = np.column_stack([np.full(n - 2, n), n + k, n + k + 1])
+        a = np.arange(n)
+        b = (a + 1) % n
+        sides = np.vstack([np.column_stack([a, b, n + b]), np.column_stack([a, n + b, n + a])])
+        self._add(verts, np.vstack([bottom, top, sides]))
+
+    def mesh(self) -> trimesh.Trimesh:
+        if not self._faces:
+            return trimesh.Trimesh(np.zeros((0, 3)), np.zeros((0, 3), dtype=np.int64),
+                                   process=False)
+        return trimesh.Trimesh(np.vstack(self._verts), np.vstack(self._faces), process=False)
+
+
+# --------------------------------------------------------------------------------------
+# shared helpers
+# --------------------------------------------------------------------------------------
+
+
+def _rng(family: str, index: int, seed: int) -> np.random.Generator:
+    key = zlib.crc32(family.encode("utf-8"))
+    return np.random.default_rng(np.random.SeedSequence(entropy=seed, spawn_key=(key, index)))
+
+
+def _check(family: str, index, seed) -> None:
+    lo, hi = INDEX_RANGE
+    if isinstance(index, bool) or not isinstance(index, (int, np.integer)):
+        raise ScenarioError(f"{family}: index must be an integer from {lo} to {hi}, "
+                            f"got {index!r}")
+    if not lo <= index <= hi:
+        raise ScenarioError(f"{family}: index must be from {lo} to {hi} (the paper's ten "
+                            f"configurations), got {index}")
+    if isinstance(seed, bool) or not isinstance(seed, (int, np.integer)) or seed < 0:
+        raise ScenarioError(f"{family}: seed must be a non-negative integer, got {seed!r}")
+
+
+def _plain(v):
+    if isinstance(v, dict):
+        return {k: _plain(x) for k, x in v.items()}
+    if isinstance(v, (list, tuple)):
+        return [_plain(x) for x in v]
+    if isinstance(v, np.ndarray):
+        return _plain(v.tolist())
+    if isinstance(v, np.generic):
+        return v.item()
+    return v
+
+
+def _make(family: str, category: str, index: int, seed: int, builder: _MeshBuilder, *,
+          width: float, length: float, ceiling: float, altitude: float,
+          parameters: dict, layout: dict, obstacle_count: int,
+          start_xy=None, goal_xy=None, pitch=None) -> Scenario:
+    sx, sy = start_xy if start_xy is not None else (width / 2.0, START_MARGIN_M)
+    gx, gy = goal_xy if goal_xy is not None else (width / 2.0, length - START_MARGIN_M)
+    provenance = {
+        "generator": f"{__name__}.{family}",
+        "paper_name": PAPER_NAMES[family],
+        "seed": int(seed),
+        "index": int(index),
+        "ft_sitl_version": __version__,
+        "parameters": _plain(parameters),
+        "obstacle_count": int(obstacle_count),
+        "mesh_pieces": builder.pieces,
+        "layout": _plain(layout),
+    }
+    if pitch is not None:
+        provenance["solvability_pitch_m"] = [float(p) for p in pitch]
+    sc = Scenario(
+        family=family, index=int(index), seed=int(seed), category=category,
+        mesh=builder.mesh(),
+        bounds_min=(0.0, 0.0, 0.0), bounds_max=(width, length, ceiling),
+        takeoff=(sx, sy, 0.0), start=(sx, sy, altitude),
+        start_yaw=math.atan2(gy - sy, gx - sx),
+        goal=(gx, gy, altitude), provenance=provenance,
+    )
+    if not sc.line_blocked(0.0):  # every generator guarantees this; a bug if not
+        raise RuntimeError(f"{sc.name}: no obstacle on the straight start->goal line")
+    return sc
+
+
+def _far_from(p, q, points, min_dist) -> bool:
+    """Is the segment p->q at least min_dist from each of the segments in points?"""
+    if not len(points):
+        return True
+    a = np.array([s[0] for s in points])
+    b = np.array([s[1] for s in points])
+    m = len(a)
+    d = segment_segment_distance(np.broadcast_to(p, (m, 3)), np.broadcast_to(q, (m, 3)),
+                                  a, b)
+    return bool(np.all(d >= min_dist))
+
+
+# --------------------------------------------------------------------------------------
+# classic
+# --------------------------------------------------------------------------------------
+
+
+def forest(index: int, seed: int = 0) -> Scenario:
+    """Forest: 40 x 60 m, ceiling 3 m, 49 trunks (density 1/49 per m^2).
+
+    Trunks are vertical cylinders from the ground, radius U(0.15, 0.30) m, height
+    U(6, 12) m (canopies would sit above the 3 m ceiling and are omitted). Positions are
+    uniform with rejection: trunk surfaces >= 1.5 m apart and >= 3 m from the takeoff
+    column and the goal. If no trunk crosses the start->goal line, the trunk nearest to it
+    is moved onto it (keeping the density exact).
+    """
+    family = "forest"
+    _check(family, index, seed)
+    rng = _rng(family, index, seed)
+    width, length, ceiling = 40.0, 60.0, 3.0
+    alt = start_altitude(ceiling)
+    density = 1.0 / 49.0
+    count = round(width * length * density)
+    gap = 1.5
+    line_x = width / 2.0
+    keep_out = [(line_x, START_MARGIN_M), (line_x, length - START_MARGIN_M)]
+    trees: list[list[float]] = []  # x, y, r, h
+    attempts = 0
+    while len(trees) < count:
+        attempts += 1
+        if attempts > 100_000:
+            raise RuntimeError(f"forest #{index}: could not place {count} trees")
+        x = rng.uniform(0.5, width - 0.5)
+        y = rng.uniform(0.5, length - 0.5)
+        r = rng.uniform(0.15, 0.30)
+        h = rng.uniform(6.0, 12.0)
+        if not _tree_ok(x, y, r, trees, keep_out, gap):
+            continue
+        trees.append([x, y, r, h])
+    moved = None
+    on_line = [i for i, (x, y, r, _) in enumerate(trees)
+               if abs(x - line_x) < r and keep_out[0][1] < y < keep_out[1][1]]
+    if not on_line:
+        for i in sorted(range(count), key=lambda i: (abs(trees[i][0] - line_x), i)):
+            x, y, r, h = trees[i]
+            others = trees[:i] + trees[i + 1:]
+            if _tree_ok(line_x, y, r, others, keep_out, gap):
+                trees[i][0] = line_x
+                moved = i
+                break
+        else:
+            raise RuntimeError(f"forest #{index}: no trunk can be moved onto the line")
+    b = _MeshBuilder()
+    for x, y, r, h in trees:
+        b.cylinder((x, y, 0.0), (x, y, h), r)
+    return _make(
+        family, "classic", index, seed, b, width=width, length=length, ceiling=ceiling,
+        altitude=alt, obstacle_count=count,
+        parameters={"size_m": [width, length], "ceiling_m": ceiling, "density_per_m2": density,
+                    "tree_count": count, "trunk_radius_m": [0.15, 0.30],
+                    "trunk_height_m": [6.0, 12.0], "min_trunk_gap_m": gap,
+                    "clear_radius_m": CLEAR_RADIUS_M, "start_altitude_m": alt},
+        layout={"trees_xyrh": trees, "moved_onto_line": moved},
+    )
+
+
+def _tree_ok(x, y, r, trees, keep_out, gap) -> bool:
+    for kx, ky in keep_out:
+        if math.hypot(x - kx, y - ky) < CLEAR_RADIUS_M + r:
+            return False
+    return all(math.hypot(x - tx, y - ty) >= r + tr + gap for tx, ty, tr, _ in trees)
+
+
+def random_angle_cylinder(index: int, seed: int = 0) -> Scenario:
+    """Random-Angle Cylinder: 40 x 60 m, ceiling 3 m, 67 cylinders (density 1/36).
+
+    Each cylinder: radius U(0.25, 0.5) m, length 8 m, centre uniform over the area at a
+    height U(0, 3) m, axis tilted U(0, 180) deg from vertical towards a uniform azimuth.
+    Rejection keeps axes >= r1 + r2 + 1 m apart (wider than the largest platform) and
+    >= 3 m + r from the takeoff column and the goal column. If none crosses the
+    start->goal line, the one nearest to it is moved (translated) onto it.
+    """
+    family = "random_angle_cylinder"
+    _check(family, index, seed)
+    rng = _rng(family, index, seed)
+    width, length, ceiling = 40.0, 60.0, 3.0
+    alt = start_altitude(ceiling)
+    density = 1.0 / 36.0
+    count = round(width * length * density)
+    cyl_len, gap = 8.0, 1.0
+    line_x = width / 2.0
+    columns = [np.array([[line_x, y, 0.0], [line_x, y, ceiling]])
+               for y in (START_MARGIN_M, length - START_MARGIN_M)]
+    start = np.array([line_x, START_MARGIN_M, alt])
+    goal = np.array([line_x, length - START_MARGIN_M, alt])
+    cyls: list[dict] = []
+
+    def ok(p0, p1, r, skip=None):
+        for col in columns:
+            if not _far_from(p0, p1, [col], CLEAR_RADIUS_M + r):
+                return False
+        for i, c in enumerate(cyls):
+            if i != skip and not _far_from(p0, p1, [(c["p0"], c["p1"])], r + c["r"] + gap):
+                return False
+        return True
+
+    attempts = 0
+    while len(cyls) < count:
+        attempts += 1
+        if attempts > 200_000:
+            raise RuntimeError(f"random_angle_cylinder #{index}: could not place {count}")
+        centre = np.array([rng.uniform(0.0, width), rng.uniform(0.0, length),
+                           rng.uniform(0.0, ceiling)])
+        r = rng.uniform(0.25, 0.5)
+        tilt = rng.uniform(0.0, math.pi)
+        azimuth = rng.uniform(0.0, 2.0 * math.pi)
+        axis = np.array([math.sin(tilt) * math.cos(azimuth),
+                         math.sin(tilt) * math.sin(azimuth), math.cos(tilt)])
+        p0, p1 = centre - axis * cyl_len / 2, centre + axis * cyl_len / 2
+        if ok(p0, p1, r):
+            cyls.append({"p0": p0, "p1": p1, "r": r, "tilt_deg": math.degrees(tilt),
+                         "azimuth_deg": math.degrees(azimuth)})
+    moved = None
+    line = [(start, goal)]
+    if all(_far_from(c["p0"], c["p1"], line, c["r"]) for c in cyls):
+        def off_line(i):
+            c = cyls[i]
+            return float(segment_segment_distance(c["p0"][None], c["p1"][None],
+                                                   start[None], goal[None])[0]), i
+        for i in sorted(range(count), key=off_line):
+            c = cyls[i]
+            centre = (c["p0"] + c["p1"]) / 2
+            y = min(max(centre[1], START_MARGIN_M + 8.0), length - START_MARGIN_M - 8.0)
+            shift = np.array([line_x, y, alt]) - centre
+            if ok(c["p0"] + shift, c["p1"] + shift, c["r"], skip=i):
+                c["p0"], c["p1"] = c["p0"] + shift, c["p1"] + shift
+                moved = i
+                break
+        else:
+            raise RuntimeError(f"random_angle_cylinder #{index}: none can move onto the line")
+    b = _MeshBuilder()
+    for c in cyls:
+        b.cylinder(c["p0"], c["p1"], c["r"])
+    return _make(
+        family, "classic", index, seed, b, width=width, length=length, ceiling=ceiling,
+        altitude=alt, obstacle_count=count,
+        parameters={"size_m": [width, length], "ceiling_m": ceiling, "density_per_m2": density,
+                    "cylinder_count": count, "radius_m": [0.25, 0.5], "length_m": cyl_len,
+                    "tilt_deg": [0.0, 180.0], "min_axis_gap_m": gap,
+                    "clear_radius_m": CLEAR_RADIUS_M, "start_altitude_m": alt},
+        layout={"cylinders": cyls, "moved_onto_line": moved},
+    )
+
+
+def urban(index: int, seed: int = 0) -> Scenario:
+    """Urban: 60 x 60 m, ceiling 10 m: buildings on a street grid, and walls.
+
+    Blocks fill x in [4, 56], y in [8, 52]: 3 or 5 columns (mirror-symmetric about the
+    centre line, so the middle column straddles it) by 3-5 rows, separated by streets
+    (4.5-8 m), with a street ring at the edges. A block is a park (empty) with probability
+    0.15 -- never in the middle column -- else split into 1-2 x 1-2 lots (1.2 m alleys)
+    each holding one box building set back 0.3-0.8 m: 75 % are 12-40 m tall (above the
+    ceiling), the rest 3-7 m (the vehicle can cross over them). 4-9 free-standing walls
+    (0.3 m thick, 3-10 m long, 2-6 m tall) stand along streets, leaving them passable.
+    """
+    family = "urban"
+    _check(family, index, seed)
+    rng = _rng(family, index, seed)
+    width, length, ceiling = 60.0, 60.0, 10.0
+    alt = start_altitude(ceiling)
+    zone_x, zone_y = (4.0, 56.0), (8.0, 52.0)
+    ncols = int(rng.choice([3, 5]))
+    nrows = int(rng.integers(3, 6))
+    half = (zone_x[1] - zone_x[0]) / 2.0
+    k = (ncols - 1) // 2
+    if ncols == 3:
+        centre_w = rng.uniform(6.0, 12.0)
+        side_streets = rng.uniform(5.0, 8.0, k)
+    else:
+        centre_w = rng.uniform(5.0, 8.0)
+        side_streets = rng.uniform(4.5, 6.5, k)
+    weights = rng.uniform(0.7, 1.3, k)
+    side_blocks = (half - centre_w / 2 - side_streets.sum()) * weights / weights.sum()
+    cx = width / 2.0
+    cols = [(cx - centre_w / 2, cx + centre_w / 2)]
+    edge = centre_w / 2
+    for s, bw in zip(side_streets, side_blocks):
+        cols.append((cx + edge + s, cx + edge + s + bw))
+        cols.insert(0, (cx - edge - s - bw, cx - edge - s))
+        edge += s + bw
+    row_streets = rng.uniform(5.0, 7.0, nrows - 1)
+    row_w = rng.uniform(0.7, 1.3, nrows)
+    row_w = (zone_y[1] - zone_y[0] - row_streets.sum()) * row_w / row_w.sum()
+    rows, y = [], zone_y[0]
+    for j in range(nrows):
+        rows.append((y, y + row_w[j]))
+        y += row_w[j] + (row_streets[j] if j < nrows - 1 else 0.0)
+    mid = ncols // 2
+    alley = 1.2
+    b = _MeshBuilder()
+    buildings, walls = [], []
+    for i, (x0, x1) in enumerate(cols):
+        for y0, y1 in rows:
+            park = rng.random() < 0.15
+            if park and i != mid:
+                continue
+            nx = 1 if (i == mid or x1 - x0 < 8.0) else int(rng.integers(1, 3))
+            ny = 1 if y1 - y0 < 8.0 else int(rng.integers(1, 3))
+            xs = _split(rng, x0, x1, nx, alley)
+            ys = _split(rng, y0, y1, ny, alley)
+            for lx0, lx1 in xs:
+                for ly0, ly1 in ys:
+                    s = min(rng.uniform(0.3, 0.8), 0.2 * min(lx1 - lx0, ly1 - ly0))
+                    tall = rng.random() < 0.75
+                    h = rng.uniform(12.0, 40.0) if tall else rng.uniform(3.0, 7.0)
+                    lo, hi = (lx0 + s, ly0 + s, 0.0), (lx1 - s, ly1 - s, h)
+                    b.box(lo, hi)
+                    buildings.append([*lo, *hi])
+    streets_ns = [(cols[i][1], cols[i + 1][0]) for i in range(ncols - 1)]
+    streets_ew = [(rows[j][1], rows[j + 1][0]) for j in range(nrows - 1)]
+    for _ in range(int(rng.integers(4, 10))):
+        thick = 0.3
+        wlen = rng.uniform(3.0, 10.0)
+        h = rng.uniform(2.0, 6.0)
+        if rng.random() < 0.5:  # along a north-south street
+            a, c = streets_ns[int(rng.integers(len(streets_ns)))]
+            xw = rng.uniform(a + 0.5, c - 0.5 - thick)
+            yw = rng.uniform(zone_y[0], zone_y[1] - wlen)
+            lo, hi = (xw, yw, 0.0), (xw + thick, yw + wlen, h)
+        else:  # along an east-west street
+            a, c = streets_ew[int(rng.integers(len(streets_ew)))]
+            yw = rng.uniform(a + 0.5, c - 0.5 - thick)
+            xw = rng.uniform(zone_x[0], zone_x[1] - wlen)
+            lo, hi = (xw, yw, 0.0), (xw + wlen, yw + thick, h)
+        b.box(lo, hi)
+        walls.append([*lo, *hi])
+    return _make(
+        family, "classic", index, seed, b, width=width, length=length, ceiling=ceiling,
+        altitude=alt, obstacle_count=len(buildings) + len(walls),
+        parameters={"size_m": [width, length], "ceiling_m": ceiling, "block_zone_x_m": zone_x,
+                    "block_zone_y_m": zone_y, "park_probability": 0.15,
+                    "tall_probability": 0.75, "tall_height_m": [12.0, 40.0],
+                    "low_height_m": [3.0, 7.0], "alley_m": alley,
+                    "wall_height_m": [2.0, 6.0], "wall_length_m": [3.0, 10.0],
+                    "start_altitude_m": alt},
+        layout={"columns_x_m": cols, "rows_y_m": rows, "buildings_lo_hi": buildings,
+                "walls_lo_hi": walls},
+    )
+
+
+def _split(rng, a, b, n, alley):
+    if n == 1:
+        return [(a, b)]
+    cut = a + (b - a) * rng.uniform(0.35, 0.65)
+    return [(a, cut - alley / 2), (cut + alley / 2, b)]
+
+
+# --------------------------------------------------------------------------------------
+# theoretical
+# --------------------------------------------------------------------------------------
+
+NARROW_GAP_PITCH_M = (0.025, 0.25, 0.25)
+"""Solvability grid for Narrow-Gap: 2.5 cm across the gaps (x), whose free window for a
+0.384 m radius is only 0.85 - 0.768 = 0.082 m wide."""
+
+
+def narrow_gap(index: int, seed: int = 0) -> Scenario:
+    """Narrow-Gap: 50 x 50 m, ceiling 4 m; ``index`` walls, one gap each (gaps = index).
+
+    Walls span the full width (x in [0, 50]), 0.3 m thick and 5 m tall, at evenly spaced
+    y in [10, 40] (+-1/8 of the spacing of jitter). Each has one full-height slot
+    U(0.85, 0.90) m wide whose centre lies U(4, 18) m off the centre line, on alternating
+    sides, so the vehicle must move laterally between gaps.
+    """
+    family = "narrow_gap"
+    _check(family, index, seed)
+    rng = _rng(family, index, seed)
+    width, length, ceiling = 50.0, 50.0, 4.0
+    alt = start_altitude(ceiling)
+    thick, height = 0.3, 5.0
+    spacing = 30.0 / index
+    side = 1.0 if rng.random() < 0.5 else -1.0
+    b = _MeshBuilder()
+    walls = []
+    for j in range(index):
+        y = 10.0 + spacing * (j + 0.5) + rng.uniform(-0.125, 0.125) * spacing
+        w = rng.uniform(0.85, 0.90)
+        c = width / 2.0 + side * rng.uniform(4.0, 18.0)
+        side = -side
+        b.box((0.0, y - thick / 2, 0.0), (c - w / 2, y + thick / 2, height))
+        b.box((c + w / 2, y - thick / 2, 0.0), (width, y + thick / 2, height))
+        walls.append({"y_m": y, "gap_centre_x_m": c, "gap_width_m": w})
+    return _make(
+        family, "theoretical", index, seed, b, width=width, length=length, ceiling=ceiling,
+        altitude=alt, obstacle_count=index, pitch=NARROW_GAP_PITCH_M,
+        parameters={"size_m": [width, length], "ceiling_m": ceiling, "gap_count": index,
+                    "gap_width_m": [0.85, 0.90], "gap_offset_m": [4.0, 18.0],
+                    "wall_thickness_m": thick, "wall_height_m": height,
+                    "start_altitude_m": alt},
+        layout={"walls": walls},
+    )
+
+
+def sudden_drop(index: int, seed: int = 0) -> Scenario:
+    """Sudden-Drop: 50 x 50 x 14 m, ceiling 4 m, start at 2.5 m; ``index`` blocks.
+
+    Blocks span the full width and hang from 1.5 m (the lowest obstacle point) to 14 m;
+    each is U(1.5, 3) m deep, placed in order along y in [8, 44] with random gaps (>= 0.5
+    m). The start altitude 2.5 m passes through them: the vehicle must drop below 1.5 m.
+    """
+    family = "sudden_drop"
+    _check(family, index, seed)
+    rng = _rng(family, index, seed)
+    width, length, ceiling, top, underside = 50.0, 50.0, 4.0, 14.0, 1.5
+    alt = 2.5
+    zone = (8.0, 44.0)
+    depths = rng.uniform(1.5, 3.0, index)
+    spare = zone[1] - zone[0] - depths.sum() - 0.5 * (index + 1)
+    gaps = 0.5 + spare * rng.dirichlet(np.ones(index + 1))
+    b = _MeshBuilder()
+    blocks = []
+    y = zone[0]
+    for j in range(index):
+        y += gaps[j]
+        b.box((0.0, y, underside), (width, y + depths[j], top))
+        blocks.append([y, y + depths[j]])
+        y += depths[j]
+    return _make(
+        family, "theoretical", index, seed, b, width=width, length=length, ceiling=ceiling,
+        altitude=alt, obstacle_count=index,
+        parameters={"size_m": [width, length, top], "ceiling_m": ceiling,
+                    "volume_height_m": top, "lowest_obstacle_m": underside,
+                    "start_altitude_m": alt, "block_count": index,
+                    "block_depth_m": [1.5, 3.0], "block_zone_y_m": zone},
+        layout={"blocks_y_m": blocks},
+    )
+
+
+def maze(index: int, seed: int = 0) -> Scenario:
+    """Maze: 25 x 40 m, ceiling 2 m; a perfect maze (one path between any two cells).
+
+    11 x 17 cells (2.27 x 2.35 m; corridors >= 2.07 m between 0.2 m walls, 2.5 m tall),
+    carved by an iterative recursive backtracker from the start cell (the middle of the
+    first row); the goal is the middle of the last row. A layout whose middle column is a
+    straight corridor (start->goal line clear) is redrawn. Dead ends are counted.
+    """
+    family = "maze"
+    _check(family, index, seed)
+    rng = _rng(family, index, seed)
+    width, length, ceiling = 25.0, 40.0, 2.0
+    alt = start_altitude(ceiling)
+    nx, ny, thick, height = 11, 17, 0.2, 2.5
+    cw, ch = width / nx, length / ny
+    mid = nx // 2
+    for _ in range(100):
+        east, north = _carve(rng, nx, ny, (mid, 0))
+        if not north[mid, :-1].all():  # a wall crosses the middle column
+            break
+    else:  # pragma: no cover - probability ~0
+        raise RuntimeError(f"maze #{index}: every layout left the line clear")
+    b = _MeshBuilder()
+    t2 = thick / 2
+    runs = 0
+    # walls on vertical grid lines x = i * cw (i = 0..nx): closed unless a passage east
+    for i in range(nx + 1):
+        closed = np.ones(ny, dtype=bool) if i in (0, nx) else ~east[i - 1, :]
+        for j0, j1 in _runs(closed):
+            b.box((i * cw - t2, j0 * ch - t2, 0.0), (i * cw + t2, j1 * ch + t2, height))
+            runs += 1
+    for j in range(ny + 1):
+        closed = np.ones(nx, dtype=bool) if j in (0, ny) else ~north[:, j - 1]
+        for i0, i1 in _runs(closed):
+            b.box((i0 * cw - t2, j * ch - t2, 0.0), (i1 * cw + t2, j * ch + t2, height))
+            runs += 1
+    degree = np.zeros((nx, ny), dtype=int)
+    degree[:-1, :] += east[:-1, :]
+    degree[1:, :] += east[:-1, :]
+    degree[:, :-1] += north[:, :-1]
+    degree[:, 1:] += north[:, :-1]
+    dead_ends = int((degree == 1).sum())
+    return _make(
+        family, "theoretical", index, seed, b, width=width, length=length, ceiling=ceiling,
+        altitude=alt, obstacle_count=runs,
+        start_xy=((mid + 0.5) * cw, 0.5 * ch), goal_xy=((mid + 0.5) * cw, (ny - 0.5) * ch),
+        parameters={"size_m": [width, length], "ceiling_m": ceiling, "cells": [nx, ny],
+                    "cell_m": [cw, ch], "corridor_width_m": min(cw, ch) - thick,
+                    "wall_thickness_m": thick, "wall_height_m": height,
+                    "algorithm": "recursive backtracker", "start_altitude_m": alt},
+        layout={"dead_ends": dead_ends,
+                "east_passages": east[:-1, :].astype(int).tolist(),
+                "north_passages": north[:, :-1].astype(int).tolist()},
+    )
+
+
+def _carve(rng, nx, ny, start):
+    """Perfect maze: east[i, j] / north[i, j] say cell (i, j) opens east / north."""
+    east = np.zeros((nx, ny), dtype=bool)
+    north = np.zeros((nx, ny), dtype=bool)
+    seen = np.zeros((nx, ny), dtype=bool)
+    seen[start] = True
+    stack = [start]
+    while stack:
+        i, j = stack[-1]
+        options = [(di, dj) for di, dj in ((1, 0), (-1, 0), (0, 1), (0, -1))
+                   if 0 <= i + di < nx and 0 <= j + dj < ny and not seen[i + di, j + dj]]
+        if not options:
+            stack.pop()
+            continue
+        di, dj = options[int(rng.integers(len(options)))]
+        if di:
+            east[min(i, i + di), j] = True
+        else:
+            north[i, min(j, j + dj)] = True
+        seen[i + di, j + dj] = True
+        stack.append((i + di, j + dj))
+    return east, north
+
+
+def _runs(mask):
+    """(start, end) of each run of True in a 1-D mask, end exclusive."""
+    out, start = [], None
+    for k, v in enumerate(list(mask) + [False]):
+        if v and start is None:
+            start = k
+        elif not v and start is not None:
+            out.append((start, k))
+            start = None
+    return out
+
+
+# Perlin ------------------------------------------------------------------------------
+
+_GRAD = np.array([[1, 1, 0], [-1, 1, 0], [1, -1, 0], [-1, -1, 0], [1, 0, 1], [-1, 0, 1],
+                  [1, 0, -1], [-1, 0, -1], [0, 1, 1], [0, -1, 1], [0, 1, -1], [0, -1, -1],
+                  [1, 1, 0], [0, -1, 1], [-1, 1, 0], [0, -1, -1]], dtype=float)
+
+
+def perlin3(x, y, z, perm: np.ndarray) -> np.ndarray:
+    """Improved Perlin gradient noise (Perlin 2002) at points (arrays), about in [-1, 1].
+
+    ``perm`` is a permutation of 0..255 (draw it from a seeded Generator).
+    """
+    p = np.concatenate([perm, perm]).astype(np.int64)
+    x, y, z = (np.asarray(v, dtype=float) for v in (x, y, z))
+    fx, fy, fz = np.floor(x), np.floor(y), np.floor(z)
+    xi, yi, zi = (f.astype(np.int64) & 255 for f in (fx, fy, fz))
+    x, y, z = x - fx, y - fy, z - fz
+
+    def fade(t):
+        return t * t * t * (t * (t * 6 - 15) + 10)
+
+    u, v, w = fade(x), fade(y), fade(z)
+    a = p[xi] + yi
+    aa, ab = p[a] + zi, p[a + 1] + zi
+    b = p[xi + 1] + yi
+    ba, bb = p[b] + zi, p[b + 1] + zi
+
+    def grad(h, dx, dy, dz):
+        g = _GRAD[h & 15]
+        return g[..., 0] * dx + g[..., 1] * dy + g[..., 2] * dz
+
+    def lerp(t, a0, a1):
+        return a0 + t * (a1 - a0)
+
+    x1, y1, z1 = x - 1, y - 1, z - 1
+    return lerp(w,
+                lerp(v, lerp(u, grad(p[aa], x, y, z), grad(p[ba], x1, y, z)),
+                     lerp(u, grad(p[ab], x, y1, z), grad(p[bb], x1, y1, z))),
+                lerp(v, lerp(u, grad(p[aa + 1], x, y, z1), grad(p[ba + 1], x1, y, z1)),
+                     lerp(u, grad(p[ab + 1], x, y1, z1), grad(p[bb + 1], x1, y1, z1))))
+
+
+def fbm3(x, y, z, perm, frequency: float, octaves: int = 4, lacunarity: float = 2.0,
+         gain: float = 0.5) -> np.ndarray:
+    """Fractal sum of :func:`perlin3` octaves; ``frequency`` in cycles per metre."""
+    total = np.zeros(np.broadcast(x, y, z).shape)
+    f, amp = frequency, 1.0
+    for _ in range(octaves):
+        total += amp * perlin3(x * f, y * f, z * f, perm)
+        f *= lacunarity
+        amp *= gain
+    return total
+
+
+def perlin(index: int, seed: int = 0) -> Scenario:
+    """Random Perlin-Noise: 40 x 50 m, ceiling 4 m, noise frequency 0.05, fill rate 0.03.
+
+    The flight volume is cut into 0.25 m voxels (160 x 200 x 16). Perlin noise is sampled
+    at their centres with the paper's frequency 0.05 taken per voxel -- voxel generators
+    multiply integer voxel indices by it -- i.e. 0.2 cycles/m (features ~5 m across), plus
+    a second octave (lacunarity 2, gain 0.5) for irregular edges; the permutation and the
+    offset are random. Exactly 3 % of the voxels -- those with the highest values, outside
+    3 m of the takeoff column and the goal -- are filled. If that leaves the
+    start->goal line clear, the noise is shifted along x (whole voxels) until a filled
+    2 x 2 voxel block surrounds the line. Filled voxels are merged into one box per run in
+    each voxel column.
+    """
+    family = "perlin"
+    _check(family, index, seed)
+    rng = _rng(family, index, seed)
+    width, length, ceiling = 40.0, 50.0, 4.0
+    alt = start_altitude(ceiling)
+    voxel, per_voxel, fill_rate, octaves = 0.25, 0.05, 0.03, 2
+    frequency = per_voxel / voxel  # cycles per metre
+    shape = (int(width / voxel), int(length / voxel), int(ceiling / voxel))
+    perm = rng.permutation(256)
+    offset = rng.uniform(0.0, 1000.0, 3)
+    n_fill = round(fill_rate * shape[0] * shape[1] * shape[2])
+    cx = (np.arange(shape[0]) + 0.5) * voxel
+    cy = (np.arange(shape[1]) + 0.5) * voxel
+    cz = (np.arange(shape[2]) + 0.5) * voxel
+    line_x = width / 2.0
+    sy, gy = START_MARGIN_M, length - START_MARGIN_M
+    near = ((np.hypot(cx[:, None] - line_x, cy[None, :] - sy) < CLEAR_RADIUS_M)
+            | (np.hypot(cx[:, None] - line_x, cy[None, :] - gy) < CLEAR_RADIUS_M))
+    # voxels around the line: columns either side of x = 20, layers either side of z = alt
+    ix = [int(line_x / voxel) - 1, int(line_x / voxel)]
+    iz = [int(alt / voxel) - 1, int(alt / voxel)]
+    route = (cy > sy) & (cy < gy)
+
+    def fill(shift):
+        val = fbm3((cx[:, None, None] + offset[0] + shift * voxel),
+                   (cy[None, :, None] + offset[1]), (cz[None, None, :] + offset[2]),
+                   perm, frequency, octaves)
+        val = np.where(near[:, :, None], -np.inf, val)
+        order = np.argsort(-val.ravel(), kind="stable")[:n_fill]
+        filled = np.zeros(val.size, dtype=bool)
+        filled[order] = True
+        return val, filled.reshape(shape)
+
+    def blocks_line(filled):
+        sub = filled[np.ix_(ix, np.flatnonzero(route), iz)]
+        return bool(sub.all(axis=(0, 2)).any())
+
+    val, filled = fill(0)
+    shift = 0
+    if not blocks_line(filled):
+        # move the strongest filled voxels (blob cores) onto the line, one by one
+        cand = np.argsort(-np.where(filled, val, -np.inf).ravel(), kind="stable")[:200]
+        for flat in cand:
+            i, j, _ = np.unravel_index(flat, shape)
+            if not route[j]:
+                continue
+            s = int(i) - ix[1]
+            val2, filled2 = fill(s)
+            if blocks_line(filled2):
+                shift, filled = s, filled2
+                break
+        else:
+            raise RuntimeError(f"perlin #{index}: could not put an obstacle on the line")
+    pad = np.zeros(shape[:2] + (1,), dtype=np.int8)
+    step = np.diff(np.concatenate([pad, filled.astype(np.int8), pad], axis=2), axis=2)
+    i0, j0, k0 = np.nonzero(step == 1)  # C order: the runs of each column, bottom up
+    k1 = np.nonzero(step == -1)[2]
+    b = _MeshBuilder()
+    b.boxes(np.column_stack([i0, j0, k0]) * voxel, np.column_stack([i0 + 1, j0 + 1, k1]) * voxel)
+    from scipy.ndimage import label
+
+    _, blobs = label(filled)
+    return _make(
+        family, "theoretical", index, seed, b, width=width, length=length, ceiling=ceiling,
+        altitude=alt, obstacle_count=blobs,
+        parameters={"size_m": [width, length], "ceiling_m": ceiling, "voxel_m": voxel,
+                    "noise_frequency_per_voxel": per_voxel,
+                    "noise_frequency_per_m": frequency, "octaves": octaves,
+                    "lacunarity": 2.0, "gain": 0.5, "fill_rate": fill_rate,
+                    "clear_radius_m": CLEAR_RADIUS_M, "start_altitude_m": alt},
+        layout={"voxels": list(shape), "filled_voxels": int(filled.sum()),
+                "noise_offset_m": offset, "x_shift_voxels": shift, "blobs": blobs},
+    )
+
+
+# --------------------------------------------------------------------------------------
+# registry
+# --------------------------------------------------------------------------------------
+
+FAMILIES: dict[str, Callable[[int, int], Scenario]] = {
+    "forest": forest,
+    "urban": urban,
+    "random_angle_cylinder": random_angle_cylinder,
+    "narrow_gap": narrow_gap,
+    "sudden_drop": sudden_drop,
+    "maze": maze,
+    "perlin": perlin,
+}
+"""Family name -> ``build(index, seed) -> Scenario``, in the paper's order."""
+
+CATEGORY = {"forest": "classic", "urban": "classic", "random_angle_cylinder": "classic",
+            "narrow_gap": "theoretical", "sudden_drop": "theoretical", "maze": "theoretical",
+            "perlin": "theoretical"}
+
+PAPER_NAMES = {"forest": "Forest", "urban": "Urban",
+               "random_angle_cylinder": "Random-Angle Cylinder", "narrow_gap": "Narrow-Gap",
+               "sudden_drop": "Sudden-Drop", "maze": "Maze", "perlin": "Random Perlin-Noise"}
+
+
+def _normalise(name: str) -> str:
+    return "_".join(name.strip().lower().replace("-", " ").replace("_", " ").split())
+
+
+_ALIASES = {_normalise(v): k for k, v in PAPER_NAMES.items()}
+_ALIASES.update({"perlin_noise": "perlin", "random_perlin": "perlin",
+                 "cylinder": "random_angle_cylinder", "random_cylinder": "random_angle_cylinder"})
+
+
+def resolve_family(name) -> str:
+    """The registry key for a family name; accepts the paper's names ("Narrow-Gap")."""
+    if not isinstance(name, str):
+        raise ScenarioError(f"scenario family must be a string, got {name!r}")
+    key = _normalise(name)
+    key = _ALIASES.get(key, key)
+    if key in FAMILIES:
+        return key
+    choices = list(FAMILIES) + list(_ALIASES)
+    close = []
+    for c in difflib.get_close_matches(key, choices, n=3, cutoff=0.5):
+        c = _ALIASES.get(c, c)
+        if c not in close:
+            close.append(c)
+    hint = f"; did you mean {', '.join(map(repr, close))}?" if close else ""
+    raise ScenarioError(f"unknown scenario family {name!r}{hint} "
+                        f"(families: {', '.join(FAMILIES)})")
+
+
+def build_scenario(family: str, index: int, seed: int = 0) -> Scenario:
+    """Configuration ``index`` (1..10) of ``family`` for ``seed`` (see the module docs)."""
+    key = resolve_family(family)
+    _check(key, index, seed)
+    return FAMILIES[key](int(index), int(seed))

@@ -1,0 +1,343 @@
+"""The seven scenario families: the paper's facts, determinism, obstacles on the straight
+line, and a proof that every configuration is solvable for the largest catalog platform."""
+
+from __future__ import annotations
+
+import functools
+import json
+import math
+
+import numpy as np
+import pytest
+import trimesh
+
+from ft_sitl import __version__
+from ft_sitl.physics.catalog import catalog
+from ft_sitl.scenarios.families import (
+    FAMILIES,
+    build_scenario,
+    perlin3,
+    resolve_family,
+    start_altitude,
+)
+from ft_sitl.scenarios.scenario import Scenario, ScenarioError
+from ft_sitl.scenarios.solvability import (
+    find_path,
+    occupancy_grid,
+    polyline_clearance,
+    scenario_path,
+    segment_mesh_distance,
+    segment_triangles_distance,
+)
+
+R_MAX = max(p.collision_radius_m for p in catalog().values())
+INDICES = range(1, 11)
+ALL = [(f, i) for f in FAMILIES for i in INDICES]
+
+# family: (width, length, ceiling, category) -- benchmark-protocol.md, paper Sec. III-B
+PAPER = {
+    "forest": (40.0, 60.0, 3.0, "classic"),
+    "urban": (60.0, 60.0, 10.0, "classic"),
+    "random_angle_cylinder": (40.0, 60.0, 3.0, "classic"),
+    "narrow_gap": (50.0, 50.0, 4.0, "theoretical"),
+    "sudden_drop": (50.0, 50.0, 4.0, "theoretical"),
+    "maze": (25.0, 40.0, 2.0, "theoretical"),
+    "perlin": (40.0, 50.0, 4.0, "theoretical"),
+}
+
+
+@functools.cache
+def built(family: str, index: int, seed: int = 0) -> Scenario:
+    return build_scenario(family, index, seed)
+
+
+def test_largest_platform_radius():
+    assert 0.38 < R_MAX < 0.39
+
+
+def test_registry_is_the_papers_seven_families():
+    assert list(FAMILIES) == list(PAPER)
+    for name, fn in FAMILIES.items():
+        sc = fn(1, 0)
+        assert sc.family == name and sc.category == PAPER[name][3]
+
+
+# ---- every configuration ---------------------------------------------------------------
+
+
+@pytest.mark.parametrize("family,index", ALL)
+def test_configuration(family, index):
+    sc = built(family, index)
+    width, length, ceiling, category = PAPER[family]
+    assert (sc.family, sc.index, sc.seed, sc.category) == (family, index, 0, category)
+    np.testing.assert_array_equal(sc.bounds_min, [0.0, 0.0, 0.0])
+    np.testing.assert_array_equal(sc.bounds_max, [width, length, ceiling])
+    assert sc.floor == 0.0 and sc.ceiling == ceiling
+    # takeoff on the floor near the short side y = 0, start above it, goal across
+    alt = 2.5 if family == "sudden_drop" else start_altitude(ceiling)
+    assert sc.takeoff[2] == 0.0 and sc.takeoff[1] < 0.1 * length
+    np.testing.assert_array_equal(sc.start, [sc.takeoff[0], sc.takeoff[1], alt])
+    assert sc.goal[2] == alt and sc.goal[1] > 0.9 * length
+    assert sc.goal[0] == pytest.approx(width / 2) and sc.start[0] == pytest.approx(width / 2)
+    d = sc.goal - sc.start
+    assert sc.start_yaw == pytest.approx(math.atan2(d[1], d[0]))
+    assert sc.goal_radius_m == 2.0
+    # provenance
+    prov = sc.provenance
+    assert prov["generator"].endswith(family) and prov["seed"] == 0 and prov["index"] == index
+    assert prov["ft_sitl_version"] == __version__ and isinstance(prov["parameters"], dict)
+    json.dumps(sc.summary())
+    # obstacles: closed, outward-facing, on the straight line
+    assert sc.obstacle_count > 0
+    assert sc.mesh.is_watertight and sc.mesh.is_winding_consistent and sc.mesh.volume > 0
+    assert sc.line_blocked(0.0), "no obstacle crosses the straight start->goal segment"
+    assert sc.line_blocked(R_MAX)
+
+
+@pytest.mark.parametrize("family,index", ALL)
+def test_solvable_for_the_largest_platform(family, index):
+    """The grid search finds a path; an exact segment-to-triangle check confirms it."""
+    sc = built(family, index)
+    path = scenario_path(sc, R_MAX)
+    assert path is not None, f"{sc.name}: no path for radius {R_MAX:.3f} m"
+    np.testing.assert_array_equal(path[0], sc.start)
+    np.testing.assert_array_equal(path[-1], sc.goal)
+    assert polyline_clearance(sc.mesh, path, cutoff=R_MAX) >= R_MAX
+    assert np.all(path >= sc.bounds_min + R_MAX - 1e-9)
+    assert np.all(path <= sc.bounds_max - R_MAX + 1e-9)
+
+
+@pytest.mark.parametrize("family", list(FAMILIES))
+def test_deterministic(family):
+    a, b = built(family, 4), build_scenario(family, 4, 0)
+    assert a.mesh_digest() == b.mesh_digest()
+    assert a.mesh.vertices.tobytes() == b.mesh.vertices.tobytes()
+    assert a.mesh.faces.tobytes() == b.mesh.faces.tobytes()
+    assert json.dumps(a.summary()) == json.dumps(b.summary())
+    # seed and index both change the layout
+    assert build_scenario(family, 4, 1).mesh_digest() != a.mesh_digest()
+    assert built(family, 5).mesh_digest() != a.mesh_digest()
+
+
+def test_no_global_rng():
+    np.random.seed(123)
+    state = np.random.get_state()[1].copy()
+    a = build_scenario("forest", 2, 7)
+    assert np.array_equal(np.random.get_state()[1], state)
+    np.random.seed(999)
+    assert build_scenario("forest", 2, 7).mesh_digest() == a.mesh_digest()
+
+
+def test_other_seeds_build_and_are_solvable():
+    for family in FAMILIES:
+        sc = build_scenario(family, 7, 3)
+        assert sc.line_blocked(0.0)
+        assert scenario_path(sc, R_MAX) is not None, sc.name
+
+
+# ---- family facts ----------------------------------------------------------------------
+
+
+def test_counts_rise_with_index():
+    gaps = [built("narrow_gap", i).provenance["parameters"]["gap_count"] for i in INDICES]
+    assert gaps == list(INDICES)
+    assert [len(built("narrow_gap", i).provenance["layout"]["walls"]) for i in INDICES] == gaps
+    drops = [built("sudden_drop", i).obstacle_count for i in INDICES]
+    assert drops == sorted(drops) and len(set(drops)) == 10
+
+
+def test_forest():
+    for i in INDICES:
+        sc = built("forest", i)
+        trees = np.array(sc.provenance["layout"]["trees_xyrh"])
+        assert len(trees) == round(40 * 60 / 49) == sc.obstacle_count
+        assert sc.provenance["parameters"]["density_per_m2"] == 1 / 49
+        assert np.all((trees[:, 2] >= 0.15) & (trees[:, 2] <= 0.30))
+        assert np.all(trees[:, 3] > sc.ceiling)
+        assert sc.mesh.bounds[0][2] == 0.0
+
+
+def test_random_angle_cylinder():
+    tilts = []
+    for i in INDICES:
+        sc = built("random_angle_cylinder", i)
+        cyl = sc.provenance["layout"]["cylinders"]
+        assert len(cyl) == round(40 * 60 / 36) == sc.obstacle_count
+        assert all(0.25 <= c["r"] <= 0.5 for c in cyl)
+        tilts += [c["tilt_deg"] for c in cyl]
+    assert 0.0 <= min(tilts) < 10.0 and 170.0 < max(tilts) <= 180.0
+
+
+def test_urban():
+    for i in INDICES:
+        sc = built("urban", i)
+        lay = sc.provenance["layout"]
+        assert lay["buildings_lo_hi"] and lay["walls_lo_hi"]
+        assert sc.obstacle_count == len(lay["buildings_lo_hi"]) + len(lay["walls_lo_hi"])
+        assert max(b[5] for b in lay["buildings_lo_hi"]) > sc.ceiling
+
+
+def test_narrow_gap():
+    for i in INDICES:
+        sc = built("narrow_gap", i)
+        walls = sc.provenance["layout"]["walls"]
+        assert all(0.85 <= w["gap_width_m"] <= 0.90 for w in walls)
+        offsets = [w["gap_centre_x_m"] - 25.0 for w in walls]
+        assert all(abs(o) >= 4.0 for o in offsets)
+        assert all(a * b < 0 for a, b in zip(offsets, offsets[1:])), "gaps alternate sides"
+        assert sc.mesh.bounds[1][2] > sc.ceiling
+        np.testing.assert_allclose(sc.mesh.bounds[:, 0], [0.0, 50.0])
+        # 2 r_max = 0.768 m fits through 0.85 m; a 0.46 m radius fits through no gap
+        assert scenario_path(sc, 0.46) is None
+
+
+def test_sudden_drop():
+    for i in INDICES:
+        sc = built("sudden_drop", i)
+        lo, hi = sc.mesh.bounds
+        assert lo[2] == 1.5 and hi[2] == 14.0  # lowest obstacle point; 14 m volume
+        assert sc.start[2] == 2.5 and sc.ceiling == 4.0
+        assert sc.provenance["parameters"]["size_m"] == [50.0, 50.0, 14.0]
+        path = scenario_path(sc, R_MAX)
+        assert path[:, 2].min() < 1.5 - R_MAX  # the vehicle has to drop below the blocks
+
+
+def test_maze():
+    for i in INDICES:
+        sc = built("maze", i)
+        p = sc.provenance
+        assert p["parameters"]["corridor_width_m"] >= 2.0
+        assert p["layout"]["dead_ends"] > 0
+        east, north = np.array(p["layout"]["east_passages"]), np.array(
+            p["layout"]["north_passages"])
+        nx, ny = p["parameters"]["cells"]
+        assert east.sum() + north.sum() == nx * ny - 1  # a perfect maze is a spanning tree
+        assert sc.mesh.bounds[1][2] > sc.ceiling
+
+
+def test_perlin():
+    for i in INDICES:
+        sc = built("perlin", i)
+        par, lay = sc.provenance["parameters"], sc.provenance["layout"]
+        assert par["noise_frequency_per_voxel"] == 0.05 and par["fill_rate"] == 0.03
+        assert lay["filled_voxels"] == round(0.03 * np.prod(lay["voxels"]))
+        assert np.prod(lay["voxels"]) * par["voxel_m"] ** 3 == pytest.approx(40 * 50 * 4)
+        assert sc.mesh.volume == pytest.approx(lay["filled_voxels"] * par["voxel_m"] ** 3)
+        assert sc.obstacle_count == lay["blobs"] > 1
+
+
+def test_perlin_noise_is_smooth_and_bounded():
+    perm = np.random.default_rng(0).permutation(256)
+    x = np.linspace(0, 10, 2001)
+    v = perlin3(x, 0.3 * x, 0.1 * x + 0.5, perm)
+    assert np.all(np.abs(v) <= 1.5) and v.std() > 0.05
+    assert np.abs(np.diff(v)).max() < 0.05  # continuous
+    np.testing.assert_allclose(perlin3(np.arange(5.0), 0.0, 0.0, perm), 0.0, atol=1e-12)
+
+
+# ---- errors ----------------------------------------------------------------------------
+
+
+def test_bad_family_suggests():
+    with pytest.raises(ValueError, match=r"unknown scenario family 'forrest'.*'forest'"):
+        build_scenario("forrest", 1)
+    with pytest.raises(ValueError, match="families: forest, urban"):
+        build_scenario("desert", 1)
+    assert resolve_family("Narrow-Gap") == "narrow_gap"
+    assert resolve_family("Random Perlin-Noise") == "perlin"
+    assert build_scenario("Random-Angle Cylinder", 2).family == "random_angle_cylinder"
+
+
+@pytest.mark.parametrize("index", [0, 11, -1, 2.0, "3", True, None])
+def test_bad_index(index):
+    with pytest.raises(ValueError, match="index must be"):
+        build_scenario("maze", index)
+    with pytest.raises(ScenarioError, match="index must be"):
+        FAMILIES["maze"](index, 0)
+
+
+@pytest.mark.parametrize("seed", [-1, 1.5, "0", None])
+def test_bad_seed(seed):
+    with pytest.raises(ValueError, match="seed must be a non-negative integer"):
+        build_scenario("forest", 1, seed)
+
+
+def test_scenario_validates_its_fields():
+    sc = built("maze", 1)
+    fields = {f: getattr(sc, f) for f in Scenario.__dataclass_fields__}
+    for change, message in [
+        ({"category": "extreme"}, "category"),
+        ({"takeoff": (1.0, 1.0, 0.5)}, "takeoff must be on the floor"),
+        ({"goal": (1.0, 99.0, 1.0)}, "goal.*outside the bounds"),
+        ({"start": (1.0, 2.0)}, "start: needs 3"),
+        ({"bounds_min": (0.0, 0.0, -1.0)}, "floor"),
+        ({"goal_radius_m": 0.0}, "goal_radius_m"),
+        ({"mesh": "mesh.ply"}, "trimesh"),
+    ]:
+        with pytest.raises(ScenarioError, match=message):
+            Scenario(**{**fields, **change})
+    with pytest.raises(AttributeError):
+        sc.index = 2
+    assert not sc.start.flags.writeable
+
+
+# ---- the solvability check itself ------------------------------------------------------
+
+
+def test_segment_distance_is_exact():
+    rng = np.random.default_rng(1)
+    tri = rng.uniform(-1, 1, (15, 3, 3))
+    t = np.linspace(0, 1, 101)[:, None]
+    u, v = np.meshgrid(np.linspace(0, 1, 41), np.linspace(0, 1, 41))
+    keep = (u + v) <= 1
+    u, v = u[keep][:, None], v[keep][:, None]
+    for _ in range(8):
+        p, q = rng.uniform(-2, 2, (2, 3))
+        d = segment_triangles_distance(p, q, tri)
+        seg = p + t * (q - p)
+        for k, (a, b, c) in enumerate(tri):  # brute force on dense samples
+            pts = a + u * (b - a) + v * (c - a)
+            brute = np.sqrt(((seg[:, None] - pts[None]) ** 2).sum(-1)).min()
+            assert d[k] <= brute + 1e-12
+            assert brute - d[k] < 0.08
+
+
+def _slot(width: float, merged: bool = False) -> trimesh.Trimesh:
+    """A wall across y = 5 (x in [0, 10], z in [0, 3]) with a slot of ``width`` at x = 5.
+    ``merged``: the left part is two touching boxes with welded vertices (not convex)."""
+    left = [trimesh.creation.box(bounds=[[0, 4.9, 0], [5 - width / 2, 5.1, 3]])]
+    if merged:
+        left = [trimesh.creation.box(bounds=[[0, 4.9, 0], [2, 5.1, 3]]),
+                trimesh.creation.box(bounds=[[2, 4.9, 0], [5 - width / 2, 5.1, 3]])]
+    right = trimesh.creation.box(bounds=[[5 + width / 2, 4.9, 0], [10, 5.1, 3]])
+    if merged:
+        left = trimesh.util.concatenate(left)
+        left.merge_vertices()
+        return trimesh.Trimesh(np.vstack([left.vertices, right.vertices]),
+                               np.vstack([left.faces, right.faces + len(left.vertices)]),
+                               process=False)
+    return trimesh.util.concatenate(left + [right])
+
+
+@pytest.mark.parametrize("merged", [False, True])
+def test_grid_is_conservative_at_a_slot(merged):
+    lo, hi = (0, 0, 0), (10, 10, 3)
+    start, goal = (3.0, 1.0, 1.5), (7.0, 9.0, 1.5)
+    r = 0.4
+    pitch = (0.02, 0.25, 0.25)
+    assert find_path(_slot(2 * r - 0.01, merged), start, goal, lo, hi, r, pitch) is None
+    wide = _slot(2 * r + 0.06, merged)
+    path = find_path(wide, start, goal, lo, hi, r, pitch)
+    assert path is not None
+    assert polyline_clearance(wide, path) >= r
+    assert np.any(np.abs(path[:, 0] - 5.0) < 0.03)  # through the slot
+    # the triangle fallback for a non-convex part blocks hardly more than convex pieces do
+    free = occupancy_grid(wide, lo, hi, r, pitch).free.sum()
+    assert free >= 0.98 * occupancy_grid(_slot(2 * r + 0.06), lo, hi, r, pitch).free.sum()
+
+
+def test_segment_mesh_distance_cutoff():
+    box = trimesh.creation.box(bounds=[[0, 0, 0], [1, 1, 1]])
+    assert segment_mesh_distance(box, (2, 0.5, 0.5), (3, 0.5, 0.5)) == pytest.approx(1.0)
+    assert segment_mesh_distance(box, (2, 0.5, 0.5), (3, 0.5, 0.5), cutoff=0.5) == math.inf
+    assert segment_mesh_distance(box, (-1, 0.5, 0.5), (2, 0.5, 0.5)) == 0.0
