@@ -29,9 +29,10 @@ def configure() -> Path:
     h = hashlib.sha256()
     for rel in _KERNEL_MODULES:
         h.update((pkg / rel).read_bytes())
-    root = os.environ.get("NUMBA_CACHE_DIR") or os.path.join(
+    user_root = os.environ.get("NUMBA_CACHE_DIR")
+    root = (os.path.join(user_root, "ft-sitl") if user_root else os.path.join(
         os.environ.get("XDG_CACHE_HOME") or os.path.expanduser("~/.cache"), "ft-sitl", "numba"
-    )
+    ))
     path = Path(root) / h.hexdigest()[:16]
     numba.config.CACHE_DIR = str(path)
     _prune(Path(root), keep=path)
@@ -50,7 +51,9 @@ def _prune(root: Path, keep: Path, max_age_s: float = 14 * 86400) -> None:
     now = time.time()
     for entry in entries:
         try:
-            if entry != keep and entry.is_dir() and now - entry.stat().st_mtime > max_age_s:
+            ours = len(entry.name) == 16 and all(ch in "0123456789abcdef" for ch in entry.name)
+            if ours and entry != keep and entry.is_dir() and \
+                    now - entry.stat().st_mtime > max_age_s:
                 shutil.rmtree(entry, ignore_errors=True)
         except OSError:
             continue

@@ -52,7 +52,10 @@ class DemoResult:
 
 
 def run_demo(platform: Platform, *, altitude_m: float = 2.0, leg_m: float = 8.0) -> DemoResult:
-    Simulation(platform).step(1)  # compile (or load) the kernels before the clock starts
+    # compile (or load) the kernels before the clock starts
+    Simulation(platform).step(1)
+    tilt_angle(np.array([1.0, 0.0, 0.0, 0.0]))
+    Recording(np.zeros(1), np.zeros((1, 1, 17))).eulers(0)
     sim = Simulation(platform)
     sim.place(0, [0.0, 0.0, 0.0])
     plan = [

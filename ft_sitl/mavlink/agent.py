@@ -168,6 +168,8 @@ class VehicleAgent:
         self._raw_mission: list = []  # MISSION_ITEM_INT messages as uploaded
         self._last_mission_current: tuple | None = None
         self._snap: _Snapshot | None = None
+        # PX4 SITL: each instance's local frame starts where it spawned
+        self.origin = np.asarray(self.cmd.home, dtype=float).copy()
 
     # --- helpers --------------------------------------------------------------------
     @property
@@ -230,7 +232,7 @@ class VehicleAgent:
     def home_position(self) -> mav.MAVLink_home_position_message:
         h = self.cmd.home
         lat, lon, alt = self.geo.to_global(h)
-        ned = frames.enu_to_ned(h)
+        ned = frames.enu_to_ned(h - self.origin)
         return mav.MAVLink_home_position_message(
             int(round(lat * 1e7)), int(round(lon * 1e7)), int(round(alt * 1000)),
             float(ned[0]), float(ned[1]), float(ned[2]), [1.0, 0.0, 0.0, 0.0], 0.0, 0.0, 0.0,
@@ -303,7 +305,8 @@ class VehicleAgent:
             amsl = float(self.geo.alt_m + s.position[2])
             rel = float(s.position[2] - self.cmd.home[2])
             return mav.MAVLink_altitude_message(t_us, amsl, amsl, rel, float(-p_ned[2]),
-                                                float(s.position[2]), float(s.position[2]))
+                                                float(s.position[2] - self.cmd.home[2]),
+                                                float(s.position[2]))
         if msg_id == mav.MAVLINK_MSG_ID_HOME_POSITION:
             return self.home_position()
         if msg_id == mav.MAVLINK_MSG_ID_BATTERY_STATUS:
@@ -337,7 +340,8 @@ class VehicleAgent:
                 time_us=self.fleet.time_us, state=s, x=x,
                 q_ned=frames.q_enu_flu_to_ned_frd(x[d.X_QUAT:d.X_QUAT + 4]),
                 w_frd=frames.flu_to_frd(x[d.X_OMEGA:d.X_OMEGA + 3]),
-                p_ned=frames.enu_to_ned(s.position), v_ned=frames.enu_to_ned(s.velocity))
+                p_ned=frames.enu_to_ned(s.position - self.origin),
+                v_ned=frames.enu_to_ned(s.velocity))
             self._snap = snap
         return snap
 
@@ -509,6 +513,9 @@ class VehicleAgent:
         if command == mav.MAV_CMD_PREFLIGHT_REBOOT_SHUTDOWN:
             if c.armed:
                 return Result.DENIED, []
+            if p[0] == 1:  # autopilot reboot: clears a flight termination
+                c.terminated = False
+                c.text(cm.Severity.INFO, "Rebooting autopilot")
             return Result.ACCEPTED, []
         return Result.UNSUPPORTED, []
 
@@ -555,20 +562,24 @@ class VehicleAgent:
                                              (acc, "acceleration")))
         except SetpointError as exc:
             return self._reject_setpoint(str(exc))
-        rot = frame in (mav.MAV_FRAME_BODY_NED, mav.MAV_FRAME_BODY_OFFSET_NED)
+        body = frame in (mav.MAV_FRAME_BODY_NED, mav.MAV_FRAME_BODY_OFFSET_NED)
+        offset = frame in (mav.MAV_FRAME_LOCAL_OFFSET_NED, mav.MAV_FRAME_BODY_OFFSET_NED)
         yaw_ned = frames.yaw_enu_to_ned(s.yaw)
 
-        def to_enu(v, offset):
+        def to_enu(v, is_position):
             if v is None:
                 return None
             v = np.asarray(v, dtype=float)
-            if rot:  # body-NED: x forward, y right along the current heading
+            # body frames turn vectors with the heading (x forward, y right); a BODY_NED
+            # position is still a local position (MAVLink), only offsets are relative
+            if body and not (is_position and not offset):
                 c, sn = math.cos(yaw_ned), math.sin(yaw_ned)
                 v = np.array([c * v[0] - sn * v[1], sn * v[0] + c * v[1], v[2]])
             out = frames.ned_to_enu(v)
-            return out + s.position if offset else out
+            if is_position:
+                return out + (s.position if offset else self.origin)
+            return out
 
-        offset = frame in (mav.MAV_FRAME_LOCAL_OFFSET_NED, mav.MAV_FRAME_BODY_OFFSET_NED)
         yaw = None if mask & (1 << 10) else m.yaw
         yaw_rate = None if mask & (1 << 11) else m.yaw_rate
         if yaw is not None and not math.isfinite(yaw):
@@ -579,7 +590,7 @@ class VehicleAgent:
             return self._reject_setpoint("type_mask ignores position, velocity and accel")
         try:
             sp = Setpoint.trajectory(
-                to_enu(pos, offset), to_enu(vel, False), to_enu(acc, False),
+                to_enu(pos, True), to_enu(vel, False), to_enu(acc, False),
                 yaw=None if yaw is None else frames.yaw_ned_to_enu(yaw),
                 yaw_rate=None if yaw_rate is None else -yaw_rate)
         except SetpointError as exc:
@@ -666,10 +677,13 @@ class VehicleAgent:
             self.cmd.text(cm.Severity.WARNING, f"Param {name[:16]} unknown: not set")
             return []
         value = _param_from_wire(name, m.param_value, m.param_type)
+        old = self.params[name]
         try:
             self.params.set(name, value)
             self.fleet.refresh_params()
         except ParamError as exc:
+            self.params.set(name, old)  # refused as a whole: nothing half-applied
+            self.fleet.refresh_params()
             self.cmd.text(cm.Severity.WARNING, str(exc)[:50])
         idx = list(PARAMS).index(name)
         return [Outgoing(self._param_value(name, idx))]
@@ -737,8 +751,8 @@ class VehicleAgent:
                 xy = (p[0], p[1])
             z = self._alt_to_local(it.z, it.frame) if math.isfinite(it.z) else nan
             pos = (xy[0], xy[1], z)
-        elif it.frame == mav.MAV_FRAME_LOCAL_NED:
-            pos = tuple(frames.ned_to_enu([it.x, it.y, it.z]))
+        elif it.frame == mav.MAV_FRAME_LOCAL_NED:  # MISSION_ITEM_INT: x, y in m * 1e4
+            pos = tuple(frames.ned_to_enu([it.x * 1e-4, it.y * 1e-4, it.z]) + self.origin)
         elif it.frame == mav.MAV_FRAME_MISSION:
             pos = (nan, nan, nan)
         else:
@@ -808,8 +822,7 @@ class VehicleAgent:
     def _on_timesync(self, m, link, peer, wall_us):
         if m.tc1 != 0:
             return []
-        return [Outgoing(mav.MAVLink_timesync_message(self.fleet.time_us * 1000, m.ts1,
-                                                      m.get_srcSystem(), m.get_srcComponent()),
+        return [Outgoing(mav.MAVLink_timesync_message(self.fleet.time_us * 1000, m.ts1),
                          link, peer)]
 
 

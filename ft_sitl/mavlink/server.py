@@ -110,7 +110,7 @@ class SitlServer:
                  tlog: Path | None = None, signing_key: str | None = None,
                  base_instance: int = 0):
         if not (math.isfinite(speed_factor) and 0.01 <= speed_factor <= 1000):
-            raise ValueError(f"speed factor: {speed_factor!r} must be within [0.01, 1000]")
+            raise ValueError(f"--speed-factor: {speed_factor!r} must be within [0.01, 1000]")
         self.fleet = fleet
         self.geo = geo
         self.bind = bind
@@ -242,8 +242,10 @@ class SitlServer:
                 wall_us = int(time.monotonic() * 1e6)
                 for a in self.agents:
                     self.send_all(a.i, a.poll(wall_us))
-                    # heartbeats also by wall clock, so slow speed factors stay connected
-                    if time.monotonic() - self._last_hb_wall[a.i] >= 1.0:
+                    # below real time the 1 Hz simulated-time heartbeat would come less
+                    # than once a wall second: top it up so clients stay connected
+                    if self.speed_factor < 1.0 and \
+                            time.monotonic() - self._last_hb_wall[a.i] >= 1.0:
                         self._last_hb_wall[a.i] = time.monotonic()
                         self.send_all(a.i, [Outgoing(a.heartbeat())])
                 elapsed = time.monotonic() - wall0

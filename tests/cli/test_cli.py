@@ -138,7 +138,7 @@ def test_sitl_serves_prints_urls_and_stops_cleanly_on_ctrl_c(tmp_path):
 def test_sitl_bad_arguments_are_one_line_errors():
     for args, needle in ((["--home", "1,2"], "--home"), (["--home", "95,0,0"], "latitude"),
                          (["--instances", "0"], "--instances"), (["--speed-factor", "0"],
-                                                                 "speed factor"),
+                                                                 "--speed-factor"),
                          (["--bind", "localhost:1"], "--bind")):
         proc = run("sitl", "--duration", "1", *args, check=False)
         assert proc.returncode == 2, (args, proc.stderr)

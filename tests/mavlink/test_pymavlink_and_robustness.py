@@ -124,10 +124,13 @@ def test_signing_rejects_unsigned_and_accepts_signed(tmp_path):
         plain.arducopter_arm()
         time.sleep(1.0)
         assert not server.fleet.commanders[0].armed
+        plain.close()
         signed = mavutil.mavlink_connection("udpin:127.0.0.1:14540", source_system=246,
                                             source_component=191)
-        signed.setup_signing(signing_secret("correct horse"), sign_outgoing=True)
+        # after the first heartbeat: pymavlink replaces its protocol object (and would drop
+        # the key) on the first MAVLink 2 packet it sees
         signed.wait_heartbeat(timeout=10)
+        signed.setup_signing(signing_secret("correct horse"), sign_outgoing=True)
         signed.arducopter_arm()
         ack = ack_of(signed, mav.MAV_CMD_COMPONENT_ARM_DISARM)
         assert ack.result == mav.MAV_RESULT_ACCEPTED
@@ -212,3 +215,24 @@ def test_hostile_input_never_crashes_the_vehicle():
         assert np.isfinite(server.fleet.sim.x).all()
         assert np.isfinite(server.fleet.sim.w_cmd).all()
         assert server.bad_packets > 0
+
+
+def test_timesync_param_rollback_and_per_vehicle_local_origin():
+    with running_sitl(instances=2) as server:
+        c = client(14541)
+        c.mav.timesync_send(0, 123456789)
+        ts = wait_msg(c, "TIMESYNC", lambda m: m.ts1 == 123456789)
+        assert ts.tc1 > 0
+        # each instance's local frame starts where it spawned (PX4 SITL), vehicle 2 is
+        # 2 m north of vehicle 1 in the shared world
+        lp = wait_msg(c, "LOCAL_POSITION_NED")
+        assert abs(lp.x) < 0.01 and abs(lp.y) < 0.01
+        # a value the platform cannot fly with is refused as a whole
+        c.mav.param_set_send(2, 1, b"MPC_THR_MIN", 0.5, mav.MAV_PARAM_TYPE_REAL32)
+        pv = wait_msg(c, "PARAM_VALUE", lambda m: m.param_id == "MPC_THR_MIN")
+        assert pv.param_value == pytest.approx(0.12)
+        assert server.fleet.params[1]["MPC_THR_MIN"] == pytest.approx(0.12)
+        c.mav.param_set_send(2, 1, b"MPC_XY_VEL_MAX", 3.0, mav.MAV_PARAM_TYPE_REAL32)
+        wait_msg(c, "PARAM_VALUE", lambda m: m.param_id == "MPC_XY_VEL_MAX"
+                 and abs(m.param_value - 3.0) < 1e-6)
+        assert server.bad_packets == 0
