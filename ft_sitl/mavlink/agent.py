@@ -822,7 +822,8 @@ class VehicleAgent:
     def _on_timesync(self, m, link, peer, wall_us):
         if m.tc1 != 0:
             return []
-        return [Outgoing(mav.MAVLink_timesync_message(self.fleet.time_us * 1000, m.ts1),
+        # tc1 = 0 would read as a request: at simulated time 0 answer 1 ns
+        return [Outgoing(mav.MAVLink_timesync_message(max(1, self.fleet.time_us * 1000), m.ts1),
                          link, peer)]
 
 

@@ -3,12 +3,20 @@
 import asyncio
 
 from mavsdk import ComponentType
-from mavsdk.asyncio import Configuration, Mavsdk
+from mavsdk.asyncio import Configuration, Mavsdk, MavsdkConnectionError
 
 
 async def connect(port: int = 14540):
     m = Mavsdk(Configuration.create_with_component_type(ComponentType.GROUND_STATION))
-    await m.add_any_connection(f"udpin://0.0.0.0:{port}")
+    # a client destroyed by the previous test may hold the port for a moment: retry
+    for attempt in range(50):
+        try:
+            await m.add_any_connection(f"udpin://0.0.0.0:{port}")
+            break
+        except MavsdkConnectionError:
+            if attempt == 49:
+                raise
+            await asyncio.sleep(0.2)
     drone = await m.first_autopilot(timeout_s=20.0)
     assert drone is not None, "no autopilot discovered"
     return m, drone
