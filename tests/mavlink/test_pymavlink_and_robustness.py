@@ -133,7 +133,7 @@ def test_signing_rejects_unsigned_and_accepts_signed(tmp_path):
         signed.setup_signing(signing_secret("correct horse"), sign_outgoing=True)
         signed.arducopter_arm()
         ack = ack_of(signed, mav.MAV_CMD_COMPONENT_ARM_DISARM)
-        assert ack.result == mav.MAV_RESULT_ACCEPTED
+        assert ack is not None and ack.result == mav.MAV_RESULT_ACCEPTED
         assert server.fleet.commanders[0].armed
 
 
@@ -213,6 +213,7 @@ def test_hostile_input_never_crashes_the_vehicle():
         # flooded without reading: drain it first, and retry as MAVSDK would
         while c.recv_match(blocking=False) is not None:
             pass
+        ack = None
         for _ in range(3):
             c.mav.command_long_send(1, 1, mav.MAV_CMD_REQUEST_MESSAGE, 0, 245, 0, 0, 0, 0, 0, 0)
             try:
@@ -220,7 +221,7 @@ def test_hostile_input_never_crashes_the_vehicle():
                 break
             except AssertionError:
                 continue
-        assert ack.result == mav.MAV_RESULT_ACCEPTED
+        assert ack is not None and ack.result == mav.MAV_RESULT_ACCEPTED
         assert np.isfinite(server.fleet.sim.x).all()
         assert np.isfinite(server.fleet.sim.w_cmd).all()
         assert server.bad_packets > 0
