@@ -85,11 +85,13 @@ def test_two_vehicles_each_flown_by_its_own_mavsdk_client():
         return pos
 
     async def both():
-        a = await connect(14540)
-        b = await connect(14541)
+        a = await connect(14542)
+        b = await connect(14543)
         return await asyncio.gather(fly(*a, 2.0), fly(*b, 4.0))
 
-    with running_sitl(instances=2, speed_factor=2.0) as server:
+    # PX4 SITL instances 2 and 3 (ports 14542/14543): a MAVSDK client of an earlier test
+    # in this process can keep 14540 bound after destroy() and swallow the packets
+    with running_sitl(instances=2, speed_factor=2.0, base_instance=2) as server:
         p1, p2 = asyncio.run(both())
         assert p1.relative_altitude_m == pytest.approx(2.0, abs=0.2)
         assert p2.relative_altitude_m == pytest.approx(4.0, abs=0.2)
