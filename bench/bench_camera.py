@@ -29,18 +29,14 @@ for _var in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS", "NUMB
     os.environ.setdefault(_var, "1")
 
 import argparse  # noqa: E402
-import datetime  # noqa: E402
-import gc  # noqa: E402
 import json  # noqa: E402
 import math  # noqa: E402
-import platform as pyplatform  # noqa: E402
-import statistics  # noqa: E402
-import subprocess  # noqa: E402
 import sys  # noqa: E402
 import time  # noqa: E402
 
 import numpy as np  # noqa: E402
 import trimesh  # noqa: E402
+from benchutil import machine_info, pin_to_one_cpu, timed  # noqa: E402
 
 from ft_sitl.scenarios.camera import (  # noqa: E402
     CameraConfig,
@@ -100,40 +96,11 @@ def poses(centres, radii, n: int = 8, seed: int = SEED + 1):
 
 
 # --- timing --------------------------------------------------------------------------------
-def pin_to_one_cpu(cpu: int | None) -> int | None:
-    """Pin this process to one CPU (the last allowed one by default). Returns it, or None."""
-    if not hasattr(os, "sched_setaffinity"):
-        return None
-    allowed = sorted(os.sched_getaffinity(0))
-    target = allowed[-1] if cpu is None else cpu
-    os.sched_setaffinity(0, {target})
-    return target
-
-
 def n_threads() -> int | None:
     try:
         return len(os.listdir("/proc/self/task"))
     except OSError:
         return None
-
-
-def timed(fn, repeats: int) -> dict:
-    """Run fn() `repeats` times; wall seconds per run and CPU share, GC off while timing."""
-    walls, shares = [], []
-    gc.collect()
-    gc.disable()
-    try:
-        for _ in range(repeats):
-            c0, t0 = time.process_time(), time.perf_counter()
-            fn()
-            t1, c1 = time.perf_counter(), time.process_time()
-            walls.append(t1 - t0)
-            shares.append((c1 - c0) / (t1 - t0))
-    finally:
-        gc.enable()
-    return {"wall_s": walls, "median_s": statistics.median(walls), "min_s": min(walls),
-            "max_s": max(walls), "cpu_share_median": statistics.median(shares),
-            "cpu_share_max": max(shares)}
 
 
 def bench_capture(cam: DepthCamera, pose_list, repeats: int, noisy: bool) -> dict:
@@ -203,28 +170,6 @@ def bench_cast_methods(cam: DepthCamera, pose_list, repeats: int) -> dict:
 
 
 # --- reporting -----------------------------------------------------------------------------
-def machine_info(cpu: int | None) -> dict:
-    model = pyplatform.processor() or ""
-    try:
-        lscpu = subprocess.run(["lscpu"], capture_output=True, text=True, timeout=10).stdout
-        for line in lscpu.splitlines():
-            if line.lower().startswith("model name"):
-                model = line.split(":", 1)[1].strip()
-                break
-    except (OSError, subprocess.SubprocessError):
-        pass
-    return {
-        "date_utc": datetime.datetime.now(datetime.UTC).strftime("%Y-%m-%dT%H:%M:%SZ"),
-        "cpu_model": model,
-        "n_cpus": os.cpu_count(),
-        "pinned_cpu": cpu,
-        "python": pyplatform.python_version(),
-        "numpy": np.__version__,
-        "trimesh": trimesh.__version__,
-        "embree": embree_available(),
-    }
-
-
 def print_markdown(res: dict, file=sys.stdout) -> None:
     m, s = res["machine"], res["scene"]
     print(f"# {m['cpu_model']}, {m['n_cpus']} CPUs (pinned to {m['pinned_cpu']}), "
@@ -292,7 +237,7 @@ def main(argv=None) -> int:
     share_max = max([r["cpu_share_max"] for r in capture]
                     + [v["cpu_share_max"] for v in cast.values() if isinstance(v, dict)])
     res = {
-        "machine": machine_info(cpu),
+        "machine": machine_info(cpu, trimesh=trimesh.__version__, embree=embree_available()),
         "scene": {"n_cylinders": N_CYLINDERS, "n_faces": int(len(mesh.faces)),
                   "n_poses": len(pose_list), "seed": SEED, "build_s": build_s},
         "repeats": repeats,

@@ -29,19 +29,15 @@ for _var in ("NUMBA_NUM_THREADS", "OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MK
     os.environ.setdefault(_var, "1")
 
 import argparse  # noqa: E402
-import datetime  # noqa: E402
-import gc  # noqa: E402
 import json  # noqa: E402
 import math  # noqa: E402
-import platform as pyplatform  # noqa: E402
-import statistics  # noqa: E402
-import subprocess  # noqa: E402
 import sys  # noqa: E402
 import time  # noqa: E402
 from pathlib import Path  # noqa: E402
 
 import numba  # noqa: E402
 import numpy as np  # noqa: E402
+from benchutil import machine_info, pin_to_one_cpu, timed  # noqa: E402
 from numba import njit  # noqa: E402
 
 from ft_sitl.autopilot.setpoints import Setpoint  # noqa: E402
@@ -76,41 +72,6 @@ def plant_loop_vehicle_major(n_steps, x, w_cmd, prm, alloc, env, status, dt):
 
 
 # --- timing helpers ------------------------------------------------------------------------
-def pin_to_one_cpu(cpu: int | None) -> int | None:
-    """Pin this process to one CPU (the last allowed one by default). Returns it, or None."""
-    if not hasattr(os, "sched_setaffinity"):
-        return None
-    allowed = sorted(os.sched_getaffinity(0))
-    target = allowed[-1] if cpu is None else cpu
-    os.sched_setaffinity(0, {target})
-    return target
-
-
-def timed(fn, repeats: int) -> dict:
-    """Run fn() `repeats` times; wall and CPU seconds per run, GC off while timing."""
-    walls, cpu_share = [], []
-    gc.collect()
-    gc.disable()
-    try:
-        for _ in range(repeats):
-            c0 = time.process_time()
-            t0 = time.perf_counter()
-            fn()
-            t1 = time.perf_counter()
-            c1 = time.process_time()
-            walls.append(t1 - t0)
-            cpu_share.append((c1 - c0) / (t1 - t0))
-    finally:
-        gc.enable()
-    return {
-        "wall_s": walls,
-        "median_s": statistics.median(walls),
-        "min_s": min(walls),
-        "max_s": max(walls),
-        "cpu_share_median": statistics.median(cpu_share),
-    }
-
-
 def circle_waypoints(n: int, centre, radius: float, period_s: float, dt_s: float):
     """n position setpoints on a horizontal circle, dt_s apart in time."""
     cx, cy, cz = centre
@@ -281,36 +242,6 @@ def bench_batches(sizes, vehicle_steps: int, repeats: int) -> list[dict]:
 
 
 # --- reporting -------------------------------------------------------------------------------
-def machine_info(cpu: int | None) -> dict:
-    model = pyplatform.processor() or ""
-    try:
-        lscpu = subprocess.run(["lscpu"], capture_output=True, text=True, timeout=10).stdout
-        for line in lscpu.splitlines():
-            if line.lower().startswith("model name"):
-                model = line.split(":", 1)[1].strip()
-                break
-    except (OSError, subprocess.SubprocessError):
-        pass
-    mem_gb = None
-    try:
-        mem_gb = os.sysconf("SC_PAGE_SIZE") * os.sysconf("SC_PHYS_PAGES") / 2**30
-    except (ValueError, OSError, AttributeError):
-        pass
-    return {
-        "date_utc": datetime.datetime.now(datetime.UTC).strftime("%Y-%m-%dT%H:%M:%SZ"),
-        "cpu_model": model,
-        "n_cpus": os.cpu_count(),
-        "pinned_cpu": cpu,
-        "mem_gib": mem_gb,
-        "load_avg_1min": os.getloadavg()[0] if hasattr(os, "getloadavg") else None,
-        "python": pyplatform.python_version(),
-        "numba": numba.__version__,
-        "numpy": np.__version__,
-        "numba_num_threads": numba.config.NUMBA_NUM_THREADS,
-        "machine": pyplatform.machine(),
-    }
-
-
 def print_report(res: dict, file=sys.stdout) -> None:
     m = res["machine"]
     cfg = res["config"]
@@ -421,7 +352,8 @@ def main(argv=None) -> int:
     batches = bench_batches(cfg["sizes"], cfg["vehicle_steps"], cfg["repeats"])
     speed = one["full_waypoint_1hz"]["speedup_median"]
     res = {
-        "machine": machine_info(cpu),
+        "machine": machine_info(cpu, numba=numba.__version__,
+                                numba_num_threads=numba.config.NUMBA_NUM_THREADS),
         "config": cfg,
         "one_vehicle": one,
         "batches": batches,
