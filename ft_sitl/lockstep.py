@@ -22,19 +22,120 @@ from ft_sitl.physics import dynamics as d
 from ft_sitl.physics.platform import Platform
 from ft_sitl.physics.quaternion import qfrom_euler, qto_euler
 
+# --- collision guard rows (one per vehicle; see ft_sitl.scenarios.guard) -------------------
+# G_ON: check obstacles (0/1); G_R: collision radius (m); G_ANCHOR: lower bound of the
+# obstacle clearance (sphere surface, m) at the anchor point; G_FLOWN: path length since the
+# anchor; G_A*: position before the step that tripped; G_LBA: clearance bound there;
+# G_OUT: 1 while the centre is outside the flight volume (checked when G_BOUNDS is 1);
+# G_TRIP: why the kernel stopped this vehicle (1 obstacles, 2 bounds, bit set); G_FREE: path
+# length the vehicle may fly before the next full check (<= 0: check at the next step).
+(G_ON, G_R, G_ANCHOR, G_FLOWN, G_AX, G_AY, G_AZ, G_LBA, G_OUT, G_BOUNDS, G_TRIP,
+ G_FREE) = range(12)
+G_N = 12
+# guard meta row: distance grid origin (3), pitch, grid shape (3), flight volume lo x/y,
+# hi x/y/z, margin (m)
+(M_OX, M_OY, M_OZ, M_H, M_NX, M_NY, M_NZ, M_LOX, M_LOY, M_HIX, M_HIY, M_HIZ,
+ M_MARGIN) = range(13)
+M_N = 13
+
 
 @njit(cache=True)
-def run_steps(n_steps, dt, x, sp, gn, a, cs, prm, alloc, env, status, w_cmd, rec, rec_every):
-    """Advance every vehicle n_steps physics steps; record the state every rec_every steps."""
+def grid_lower_bound(grid, meta, qx, qy, qz):
+    """Lower bound of the distance from (qx, qy, qz) to the obstacles from the voxel grid
+    (-inf outside it)."""
+    h = meta[M_H]
+    fx = (qx - meta[M_OX]) / h
+    fy = (qy - meta[M_OY]) / h
+    fz = (qz - meta[M_OZ]) / h
+    if not (fx >= 0.0 and fy >= 0.0 and fz >= 0.0 and fx < meta[M_NX] and fy < meta[M_NY]
+            and fz < meta[M_NZ]):
+        return -np.inf
+    ix, iy, iz = int(fx), int(fy), int(fz)
+    cx = (fx - ix - 0.5) * h
+    cy = (fy - iy - 0.5) * h
+    cz = (fz - iz - 0.5) * h
+    return grid[ix, iy, iz] - np.sqrt(cx * cx + cy * cy + cz * cz)
+
+
+@njit(cache=True)
+def guard_step(g, grid, meta, seg, px, py, pz, qx, qy, qz):
+    """The full check after the step (px, py, pz) -> (qx, qy, qz) of length seg, once the
+    vehicle has flown its free path length (G_FLOWN already includes this step). Sets the
+    next G_FREE; returns the trip bits (0: the step is proven free and in the same in/out
+    state as before)."""
+    trip = 0
+    inf = np.inf
+    free_o = inf
+    if g[G_ON] > 0.0:
+        margin = meta[M_MARGIN]
+        if g[G_FLOWN] >= g[G_ANCHOR] - margin:
+            lb_a = g[G_ANCHOR] - (g[G_FLOWN] - seg)  # bound at the step's start
+            lb = grid_lower_bound(grid, meta, qx, qy, qz) - g[G_R]
+            # clearance >= max(lb_a - s, lb - (seg - s)) > margin all along the step
+            if lb > margin and lb_a + lb - seg > margin:
+                g[G_ANCHOR] = lb
+                g[G_FLOWN] = 0.0
+            else:
+                g[G_LBA] = lb_a
+                trip |= 1
+        free_o = g[G_ANCHOR] - margin - g[G_FLOWN]
+    free_v = inf
+    if g[G_BOUNDS] > 0.0:
+        d_in = min(qx - meta[M_LOX], meta[M_HIX] - qx, qy - meta[M_LOY], meta[M_HIY] - qy,
+                   meta[M_HIZ] - qz)
+        out = 1.0 if d_in < 0.0 else 0.0
+        if out != g[G_OUT]:
+            trip |= 2
+        # path length before the centre can cross a plane (in) or get back in (out)
+        free_v = d_in if d_in >= 0.0 else max(meta[M_LOX] - qx, qx - meta[M_HIX],
+                                              meta[M_LOY] - qy, qy - meta[M_HIY],
+                                              qz - meta[M_HIZ])
+    g[G_FREE] = min(free_o, free_v)
+    if trip:
+        g[G_AX] = px
+        g[G_AY] = py
+        g[G_AZ] = pz
+        g[G_TRIP] = trip
+    return trip
+
+
+@njit(cache=True)
+def run_steps(n_steps, dt, x, sp, gn, a, cs, prm, alloc, env, status, w_cmd, rec, rec_every,
+              k_done, gd, grid, meta):
+    """Advance every vehicle to step n_steps from step k_done[i]; record the state every
+    rec_every steps. A vehicle whose guard row trips (see guard_step) stops after that step
+    with its G_TRIP set, for the caller to resolve and resume."""
     for i in range(x.shape[0]):
         # per-vehicle rows sliced once, not every step
         xi, spi, gni, ai, csi, wi = x[i], sp[i], gn[i], a[i], cs[i], w_cmd[i]
-        prmi, alloci, envi, sti = prm[i], alloc[i], env[i], status[i]
-        for k in range(n_steps):
+        prmi, alloci, envi, sti, gi = prm[i], alloc[i], env[i], status[i], gd[i]
+        guarded = gi[G_ON] > 0.0 or gi[G_BOUNDS] > 0.0
+        free = gi[G_FREE]
+        flown = 0.0  # path length since the last full check
+        k = k_done[i]
+        while k < n_steps:
+            px, py, pz = xi[0], xi[1], xi[2]
             c.controller_step_one(xi, spi, gni, ai, csi, dt, wi)
             d.plant_step_one(xi, wi, prmi, alloci, envi, sti, dt)
-            if rec_every > 0 and (k + 1) % rec_every == 0:
-                rec[(k + 1) // rec_every - 1, i, :] = xi
+            k += 1
+            if guarded:
+                dx, dy, dz = xi[0] - px, xi[1] - py, xi[2] - pz
+                seg = np.sqrt(dx * dx + dy * dy + dz * dz)
+                free -= seg
+                flown += seg
+                if free <= 0.0:
+                    gi[G_FLOWN] += flown
+                    flown = 0.0
+                    trip = guard_step(gi, grid, meta, seg, px, py, pz, xi[0], xi[1], xi[2])
+                    free = gi[G_FREE]
+                    if trip:
+                        break  # (the caller records this step once it is resolved)
+            if rec_every > 0 and k % rec_every == 0:
+                rec[k // rec_every - 1, i, :] = xi
+        if guarded:
+            gi[G_FLOWN] += flown
+            gi[G_FREE] = free
+        k_done[i] = k
 
 
 @dataclass
@@ -90,6 +191,14 @@ class Simulation:
         self.refresh_gains()
         self.time_us = 0
         self.steps = 0
+        # collision guard: rows, grid and meta from an attached CollisionGuard; unguarded
+        # vehicles have G_ON = G_BOUNDS = 0
+        self.guard = None
+        self._gd = np.zeros((n, G_N))
+        self._grid = np.zeros((1, 1, 1), dtype=np.float32)
+        self._meta = np.zeros(M_N)
+        self._meta[M_H] = 1.0
+        self._k_done = np.zeros(n, dtype=np.int64)
 
     # --- configuration ------------------------------------------------------------
     def refresh_gains(self) -> None:
@@ -131,11 +240,22 @@ class Simulation:
         if n_steps < 0:
             raise ValueError("n_steps must be >= 0")
         rec = np.empty((n_steps // record_every if record_every else 0, self.n, self.x.shape[1]))
-        run_steps(
-            n_steps, self.dt, self.plant.x, self.sp, self.gains, self.mix, self.ctrl,
-            self.plant.prm, self.plant.alloc, self.plant.env, self.plant.status, self.w_cmd,
-            rec, record_every,
-        )
+        k_done = self._k_done
+        k_done[:] = 0
+        while True:
+            run_steps(
+                n_steps, self.dt, self.plant.x, self.sp, self.gains, self.mix, self.ctrl,
+                self.plant.prm, self.plant.alloc, self.plant.env, self.plant.status,
+                self.w_cmd, rec, record_every, k_done, self._gd, self._grid, self._meta,
+            )
+            tripped = np.flatnonzero(self._gd[:, G_TRIP] != 0.0)
+            if not len(tripped):
+                break
+            for i in tripped:  # the guard resolves each stopped vehicle, then all resume
+                k = int(k_done[i])
+                self.guard.resolve(self, int(i), self.time_us + k * self.dt_us)
+                if record_every and k % record_every == 0:
+                    rec[k // record_every - 1, i, :] = self.plant.x[i]
         self.time_us += n_steps * self.dt_us
         self.steps += n_steps
         return rec if record_every else None

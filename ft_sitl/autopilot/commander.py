@@ -179,6 +179,7 @@ class Commander:
     reached: deque = field(default_factory=lambda: deque(maxlen=64))
     battery: Battery | None = None
     terminated: bool = False
+    crashed: bool = False
 
     def __post_init__(self):
         self._nav = _Nav()
@@ -273,6 +274,14 @@ class Commander:
         self.armed = False
         self.text(Severity.EMERGENCY, "Flight termination active")
         return Result.ACCEPTED
+
+    def crash(self, what: str, speed_m_s: float) -> None:
+        """The vehicle hit something: motors off now, as after a flight termination."""
+        self.crashed = True
+        self.terminated = True
+        self.armed = False
+        self.text(Severity.EMERGENCY,
+                  f"Collision: hit {what} at {speed_m_s:.1f} m/s, motors stopped")
 
     # --- modes ----------------------------------------------------------------------
     def set_mode(self, main: int, sub: int = 0) -> Result:

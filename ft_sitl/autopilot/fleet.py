@@ -30,7 +30,10 @@ class Fleet:
         *,
         params: Sequence[ParamSet] | None = None,
         spawn: Sequence[Sequence[float]] | None = None,
+        spawn_yaw: Sequence[float] | None = None,
         physics_hz: int = 1000,
+        scenario=None,
+        guard=None,
     ):
         if isinstance(platforms, Platform):
             platforms = [platforms]
@@ -40,12 +43,60 @@ class Fleet:
         self.sim = Simulation(platforms, params=self.params, physics_hz=physics_hz)
         self.commanders = [Commander(p, ps) for p, ps in zip(platforms, self.params)]
         spawn = spawn if spawn is not None else [[0.0, 0.0, 0.0]] * n
-        for i, pos in enumerate(spawn):
-            self.sim.place(i, pos)
-            self.sim.plant.status[i, d.S_CONTACT] = 1.0
-            self.commanders[i].set_home(np.asarray(pos, dtype=float))
+        if len(spawn) != n:
+            raise ValueError(f"spawn: {len(spawn)} positions for {n} vehicles")
+        self.spawn = [np.array(p, dtype=float) for p in spawn]
+        self.spawn_yaw = [float(y) for y in spawn_yaw] if spawn_yaw is not None else [0.0] * n
+        self.scenario = scenario
+        if guard is None and scenario is not None:
+            from ft_sitl.scenarios.guard import CollisionGuard
+
+            guard = CollisionGuard.for_scenario(scenario,
+                                                [p.collision_radius_m for p in platforms])
+        self.guard = guard
+        if guard is not None:
+            guard.attach(self.sim)
+            guard.handler = self._on_guard_event
+        for i in range(n):
+            self._place(i)
         self.steps_per_tick = max(1, round(1.0 / (COMMANDER_HZ * self.sim.dt)))
         self._tick_all()
+
+    def _place(self, i: int) -> None:
+        self.sim.place(i, self.spawn[i], self.spawn_yaw[i])
+        self.sim.plant.status[i, d.S_CONTACT] = 1.0
+        self.commanders[i].set_home(self.spawn[i].copy())
+        self.commanders[i].home_yaw = self.spawn_yaw[i]
+        if self.guard is not None:
+            self.guard.reset(i)
+
+    def respawn(self, i: int) -> None:
+        """Put vehicle i back on its spawn point at rest, disarmed, crash cleared (what a
+        reboot of a crashed vehicle does in this SITL; a real one would need carrying)."""
+        cmd = self.commanders[i]
+        cmd.armed = False
+        cmd.crashed = cmd.terminated = False
+        self._place(i)
+        self.sim.sp[i] = Setpoint.off().row
+
+    def _on_guard_event(self, ev) -> None:
+        from ft_sitl.autopilot.commander import Severity
+
+        cmd = self.commanders[ev.vehicle]
+        cmd.time_us = ev.time_us
+        if ev.kind == "collision":
+            cmd.crash(ev.what, ev.speed_m_s)
+            self.sim.sp[ev.vehicle] = Setpoint.off().row  # motors off from the next step
+        elif ev.kind == "left_volume":
+            where = "above the ceiling" if ev.what == "ceiling" else f"past the {ev.what}"
+            cmd.text(Severity.WARNING, f"Left the flight volume: {where}")
+        elif ev.kind == "entered_volume":
+            cmd.text(Severity.INFO, "Back inside the flight volume")
+
+    @property
+    def events(self) -> list:
+        """The collision guard's events so far (empty without a scenario)."""
+        return self.guard.events if self.guard is not None else []
 
     @property
     def n(self) -> int:

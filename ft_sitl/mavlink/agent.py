@@ -162,6 +162,7 @@ class VehicleAgent:
         self.next_due: list[dict[int, int]] = [dict.fromkeys(r, 0) for r in self.rates]
         self.n_links = n_links
         self._texts_sent = 0
+        self._text_id = 0
         self._reached_sent = 0
         self._upload: _Transfer | None = None
         self._download_items: list = []
@@ -190,8 +191,18 @@ class VehicleAgent:
         out = []
         t = list(self.cmd.statustexts)
         for severity, text in t[self._texts_sent:] if len(t) >= self._texts_sent else t:
-            out.append(Outgoing(mav.MAVLink_statustext_message(
-                severity, text[:50].encode("ascii", "replace"))))
+            raw = text.encode("ascii", "replace")
+            if len(raw) <= 50:
+                out.append(Outgoing(mav.MAVLink_statustext_message(severity, raw)))
+                continue
+            # MAVLink 2 chunking: one id, chunk_seq 0.., a chunk shorter than 50 ends it
+            self._text_id = self._text_id % 65535 + 1
+            chunks = [raw[k:k + 50] for k in range(0, len(raw), 50)]
+            if len(chunks[-1]) == 50:
+                chunks.append(b"")
+            for seq, chunk in enumerate(chunks):
+                out.append(Outgoing(mav.MAVLink_statustext_message(
+                    severity, chunk, self._text_id, seq)))
         self._texts_sent = len(t)
         if self.cmd.statustexts.maxlen and len(t) == self.cmd.statustexts.maxlen:
             self.cmd.statustexts.clear()
@@ -514,6 +525,8 @@ class VehicleAgent:
             if c.armed:
                 return Result.DENIED, []
             if p[0] == 1:  # autopilot reboot: clears a flight termination
+                if c.crashed:  # and puts a crashed vehicle back on its spawn point
+                    self.fleet.respawn(self.i)
                 c.terminated = False
                 c.text(cm.Severity.INFO, "Rebooting autopilot")
             return Result.ACCEPTED, []

@@ -463,6 +463,27 @@ class CollisionWorld:
                 hi = mid
         return hi, 0.0
 
+    def step_check(self, a: np.ndarray, b: np.ndarray, seg: float, r: float,
+                   lb_a: float) -> tuple[Contact | None, float]:
+        """Obstacle check of one step a -> b (length seg) of a sphere of radius r, given a
+        lower bound lb_a of its clearance at a (-inf if unknown): ``(contact, c)`` with the
+        first contact or None and, when free, a lower bound c of the clearance at b (-inf
+        after a contact). One fcl query when that settles it, else a conservative sweep."""
+        tol = self.contact_tol
+        c_b = -math.inf
+        if lb_a > tol:
+            c_b = self._dist_fast(b) - r
+            if c_b > tol and lb_a + c_b - seg > 2.0 * tol:
+                # clearance >= max(lb_a - s, c_b - (seg - s)) > tol all along a-b
+                return None, c_b
+            s, c_end = self._sweep_obstacles(a, b, r, c0=lb_a)
+        else:
+            s, c_end = self._sweep_obstacles(a, b, r, c0=None)
+        if s is None:
+            return None, max(c_end, c_b)
+        t = s / seg if seg > 0.0 else 0.0
+        return self._obstacle_contact(a + (b - a) * t, r, t)[1], -math.inf
+
     # --- public queries -------------------------------------------------------------------
     def obstacle_distance(self, p) -> float:
         """Signed distance (m) from the point p to the obstacle surface (negative inside a
@@ -596,28 +617,13 @@ class CollisionMonitor:
         """The vehicle moved a -> b (length seg) and may have used up its margin; lb_a is a
         lower bound of the obstacle clearance at a (-inf if unknown)."""
         w = self.world
-        tol = w.contact_tol
         q0 = w.queries
         try:
-            c_b = -math.inf
-            if lb_a > tol:
-                c_b = w._dist_fast(b) - r
-                if c_b > tol and lb_a + c_b - seg > 2.0 * tol:
-                    # clearance >= max(lb_a - s, c_b - (seg - s)) > tol all along a-b
-                    self._c_anchor, self._flown = c_b, 0.0
-                    return None
-                s, c_end = w._sweep_obstacles(a, b, r, c0=lb_a)
-            else:
-                s, c_end = w._sweep_obstacles(a, b, r, c0=None)
-            if s is None:
-                self._c_anchor, self._flown = max(c_end, c_b), 0.0
-                return None
-            t = s / seg if seg > 0.0 else 0.0
-            contact = w._obstacle_contact(a + (b - a) * t, r, t)[1]
-            self._c_anchor, self._flown = -math.inf, 0.0  # re-check from scratch next time
-            return contact
+            contact, c = w.step_check(a, b, seg, r, lb_a)
         finally:
             self.queries += w.queries - q0
+        self._c_anchor, self._flown = c, 0.0
+        return contact
 
     def _start(self, r: float) -> None:
         self._radius = r

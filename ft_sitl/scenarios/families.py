@@ -115,21 +115,23 @@ class _MeshBuilder:
     def __init__(self):
         self._verts: list[np.ndarray] = []
         self._faces: list[np.ndarray] = []
+        self._kinds: list[str] = []
         self._n = 0
 
     @property
     def pieces(self) -> int:
         return len(self._faces)
 
-    def _add(self, verts, faces):
+    def _add(self, verts, faces, kind):
         self._verts.append(np.asarray(verts, dtype=float))
         self._faces.append(np.asarray(faces, dtype=np.int64) + self._n)
+        self._kinds.append(kind)
         self._n += len(verts)
 
-    def box(self, lo, hi):
-        self.boxes(np.asarray(lo, dtype=float)[None], np.asarray(hi, dtype=float)[None])
+    def box(self, lo, hi, kind: str = "obstacle"):
+        self.boxes(np.asarray(lo, dtype=float)[None], np.asarray(hi, dtype=float)[None], kind)
 
-    def boxes(self, lo, hi):
+    def boxes(self, lo, hi, kind: str = "obstacle"):
         """Axis-aligned boxes lo[i] .. hi[i] (arrays (n, 3)), each its own piece."""
         lo, hi = np.asarray(lo, dtype=float), np.asarray(hi, dtype=float)
         if np.any(hi <= lo):
@@ -139,9 +141,11 @@ class _MeshBuilder:
         faces = _BOX_FACES[None] + 8 * np.arange(n, dtype=np.int64)[:, None, None]
         self._verts.append(verts)
         self._faces.extend(np.split(faces.reshape(-1, 3) + self._n, n) if n else [])
+        self._kinds.extend([kind] * n)
         self._n += len(verts)
 
-    def cylinder(self, p0, p1, radius: float, sections: int = CYLINDER_SECTIONS):
+    def cylinder(self, p0, p1, radius: float, sections: int = CYLINDER_SECTIONS,
+                 kind: str = "obstacle"):
         """A prism of ``sections`` sides around the axis p0 -> p1 containing the cylinder."""
         p0, p1 = np.asarray(p0, dtype=float), np.asarray(p1, dtype=float)
         d = p1 - p0
@@ -161,7 +165,18 @@ class _MeshBuilder:
         a = np.arange(n)
         b = (a + 1) % n
         sides = np.vstack([np.column_stack([a, b, n + b]), np.column_stack([a, n + b, n + a])])
-        self._add(verts, np.vstack([bottom, top, sides]))
+        self._add(verts, np.vstack([bottom, top, sides]), kind)
+
+    def piece_names(self) -> tuple[np.ndarray, tuple[str, ...]]:
+        """(first face of each piece, its name: the kind and its ordinal, "tree 3")."""
+        counts: dict[str, int] = {}
+        names = []
+        for k in self._kinds:
+            counts[k] = counts.get(k, 0) + 1
+            names.append(f"{k} {counts[k]}")
+        sizes = np.array([len(f) for f in self._faces], dtype=np.int64)
+        first = np.concatenate([[0], np.cumsum(sizes)[:-1]]) if len(sizes) else sizes
+        return first.astype(np.int64), tuple(names)
 
     def mesh(self) -> trimesh.Trimesh:
         if not self._faces:
@@ -221,11 +236,13 @@ def _make(family: str, category: str, index: int, seed: int, builder: _MeshBuild
         "mesh_pieces": builder.pieces,
         "layout": _plain(layout),
     }
+    first_face, names = builder.piece_names()
     if pitch is not None:
         provenance["solvability_pitch_m"] = [float(p) for p in pitch]
     sc = Scenario(
         family=family, index=int(index), seed=int(seed), category=category,
         mesh=builder.mesh(),
+        piece_first_face=first_face, piece_names=names,
         bounds_min=(0.0, 0.0, 0.0), bounds_max=(width, length, ceiling),
         takeoff=(sx, sy, 0.0), start=(sx, sy, altitude),
         start_yaw=math.atan2(gy - sy, gx - sx),
@@ -300,7 +317,7 @@ def forest(index: int, seed: int = 0) -> Scenario:
             raise RuntimeError(f"forest #{index}: no trunk can be moved onto the line")
     b = _MeshBuilder()
     for x, y, r, h in trees:
-        b.cylinder((x, y, 0.0), (x, y, h), r)
+        b.cylinder((x, y, 0.0), (x, y, h), r, kind="tree")
     return _make(
         family, "classic", index, seed, b, width=width, length=length, ceiling=ceiling,
         altitude=alt, obstacle_count=count,
@@ -388,7 +405,7 @@ def random_angle_cylinder(index: int, seed: int = 0) -> Scenario:
             raise RuntimeError(f"random_angle_cylinder #{index}: none can move onto the line")
     b = _MeshBuilder()
     for c in cyls:
-        b.cylinder(c["p0"], c["p1"], c["r"])
+        b.cylinder(c["p0"], c["p1"], c["r"], kind="cylinder")
     return _make(
         family, "classic", index, seed, b, width=width, length=length, ceiling=ceiling,
         altitude=alt, obstacle_count=count,
@@ -462,7 +479,7 @@ def urban(index: int, seed: int = 0) -> Scenario:
                     tall = rng.random() < 0.75
                     h = rng.uniform(12.0, 40.0) if tall else rng.uniform(3.0, 7.0)
                     lo, hi = (lx0 + s, ly0 + s, 0.0), (lx1 - s, ly1 - s, h)
-                    b.box(lo, hi)
+                    b.box(lo, hi, "building")
                     buildings.append([*lo, *hi])
     streets_ns = [(cols[i][1], cols[i + 1][0]) for i in range(ncols - 1)]
     streets_ew = [(rows[j][1], rows[j + 1][0]) for j in range(nrows - 1)]
@@ -480,7 +497,7 @@ def urban(index: int, seed: int = 0) -> Scenario:
             yw = rng.uniform(a + 0.5, c - 0.5 - thick)
             xw = rng.uniform(zone_x[0], zone_x[1] - wlen)
             lo, hi = (xw, yw, 0.0), (xw + wlen, yw + thick, h)
-        b.box(lo, hi)
+        b.box(lo, hi, "wall")
         walls.append([*lo, *hi])
     return _make(
         family, "classic", index, seed, b, width=width, length=length, ceiling=ceiling,
@@ -535,8 +552,8 @@ def narrow_gap(index: int, seed: int = 0) -> Scenario:
         w = rng.uniform(0.85, 0.90)
         c = width / 2.0 + side * rng.uniform(4.0, 18.0)
         side = -side
-        b.box((0.0, y - thick / 2, 0.0), (c - w / 2, y + thick / 2, height))
-        b.box((c + w / 2, y - thick / 2, 0.0), (width, y + thick / 2, height))
+        b.box((0.0, y - thick / 2, 0.0), (c - w / 2, y + thick / 2, height), "wall")
+        b.box((c + w / 2, y - thick / 2, 0.0), (width, y + thick / 2, height), "wall")
         walls.append({"y_m": y, "gap_centre_x_m": c, "gap_width_m": w})
     return _make(
         family, "theoretical", index, seed, b, width=width, length=length, ceiling=ceiling,
@@ -570,7 +587,7 @@ def sudden_drop(index: int, seed: int = 0) -> Scenario:
     y = zone[0]
     for j in range(index):
         y += gaps[j]
-        b.box((0.0, y, underside), (width, y + depths[j], top))
+        b.box((0.0, y, underside), (width, y + depths[j], top), "overhang")
         blocks.append([y, y + depths[j]])
         y += depths[j]
     return _make(
@@ -613,12 +630,14 @@ def maze(index: int, seed: int = 0) -> Scenario:
     for i in range(nx + 1):
         closed = np.ones(ny, dtype=bool) if i in (0, nx) else ~east[i - 1, :]
         for j0, j1 in _runs(closed):
-            b.box((i * cw - t2, j0 * ch - t2, 0.0), (i * cw + t2, j1 * ch + t2, height))
+            b.box((i * cw - t2, j0 * ch - t2, 0.0), (i * cw + t2, j1 * ch + t2, height),
+                  "wall")
             runs += 1
     for j in range(ny + 1):
         closed = np.ones(nx, dtype=bool) if j in (0, ny) else ~north[:, j - 1]
         for i0, i1 in _runs(closed):
-            b.box((i0 * cw - t2, j * ch - t2, 0.0), (i1 * cw + t2, j * ch + t2, height))
+            b.box((i0 * cw - t2, j * ch - t2, 0.0), (i1 * cw + t2, j * ch + t2, height),
+                  "wall")
             runs += 1
     degree = np.zeros((nx, ny), dtype=int)
     degree[:-1, :] += east[:-1, :]
@@ -801,7 +820,8 @@ def perlin(index: int, seed: int = 0) -> Scenario:
     i0, j0, k0 = np.nonzero(step == 1)  # C order: the runs of each column, bottom up
     k1 = np.nonzero(step == -1)[2]
     b = _MeshBuilder()
-    b.boxes(np.column_stack([i0, j0, k0]) * voxel, np.column_stack([i0 + 1, j0 + 1, k1]) * voxel)
+    b.boxes(np.column_stack([i0, j0, k0]) * voxel, np.column_stack([i0 + 1, j0 + 1, k1]) * voxel,
+            "noise column")
     from scipy.ndimage import label
 
     _, blobs = label(filled)

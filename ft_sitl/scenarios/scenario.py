@@ -18,7 +18,7 @@ from dataclasses import dataclass, field
 import numpy as np
 import trimesh
 
-CATEGORIES = ("classic", "theoretical")
+CATEGORIES = ("classic", "theoretical", "user")
 INDEX_RANGE = (1, 10)
 GOAL_RADIUS_M = 2.0
 
@@ -80,6 +80,10 @@ class Scenario:
     goal: np.ndarray
     goal_radius_m: float = GOAL_RADIUS_M
     provenance: dict = field(default_factory=dict)
+    #: first face index of each named obstacle piece (ascending) and the pieces' names,
+    #: e.g. "tree 7"; empty when the mesh's parts are not named (a user mesh)
+    piece_first_face: np.ndarray = field(default_factory=lambda: np.zeros(0, dtype=np.int64))
+    piece_names: tuple = ()
 
     def __post_init__(self):
         where = f"scenario {self.family!r} #{self.index}"
@@ -124,6 +128,16 @@ class Scenario:
         object.__setattr__(self, "goal_radius_m", float(self.goal_radius_m))
         if not isinstance(self.provenance, dict):
             raise ScenarioError(f"{where}: provenance must be a dict")
+        first = np.asarray(self.piece_first_face, dtype=np.int64).reshape(-1)
+        names = tuple(str(n) for n in self.piece_names)
+        if len(first) != len(names) or (len(first) and (
+                first[0] != 0 or np.any(np.diff(first) <= 0)
+                or first[-1] >= len(self.mesh.faces))):
+            raise ScenarioError(f"{where}: piece_first_face must start at 0, rise strictly, "
+                                f"stay below the face count and match piece_names")
+        first.flags.writeable = False
+        object.__setattr__(self, "piece_first_face", first)
+        object.__setattr__(self, "piece_names", names)
 
     # ---- derived -----------------------------------------------------------------------
 
@@ -149,6 +163,14 @@ class Scenario:
     @property
     def obstacle_count(self) -> int:
         return int(self.provenance.get("obstacle_count", 0))
+
+    def obstacle_name(self, face: int) -> str:
+        """The name of the obstacle that mesh face ``face`` belongs to ("tree 7",
+        "building 3", ...), or "obstacle" when the mesh's parts are not named."""
+        if not len(self.piece_names) or not 0 <= face < len(self.mesh.faces):
+            return "obstacle"
+        k = int(np.searchsorted(self.piece_first_face, face, side="right")) - 1
+        return self.piece_names[k]
 
     def line_distance(self, cutoff: float = np.inf) -> float:
         """Exact distance from the straight start->goal segment to the obstacles

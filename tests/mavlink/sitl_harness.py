@@ -13,10 +13,16 @@ PLATFORM = "0.98kg-EGO Planner DIY"
 
 
 @contextmanager
-def running_sitl(instances: int = 1, speed_factor: float = 1.0, params=None, **kwargs):
+def running_sitl(instances: int = 1, speed_factor: float = 1.0, params=None, scenario=None,
+                 **kwargs):
     p = get_platform(PLATFORM)
-    fleet = Fleet([p] * instances, params=params,
-                  spawn=[[0.0, 2.0 * i, 0.0] for i in range(instances)])
+    if scenario is None:
+        spawn, yaw = [[0.0, 2.0 * i, 0.0] for i in range(instances)], None
+    else:  # the takeoff point, further vehicles 2 m east
+        spawn = [scenario.takeoff + [2.0 * i, 0.0, 0.0] for i in range(instances)]
+        yaw = [scenario.start_yaw] * instances
+    fleet = Fleet([p] * instances, params=params, spawn=spawn, spawn_yaw=yaw,
+                  scenario=scenario)
     server = SitlServer(fleet, frames.GeoReference(*frames.PX4_SITL_HOME),
                         speed_factor=speed_factor, **kwargs)
     loop = asyncio.new_event_loop()
