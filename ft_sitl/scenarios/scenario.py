@@ -143,7 +143,9 @@ class Scenario:
 
     @property
     def name(self) -> str:
-        """``family-NN-sSEED``, e.g. ``forest-03-s0``."""
+        """``family-NN-sSEED``, e.g. ``forest-03-s0``; a user scenario's own name."""
+        if self.category == "user":
+            return self.family
         return f"{self.family}-{self.index:02d}-s{self.seed}"
 
     @property
