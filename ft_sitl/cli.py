@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import math
 import sys
 from pathlib import Path
 
@@ -179,6 +180,66 @@ def _parse_home(text: str):
         raise CliError(f"--home: {exc}") from None
 
 
+def _ned(v) -> str:
+    return "[" + ", ".join(f"{x:.2f}" for x in v) + "]"
+
+
+def _heading_deg(yaw_enu: float) -> float:
+    from ft_sitl.frames import yaw_enu_to_ned
+
+    return math.degrees(yaw_enu_to_ned(yaw_enu)) % 360.0
+
+
+def _sitl_scenario(text: str):
+    """``FAMILY:INDEX[:SEED]`` or a scenario spec file -> Scenario."""
+    from ft_sitl.scenarios.scenario import ScenarioError
+
+    path = Path(text)
+    try:
+        if path.suffix.lower() in (".yaml", ".yml", ".toml"):
+            from ft_sitl.scenarios.io import load_scenario
+
+            return load_scenario(path)
+        from ft_sitl.scenarios.families import build_scenario
+
+        parts = text.split(":")
+        if len(parts) not in (2, 3):
+            raise CliError(f"--scenario: {text!r} must be FAMILY:INDEX[:SEED] (e.g. "
+                           f"forest:3) or a scenario spec file (.yaml, .toml)")
+        try:
+            index = int(parts[1])
+            seed = int(parts[2]) if len(parts) == 3 else 0
+        except ValueError:
+            raise CliError(f"--scenario: {text!r}: INDEX and SEED must be integers") from None
+        return build_scenario(parts[0], index, seed)
+    except ScenarioError as exc:
+        raise CliError(f"--scenario: {exc}") from None
+
+
+def _scenario_spawn(scenario, platform, n: int):
+    """Spawn points: the scenario's takeoff point, further vehicles 1.5 m apart across the
+    start direction; each must be clear of the obstacles."""
+    import numpy as np
+
+    from ft_sitl.scenarios.collision import CollisionWorld
+
+    yaw = scenario.start_yaw
+    across = np.array([-math.sin(yaw), math.cos(yaw), 0.0])
+    world = CollisionWorld(scenario.mesh, scenario.bounds_min, scenario.bounds_max)
+    r = platform.collision_radius_m
+    spawn = []
+    for k in range(n):
+        off = 1.5 * ((k + 1) // 2) * (1 if k % 2 else -1)
+        pos = scenario.takeoff + off * across
+        centre = pos + np.array([0.0, 0.0, r + 0.01])
+        if world.clearance(centre, r, kinds=("obstacle", "bounds")) <= 0.0:
+            raise CliError(f"--instances: vehicle {k + 1}'s spawn point "
+                           f"{np.round(pos, 2).tolist()} in {scenario.name} is blocked by an "
+                           f"obstacle or outside the area; use fewer instances")
+        spawn.append(pos.tolist())
+    return spawn, [yaw] * n
+
+
 def cmd_sitl(args) -> int:
     import asyncio
     import ipaddress
@@ -196,8 +257,13 @@ def cmd_sitl(args) -> int:
     except ValueError:
         raise CliError(f"--bind: {args.bind!r} is not an IP address") from None
     p = _registry(args).get(args.platform)
-    fleet = Fleet([p] * args.instances,
-                  spawn=[[0.0, 2.0 * i, 0.0] for i in range(args.instances)])
+    scenario = _sitl_scenario(args.scenario) if args.scenario else None
+    if scenario is None:
+        spawn = [[0.0, 2.0 * i, 0.0] for i in range(args.instances)]
+        yaw = [0.0] * args.instances
+    else:
+        spawn, yaw = _scenario_spawn(scenario, p, args.instances)
+    fleet = Fleet([p] * args.instances, spawn=spawn, spawn_yaw=yaw, scenario=scenario)
     try:
         server = SitlServer(fleet, geo, bind=args.bind, speed_factor=args.speed_factor,
                             tlog=args.tlog, signing_key=args.signing_key)
@@ -205,7 +271,11 @@ def cmd_sitl(args) -> int:
         raise CliError(str(exc)) from None
     urls = server.urls()
     if args.json:
-        print(json.dumps({"platform": p.name, "vehicles": urls}, indent=2), flush=True)
+        out = {"platform": p.name, "vehicles": urls}
+        if scenario is not None:
+            out["scenario"] = scenario.summary()
+            out["spawn_enu"] = spawn
+        print(json.dumps(out, indent=2), flush=True)
     else:
         print(f"ft-sitl {__version__}: {args.instances} x {p.name}, speed factor "
               f"{args.speed_factor:g}, home {geo.lat_deg:.6f}, {geo.lon_deg:.6f}, "
@@ -216,6 +286,15 @@ def cmd_sitl(args) -> int:
         for u in urls:
             print(f"  vehicle sysid {u['sysid']}: MAVSDK {u['mavsdk']}   pymavlink "
                   f"{u['pymavlink']}   GCS {u['gcs']}", flush=True)
+        if scenario is not None:
+            from ft_sitl.frames import enu_to_ned
+
+            o = scenario.takeoff
+            print(f"scenario {scenario.name}: {scenario.obstacle_count} obstacles, ceiling "
+                  f"{scenario.ceiling:g} m; in vehicle 1's local NED frame (origin = its "
+                  f"takeoff point) start {_ned(enu_to_ned(scenario.start - o))}, goal "
+                  f"{_ned(enu_to_ned(scenario.goal - o))}, start heading "
+                  f"{_heading_deg(scenario.start_yaw):.1f} deg", flush=True)
         print("Ctrl-C stops.", flush=True)
 
     async def main():
@@ -237,6 +316,238 @@ def cmd_sitl(args) -> int:
           f"{server.achieved_speed_factor:.2f} (asked {args.speed_factor:g}); "
           f"{server.bad_packets} bad packets dropped", file=sys.stderr)
     return 0
+
+
+# --------------------------------------------------------------------------------------
+# scenarios
+# --------------------------------------------------------------------------------------
+
+SCENARIO_DESCRIPTIONS = {
+    "forest": "random upright tree trunks (paper density 1/49 per m^2)",
+    "urban": "buildings on a street grid, plus free-standing walls",
+    "random_angle_cylinder": "random cylinders tilted 0-180 deg (paper density 1/36 per m^2)",
+    "narrow_gap": "walls across the route, one 0.85-0.90 m gap each; index = walls",
+    "sudden_drop": "overhanging blocks from 1.5 m up, start at 2.5 m; index = blocks",
+    "maze": "a perfect maze with dead ends: one route to the goal",
+    "perlin": "blobs of 0.25 m voxels where 3-D Perlin noise is in its top 3 %",
+}
+"""One line per family for ``scenarios list`` (what it is made of and what index does)."""
+
+
+def _check_out_dir(option: str, path: Path) -> None:
+    parent = path.parent if str(path.parent) else Path(".")
+    if not parent.is_dir():
+        raise CliError(f"{option}: directory {parent} does not exist")
+
+
+def _scenario_from_args(args):
+    """The scenario the FAMILY / --file, --index, --seed options name."""
+    from ft_sitl.scenarios.families import build_scenario, resolve_family
+    from ft_sitl.scenarios.scenario import INDEX_RANGE, ScenarioError
+
+    if args.file is not None:
+        if args.family is not None:
+            raise CliError(f"give a FAMILY or --file, not both (got {args.family!r} and "
+                           f"--file {args.file})")
+        if args.index is not None or args.seed is not None:
+            raise CliError("--index and --seed do not apply to --file (the spec sets them)")
+        if not args.file.is_file():
+            raise CliError(f"--file: {args.file} does not exist")
+        from ft_sitl.scenarios.io import load_scenario
+
+        try:
+            return load_scenario(args.file)
+        except (ScenarioError, ValueError, OSError) as exc:
+            raise CliError(f"--file: {exc}") from None
+    if args.family is None:
+        raise CliError("give a scenario FAMILY (see 'ft-sitl scenarios list') or --file SPEC")
+    try:
+        family = resolve_family(args.family)
+    except ScenarioError as exc:
+        raise CliError(str(exc)) from None
+    index = 1 if args.index is None else args.index
+    seed = 0 if args.seed is None else args.seed
+    lo, hi = INDEX_RANGE
+    if not lo <= index <= hi:
+        raise CliError(f"--index: {index} must be within {lo}..{hi} (the paper's ten "
+                       "configurations)")
+    if seed < 0:
+        raise CliError(f"--seed: {seed} must be a non-negative integer")
+    try:
+        return build_scenario(family, index, seed)
+    except ScenarioError as exc:
+        raise CliError(str(exc)) from None
+
+
+def _fmt_point(p) -> str:
+    return "(" + ", ".join(f"{v:.2f}" for v in p) + ")"
+
+
+def cmd_scenarios_list(args) -> int:
+    import inspect
+
+    from ft_sitl.scenarios.families import CATEGORY, FAMILIES, PAPER_NAMES, build_scenario
+    from ft_sitl.scenarios.scenario import INDEX_RANGE
+
+    rows = []
+    for key, builder in FAMILIES.items():
+        sc = build_scenario(key, 1, 0)  # the area and ceiling do not depend on index or seed
+        doc = (inspect.getdoc(builder) or "").splitlines()
+        rows.append({
+            "family": key,
+            "paper_name": PAPER_NAMES[key],
+            "category": CATEGORY[key],
+            "area_m": [float(v) for v in sc.size[:2]],
+            "ceiling_m": sc.ceiling,
+            "description": SCENARIO_DESCRIPTIONS.get(key, doc[0] if doc else ""),
+        })
+    if args.json:
+        print(json.dumps(rows, indent=2))
+        return 0
+    print(f"{'family':22s} {'paper name':22s} {'category':11s} {'area (m)':>9s} {'ceiling':>7s}"
+          f"  description")
+    for r in rows:
+        area = f"{r['area_m'][0]:g} x {r['area_m'][1]:g}"
+        print(f"{r['family']:22s} {r['paper_name']:22s} {r['category']:11s} {area:>9s} "
+              f"{r['ceiling_m']:5g} m  {r['description']}")
+    print(f"{len(rows)} families, configurations (--index) {INDEX_RANGE[0]}.."
+          f"{INDEX_RANGE[1]}, any --seed >= 0")
+    return 0
+
+
+def cmd_scenarios_build(args) -> int:
+    import time
+
+    from ft_sitl.scenarios.families import PAPER_NAMES
+
+    t0 = time.perf_counter()
+    sc = _scenario_from_args(args)
+    build_s = time.perf_counter() - t0
+    if args.json:
+        print(json.dumps(sc.summary(), indent=2))
+        return 0
+    paper = PAPER_NAMES.get(sc.family, sc.family)
+    w, l, h = sc.size
+    print(f"{sc.name}  ({paper}, {sc.category})")
+    print(f"  area {w:g} x {l:g} m, ceiling {h:g} m")
+    print(f"  obstacles {sc.obstacle_count}: {len(sc.mesh.vertices)} vertices, "
+          f"{len(sc.mesh.faces)} triangles")
+    print(f"  takeoff {_fmt_point(sc.takeoff)}")
+    print(f"  start   {_fmt_point(sc.start)}, yaw {math.degrees(sc.start_yaw):.1f} deg")
+    print(f"  goal    {_fmt_point(sc.goal)}, radius {sc.goal_radius_m:g} m, straight line "
+          f"{math.dist(sc.goal, sc.start):.1f} m")
+    print(f"  mesh sha256 {sc.mesh_digest()}")
+    print(f"  {'loaded' if args.file is not None else 'built'} in {build_s:.3f} s")
+    return 0
+
+
+def cmd_scenarios_export(args) -> int:
+    from ft_sitl.scenarios.io import EXPORT_FORMATS, export_scenario, write_scenario_spec
+    from ft_sitl.scenarios.scenario import ScenarioError
+
+    valid = ", ".join(EXPORT_FORMATS)
+    fmt = args.format
+    if fmt is None:
+        suffix = args.out.suffix.lower().lstrip(".") if args.out is not None else ""
+        if suffix not in EXPORT_FORMATS:
+            hint = f" (the --out suffix .{suffix} is not one)" if suffix else ""
+            raise CliError(f"--format: give one of {valid}{hint}")
+        fmt = suffix
+    if fmt.lower() not in EXPORT_FORMATS:
+        raise CliError(f"--format: {fmt!r} is not one of {valid}")
+    fmt = fmt.lower()
+    if args.out is not None:
+        _check_out_dir("--out", args.out)
+    sc = _scenario_from_args(args)
+    out = args.out if args.out is not None else Path(f"{sc.name}.{fmt}")
+    try:
+        written = [Path(p) for p in export_scenario(sc, out, fmt)]
+        if args.spec:
+            # the spec refers to an exact PLY: the one just written, or one written beside it
+            mesh = written[0] if fmt == "ply" else None
+            spec_files = write_scenario_spec(sc, written[0].with_suffix(".yaml"),
+                                             mesh_path=mesh)
+            written += [Path(p) for p in spec_files if Path(p) not in written]
+    except (ScenarioError, ValueError, OSError) as exc:
+        raise CliError(str(exc)) from None
+    if args.json:
+        print(json.dumps({"scenario": sc.name, "format": fmt,
+                          "files": [str(p) for p in written]}, indent=2))
+        return 0
+    for p in written:
+        print(f"wrote {p}")
+    return 0
+
+
+def cmd_scenarios_render(args) -> int:
+    from ft_sitl.scenarios.render import DPI_RANGE, load_trajectory, render_scenario
+
+    if args.out is not None:
+        if args.out.suffix.lower() != ".png":
+            raise CliError(f"--out: {args.out} must end in .png (the picture is a PNG)")
+        _check_out_dir("--out", args.out)
+    if not DPI_RANGE[0] <= args.dpi <= DPI_RANGE[1]:
+        raise CliError(f"--dpi: {args.dpi:g} must be within {DPI_RANGE[0]}..{DPI_RANGE[1]}")
+    traj = None
+    if args.trajectory is not None:
+        try:
+            traj = load_trajectory(args.trajectory)
+        except ValueError as exc:
+            raise CliError(f"--trajectory: {exc}") from None
+    sc = _scenario_from_args(args)
+    out = args.out if args.out is not None else Path(f"{sc.name}.png")
+    try:
+        render_scenario(sc, out, trajectory=traj, dpi=args.dpi)
+    except OSError as exc:
+        raise CliError(f"--out: cannot write {out}: {exc}") from None
+    print(f"wrote {out}")
+    return 0
+
+
+def _add_scenarios_parser(sub) -> None:
+    from ft_sitl.scenarios.render import DEFAULT_DPI  # numpy only: cheap at start-up
+
+    sc = sub.add_parser("scenarios", help="the navigation scenario families",
+                        description="List, build, export and draw the seven FLYINGTRUST "
+                        "scenario families (10 configurations each, any seed).")
+    ssub = sc.add_subparsers(dest="scenarios_command", metavar="ACTION", required=True)
+    src = argparse.ArgumentParser(add_help=False)
+    src.add_argument("family", nargs="?", metavar="FAMILY",
+                     help="family name, e.g. forest or the paper's Narrow-Gap")
+    src.add_argument("--file", type=Path, metavar="SPEC",
+                     help="a scenario spec file (.yaml or .toml) instead of FAMILY")
+    src.add_argument("--index", type=int, help="configuration 1..10 (default: 1)")
+    src.add_argument("--seed", type=int, help="random seed, >= 0 (default: 0)")
+
+    sl = ssub.add_parser("list", help="list the scenario families")
+    sl.add_argument("--json", action="store_true", help="machine-readable output")
+    sl.set_defaults(func=cmd_scenarios_list)
+    sb = ssub.add_parser("build", parents=[src], help="build one scenario and summarise it",
+                         description="Build a scenario and print its summary.")
+    sb.add_argument("--json", action="store_true", help="print Scenario.summary() as JSON")
+    sb.set_defaults(func=cmd_scenarios_build)
+    se = ssub.add_parser("export", parents=[src], help="write a scenario's mesh to a file",
+                         description="Write a scenario's obstacle mesh as PLY, PCD, OBJ, "
+                         "Collada (DAE) or a Gazebo SDF world.")
+    se.add_argument("--format", metavar="FMT",
+                    help="ply, pcd, obj, dae or sdf (default: from the --out suffix)")
+    se.add_argument("-o", "--out", type=Path, metavar="PATH",
+                    help="output file (default: <scenario name>.<FMT> here)")
+    se.add_argument("--spec", action="store_true",
+                    help="also write a YAML spec that 'scenarios ... --file' reads back "
+                    "(<PATH stem>.yaml, with the exact mesh <PATH stem>.ply)")
+    se.add_argument("--json", action="store_true", help="print the written files as JSON")
+    se.set_defaults(func=cmd_scenarios_export)
+    sr = ssub.add_parser("render", parents=[src], help="draw a scenario to a PNG",
+                         description="Draw a top view and a perspective view of a scenario "
+                         "(start, goal, straight line, optional trajectory) to a PNG.")
+    sr.add_argument("-o", "--out", type=Path, metavar="PNG",
+                    help="output picture (default: <scenario name>.png here)")
+    sr.add_argument("--trajectory", type=Path, metavar="FILE",
+                    help="draw a flown path: .csv (x,y,z columns) or .npy (N x 3), ENU m")
+    sr.add_argument("--dpi", type=float, default=DEFAULT_DPI,
+                    help="resolution, dots per inch (default: %(default)s)")
+    sr.set_defaults(func=cmd_scenarios_render)
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -306,6 +617,9 @@ def build_parser() -> argparse.ArgumentParser:
                       help="MAVLink 2 signing passphrase: unsigned packets are rejected")
     sitl.add_argument("--duration", type=float, metavar="S",
                       help="stop after S wall seconds (default: run until Ctrl-C)")
+    sitl.add_argument("--scenario", metavar="FAMILY:INDEX[:SEED]|SPEC",
+                      help="fly in a scenario world (e.g. forest:3, or a .yaml/.toml spec): "
+                           "spawn at its takeoff point, crash on collision")
     sitl.add_argument("--json", action="store_true", help="print the vehicle URLs as JSON")
     sitl.set_defaults(func=cmd_sitl)
 
@@ -314,6 +628,8 @@ def build_parser() -> argparse.ArgumentParser:
     parl = parsub.add_parser("list", help="list PX4-named parameters with defaults and bounds")
     parl.add_argument("--json", action="store_true", help="machine-readable output")
     parl.set_defaults(func=cmd_params_list)
+
+    _add_scenarios_parser(sub)
     return ap
 
 

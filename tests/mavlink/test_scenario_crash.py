@@ -7,6 +7,7 @@ import pytest
 from mavsdk.asyncio.plugins.action import ActionAsync
 from mavsdk.asyncio.plugins.offboard import OffboardAsync
 from mavsdk.asyncio.plugins.telemetry import TelemetryAsync
+from mavsdk.plugins.action import ActionError
 from mavsdk.plugins.offboard import PositionNedYaw, VelocityNedYaw
 from mavsdk.plugins.telemetry import StatusTextType
 
@@ -24,7 +25,7 @@ def test_mavsdk_flight_into_a_tree_crashes_then_a_reboot_respawns():
     u = enu_to_ned((sc.goal - sc.start) / np.linalg.norm(sc.goal - sc.start))
 
     async def fly(server):
-        m, drone = await connect()
+        m, drone = await connect(14544)  # instance 4: away from earlier tests' clients
         action, tel, off = ActionAsync(drone), TelemetryAsync(drone), OffboardAsync(drone)
         texts = []
 
@@ -58,7 +59,7 @@ def test_mavsdk_flight_into_a_tree_crashes_then_a_reboot_respawns():
         await asyncio.sleep(1.0)
         assert long_text.strip() in [t.text for t in texts]
         # arming is refused until a reboot, which puts the vehicle back on its spawn point
-        with pytest.raises(Exception):
+        with pytest.raises(ActionError):
             await action.arm()
         await action.reboot()
         await asyncio.sleep(1.0)
@@ -69,6 +70,6 @@ def test_mavsdk_flight_into_a_tree_crashes_then_a_reboot_respawns():
         collector.cancel()
         m.destroy()
 
-    with running_sitl(speed_factor=3.0, scenario=sc) as server:
+    with running_sitl(speed_factor=3.0, scenario=sc, base_instance=4) as server:
         asyncio.run(fly(server))
         assert server.bad_packets == 0
