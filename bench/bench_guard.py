@@ -2,12 +2,16 @@
 
 For configuration 10 of every scenario family (the densest of each), a batch of vehicles
 flies the scenario's proven collision-free path (``solvability.scenario_path`` for a 0.6 m
-radius, so a vehicle of collision radius 0.25 m has 0.35 m for tracking errors): vehicle k
-starts hovering at the fraction k/N of the path and follows a carrot moving along it at
-3 m/s, for 10 simulated seconds, commanded every 20 ms (the setpoints are computed before
-timing). The same flight is run without and with a CollisionGuard attached
-(``ft_sitl.scenarios.guard``: anchor + distance grid in the compiled loop, python-fcl only
-near obstacles), alternating, several repeats, in one process pinned to one CPU.
+radius, 0.4 m for Narrow-Gap's gaps; the vehicle's collision radius is 0.25 m, 0.2 m on
+Narrow-Gap, leaving at least 0.2 m for tracking errors): vehicle k starts hovering at the
+fraction k/N of the path and follows a carrot moving along it at 3 m/s (1.5 m/s in the
+tight turns of Maze, Narrow-Gap and Sudden-Drop; a position setpoint with the carrot's
+velocity as feed-forward), for 10 simulated seconds, commanded every 20 ms (the setpoints
+are computed before timing). A vehicle that touches an obstacle anyway crashes as in a
+trial (motors off, no further checks: a trial ends there) and is counted. The same flight
+is run without and with a CollisionGuard attached (``ft_sitl.scenarios.guard``: free ball,
+anchor and distance grid in the compiled loop, python-fcl only near obstacles),
+alternating, several repeats, in one process pinned to one CPU.
 
 Reported per family: the physics cost (controller + plant, no guard) and the guard's extra
 cost, both in CPU microseconds per vehicle per simulated second (median of repeats), the
@@ -37,7 +41,7 @@ import numpy as np  # noqa: E402
 from benchutil import machine_info, pin_to_one_cpu  # noqa: E402
 
 from ft_sitl.autopilot.setpoints import Setpoint  # noqa: E402
-from ft_sitl.lockstep import Simulation  # noqa: E402
+from ft_sitl.lockstep import G_BOUNDS, G_ON, Simulation  # noqa: E402
 from ft_sitl.physics.catalog import catalog  # noqa: E402
 from ft_sitl.scenarios.collision import CollisionWorld  # noqa: E402
 from ft_sitl.scenarios.families import FAMILIES, build_scenario  # noqa: E402
@@ -48,6 +52,8 @@ PLATFORM = "0.98kg-EGO Planner DIY"
 PATH_RADIUS_M = 0.6
 VEHICLE_RADIUS_M = 0.25
 SPEED_M_S = 3.0
+SLOW_M_S = 1.5
+SLOW_FAMILIES = ("maze", "narrow_gap", "sudden_drop")
 CHUNK_STEPS = 20  # 50 Hz setpoints at 1 kHz physics
 TARGET_SHARE = 0.05
 
@@ -61,19 +67,27 @@ def _along(path: np.ndarray, s: np.ndarray) -> np.ndarray:
 
 
 def plan(scenario, n: int, seconds: float):
-    path = scenario_path(scenario, PATH_RADIUS_M)
-    if path is None:
-        raise RuntimeError(f"{scenario.name}: no path for radius {PATH_RADIUS_M}")
+    speed = SLOW_M_S if scenario.family in SLOW_FAMILIES else SPEED_M_S
+    for r_path in (PATH_RADIUS_M, 0.45, 0.4):  # Narrow-Gap's 0.85 m gaps need the last
+        path = scenario_path(scenario, r_path)
+        if path is not None:
+            break
+    else:
+        raise RuntimeError(f"{scenario.name}: no path for radius 0.4 m")
     length = float(np.sum(np.linalg.norm(np.diff(path, axis=0), axis=1)))
     s0 = length * np.arange(n) / n
     chunks = int(round(seconds * 1000 / CHUNK_STEPS))
     t = (np.arange(chunks) + 1) * CHUNK_STEPS * 1e-3
     rows = np.empty((chunks, n, len(Setpoint.off().row)))
     for k in range(n):
-        pts = _along(path, s0[k] + SPEED_M_S * t)
-        for c in range(chunks):
-            rows[c, k] = Setpoint.position(pts[c]).row
-    return _along(path, s0), rows, length
+        pts = _along(path, s0[k] + speed * t)
+        ahead = _along(path, s0[k] + speed * t + 0.1)
+        for c in range(chunks):  # the carrot, with its velocity as feed-forward
+            u = ahead[c] - pts[c]
+            norm = float(np.linalg.norm(u))
+            vel = speed * u / norm if norm > 1e-9 else np.zeros(3)
+            rows[c, k] = Setpoint.position(pts[c], velocity=vel).row
+    return _along(path, s0), rows, length, r_path
 
 
 def fly(platform, starts, rows, guard: CollisionGuard | None):
@@ -81,13 +95,26 @@ def fly(platform, starts, rows, guard: CollisionGuard | None):
     sim = Simulation([platform] * n)
     for k in range(n):
         sim.start_hovering(k, starts[k])
+    crashed = np.zeros(n, dtype=bool)
     if guard is not None:
         guard.events.clear()
         guard.trips = guard.queries = 0
         guard.attach(sim)
+
+        def crash(ev):
+            # as in a trial, a collision ends that vehicle's flight: motors off, and no
+            # more checks (what a crashed vehicle costs while it falls and rests against
+            # the obstacle is not flight; the unguarded run flies it on, same physics cost)
+            if ev.kind == "collision":
+                crashed[ev.vehicle] = True
+                sim.sp[ev.vehicle] = Setpoint.off().row
+                sim._gd[ev.vehicle, [G_ON, G_BOUNDS]] = 0.0
+        guard.handler = crash
+    off = Setpoint.off().row
     c0 = time.process_time()
     for c in range(len(rows)):
         sim.sp[:] = rows[c]
+        sim.sp[crashed] = off
         sim.step(CHUNK_STEPS)
     return time.process_time() - c0
 
@@ -95,12 +122,13 @@ def fly(platform, starts, rows, guard: CollisionGuard | None):
 def bench_family(family: str, n: int, seconds: float, repeats: int) -> dict:
     sc = build_scenario(family, 10)
     p = catalog().get(PLATFORM)
-    starts, rows, length = plan(sc, n, seconds)
+    starts, rows, length, r_path = plan(sc, n, seconds)
+    radius = min(VEHICLE_RADIUS_M, r_path - 0.2)  # >= 0.2 m left for tracking errors
     t0 = time.perf_counter()
     grid = DistanceGrid.build(sc.mesh, sc.bounds_min, sc.bounds_max)
     grid_s = time.perf_counter() - t0
     world = CollisionWorld(sc.mesh, sc.bounds_min, sc.bounds_max)
-    guard = CollisionGuard(world, [VEHICLE_RADIUS_M] * n, grid=grid, names=sc.obstacle_name)
+    guard = CollisionGuard(world, [radius] * n, grid=grid, names=sc.obstacle_name)
     fly(p, starts, rows[:5], None)  # warm-up (JIT load)
     fly(p, starts, rows[:5], guard)
     plain, guarded = [], []
@@ -114,7 +142,8 @@ def bench_family(family: str, n: int, seconds: float, repeats: int) -> dict:
     collisions = sum(1 for e in guard.events if e.kind == "collision")
     return {
         "family": family, "scenario": sc.name, "triangles": int(len(sc.mesh.faces)),
-        "path_m": round(length, 1), "vehicles": n, "sim_s": seconds,
+        "path_m": round(length, 1), "path_radius_m": r_path, "vehicle_radius_m": radius,
+        "vehicles": n, "sim_s": seconds,
         "grid_shape": list(grid.shape), "grid_pitch_m": grid.pitch,
         "grid_build_s": round(grid_s, 3),
         "physics_us_per_vehicle_s": round(phys, 1),

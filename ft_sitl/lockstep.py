@@ -24,14 +24,15 @@ from ft_sitl.physics.quaternion import qfrom_euler, qto_euler
 
 # --- collision guard rows (one per vehicle; see ft_sitl.scenarios.guard) -------------------
 # G_ON: check obstacles (0/1); G_R: collision radius (m); G_ANCHOR: lower bound of the
-# obstacle clearance (sphere surface, m) at the anchor point; G_FLOWN: path length since the
-# anchor; G_A*: position before the step that tripped; G_LBA: clearance bound there;
+# obstacle clearance (sphere surface, m) at the anchor point G_O*; G_B*, G_RR: the free
+# ball (centre, radius squared; < 0: none): while the centre stays inside it no obstacle can
+# be touched and the flight volume is not crossed, so the kernel does nothing else;
+# G_A*: position before the step that tripped; G_LBA: clearance bound there;
 # G_OUT: 1 while the centre is outside the flight volume (checked when G_BOUNDS is 1);
-# G_TRIP: why the kernel stopped this vehicle (1 obstacles, 2 bounds, bit set); G_FREE: path
-# length the vehicle may fly before the next full check (<= 0: check at the next step).
-(G_ON, G_R, G_ANCHOR, G_FLOWN, G_AX, G_AY, G_AZ, G_LBA, G_OUT, G_BOUNDS, G_TRIP,
- G_FREE) = range(12)
-G_N = 12
+# G_TRIP: why the kernel stopped this vehicle (1 obstacles, 2 bounds, bit set).
+(G_ON, G_R, G_ANCHOR, G_OX, G_OY, G_OZ, G_BX, G_BY, G_BZ, G_RR, G_AX, G_AY, G_AZ, G_LBA,
+ G_OUT, G_BOUNDS, G_TRIP) = range(17)
+G_N = 17
 # guard meta row: distance grid origin (3), pitch, grid shape (3), flight volume lo x/y,
 # hi x/y/z, margin (m)
 (M_OX, M_OY, M_OZ, M_H, M_NX, M_NY, M_NZ, M_LOX, M_LOY, M_HIX, M_HIY, M_HIZ,
@@ -58,39 +59,45 @@ def grid_lower_bound(grid, meta, qx, qy, qz):
 
 
 @njit(cache=True)
-def guard_step(g, grid, meta, seg, px, py, pz, qx, qy, qz):
-    """The full check after the step (px, py, pz) -> (qx, qy, qz) of length seg, once the
-    vehicle has flown its free path length (G_FLOWN already includes this step). Sets the
-    next G_FREE; returns the trip bits (0: the step is proven free and in the same in/out
-    state as before)."""
+def guard_step(g, grid, meta, px, py, pz, qx, qy, qz):
+    """The full check after the step (px, py, pz) -> (qx, qy, qz) that left the free ball.
+    Sets a new free ball around q; returns the trip bits (0: the step is proven free and
+    in the same in/out state as before)."""
     trip = 0
-    inf = np.inf
-    free_o = inf
+    free = np.inf
     if g[G_ON] > 0.0:
         margin = meta[M_MARGIN]
-        if g[G_FLOWN] >= g[G_ANCHOR] - margin:
-            lb_a = g[G_ANCHOR] - (g[G_FLOWN] - seg)  # bound at the step's start
+        ox, oy, oz = g[G_OX], g[G_OY], g[G_OZ]
+        lb_p = g[G_ANCHOR] - np.sqrt((px - ox) ** 2 + (py - oy) ** 2 + (pz - oz) ** 2)
+        lb_q = g[G_ANCHOR] - np.sqrt((qx - ox) ** 2 + (qy - oy) ** 2 + (qz - oz) ** 2)
+        if not lb_q > 2.0 * margin:  # the anchor no longer covers q: try the grid
+            seg = np.sqrt((qx - px) ** 2 + (qy - py) ** 2 + (qz - pz) ** 2)
             lb = grid_lower_bound(grid, meta, qx, qy, qz) - g[G_R]
-            # clearance >= max(lb_a - s, lb - (seg - s)) > margin all along the step
-            if lb > margin and lb_a + lb - seg > margin:
+            # clearance >= max(lb_p - s, lb - (seg - s)) > margin all along the step
+            if lb > margin and lb_p + lb - seg > margin:
                 g[G_ANCHOR] = lb
-                g[G_FLOWN] = 0.0
+                g[G_OX] = qx
+                g[G_OY] = qy
+                g[G_OZ] = qz
+                lb_q = lb
             else:
-                g[G_LBA] = lb_a
+                g[G_LBA] = lb_p
                 trip |= 1
-        free_o = g[G_ANCHOR] - margin - g[G_FLOWN]
-    free_v = inf
+        free = lb_q - margin
     if g[G_BOUNDS] > 0.0:
         d_in = min(qx - meta[M_LOX], meta[M_HIX] - qx, qy - meta[M_LOY], meta[M_HIY] - qy,
                    meta[M_HIZ] - qz)
         out = 1.0 if d_in < 0.0 else 0.0
         if out != g[G_OUT]:
             trip |= 2
-        # path length before the centre can cross a plane (in) or get back in (out)
-        free_v = d_in if d_in >= 0.0 else max(meta[M_LOX] - qx, qx - meta[M_HIX],
-                                              meta[M_LOY] - qy, qy - meta[M_HIY],
-                                              qz - meta[M_HIZ])
-    g[G_FREE] = min(free_o, free_v)
+        # how far the centre is from crossing a plane (inside) or from getting back in
+        free = min(free, d_in if d_in >= 0.0 else max(meta[M_LOX] - qx, qx - meta[M_HIX],
+                                                       meta[M_LOY] - qy, qy - meta[M_HIY],
+                                                       qz - meta[M_HIZ]))
+    g[G_BX] = qx
+    g[G_BY] = qy
+    g[G_BZ] = qz
+    g[G_RR] = free * free if free > 0.0 else -1.0
     if trip:
         g[G_AX] = px
         g[G_AY] = py
@@ -110,8 +117,7 @@ def run_steps(n_steps, dt, x, sp, gn, a, cs, prm, alloc, env, status, w_cmd, rec
         xi, spi, gni, ai, csi, wi = x[i], sp[i], gn[i], a[i], cs[i], w_cmd[i]
         prmi, alloci, envi, sti, gi = prm[i], alloc[i], env[i], status[i], gd[i]
         guarded = gi[G_ON] > 0.0 or gi[G_BOUNDS] > 0.0
-        free = gi[G_FREE]
-        flown = 0.0  # path length since the last full check
+        bx, by, bz, rr = gi[G_BX], gi[G_BY], gi[G_BZ], gi[G_RR]
         k = k_done[i]
         while k < n_steps:
             px, py, pz = xi[0], xi[1], xi[2]
@@ -119,22 +125,15 @@ def run_steps(n_steps, dt, x, sp, gn, a, cs, prm, alloc, env, status, w_cmd, rec
             d.plant_step_one(xi, wi, prmi, alloci, envi, sti, dt)
             k += 1
             if guarded:
-                dx, dy, dz = xi[0] - px, xi[1] - py, xi[2] - pz
-                seg = np.sqrt(dx * dx + dy * dy + dz * dz)
-                free -= seg
-                flown += seg
-                if free <= 0.0:
-                    gi[G_FLOWN] += flown
-                    flown = 0.0
-                    trip = guard_step(gi, grid, meta, seg, px, py, pz, xi[0], xi[1], xi[2])
-                    free = gi[G_FREE]
+                ex, ey, ez = xi[0] - bx, xi[1] - by, xi[2] - bz
+                # inside the (convex) free ball: the whole step is, too
+                if not ex * ex + ey * ey + ez * ez < rr:
+                    trip = guard_step(gi, grid, meta, px, py, pz, xi[0], xi[1], xi[2])
+                    bx, by, bz, rr = gi[G_BX], gi[G_BY], gi[G_BZ], gi[G_RR]
                     if trip:
                         break  # (the caller records this step once it is resolved)
             if rec_every > 0 and k % rec_every == 0:
                 rec[k // rec_every - 1, i, :] = xi
-        if guarded:
-            gi[G_FLOWN] += flown
-            gi[G_FREE] = free
         k_done[i] = k
 
 

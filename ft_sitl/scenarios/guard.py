@@ -4,14 +4,18 @@ A :class:`CollisionGuard` attached to a :class:`~ft_sitl.lockstep.Simulation` ch
 physics step of every vehicle for contact with the scenario's obstacles and for leaving the
 flight volume, without calling Python on most steps. Per vehicle the compiled loop keeps
 
-* an *anchor*: a lower bound of the vehicle's obstacle clearance at some earlier point and
-  the path length flown since. While the path length stays below the bound, nothing can have
-  been touched (the clearance is 1-Lipschitz in the position): the check is one addition
-  and one comparison;
+* an *anchor*: a point and a lower bound ``c`` of the vehicle's obstacle clearance there.
+  The clearance is 1-Lipschitz in the position, so anywhere within ``c`` of the anchor the
+  vehicle touches nothing;
+* a *free ball*: a ball around the position of the last full check, no larger than what
+  the anchor guarantees and no larger than the distance to the flight-volume planes. A
+  ball is convex, so while each step ends inside it the whole path does: the per-step
+  check is one squared distance compared with a radius squared (no square root, no
+  memory beyond the row);
 * a :class:`DistanceGrid`: a voxel grid of lower bounds of the distance to the obstacles,
-  built once per scenario. When the anchor is used up the loop reads the grid at the new
-  position; if the grid proves the step free (see :func:`ft_sitl.lockstep.guard_step`)
-  that bound becomes the new anchor.
+  built once per scenario. When a step leaves the ball and the anchor no longer covers the
+  new position, the loop reads the grid there; if the grid proves the step free (see
+  :func:`ft_sitl.lockstep.guard_step`) that bound becomes the new anchor.
 
 Only when both fail (the vehicle is within about half a metre of an obstacle, or the grid
 does not cover it) does the loop stop that vehicle and hand the step to
@@ -45,16 +49,20 @@ from ft_sitl import lockstep as ls
 from ft_sitl.physics import dynamics as d
 from ft_sitl.scenarios.collision import CollisionMonitor, CollisionWorld, Contact
 
-#: grid pitch (m) and the surface sampling spacing used to fill it
-GRID_PITCH_M = 0.2
+#: grid pitches (m) tried finest first: the finest whose grid has at most GRID_MAX_CELLS
+#: cells is used (a finer grid gives tighter bounds, so fewer exact checks near obstacles)
+GRID_PITCHES_M = (0.1, 0.125, 0.15, 0.2, 0.25)
 #: the grid covers the flight volume grown by this much on every side (m)
 GRID_PAD_M = 1.0
-#: a grid larger than this many cells is built coarser
-GRID_MAX_CELLS = 24_000_000
+#: cell budget (float32: 4 bytes each); a volume too large for the coarsest pitch gets a
+#: coarser one still
+GRID_MAX_CELLS = 8_000_000
 #: separation (m) a resolved contact leaves between the sphere and the surface
 SEPARATION_M = 1e-3
 #: Coulomb friction coefficient of a contact with an obstacle
 FRICTION = 0.5
+#: a contact normal this close to vertical supports a crashed vehicle (it rests on it)
+SUPPORT_NZ = 0.7
 _FAR = np.float32(1e9)
 
 
@@ -81,11 +89,14 @@ class DistanceGrid:
         return tuple(self.data.shape)
 
     @classmethod
-    def build(cls, mesh, lo, hi, *, pitch: float = GRID_PITCH_M, pad: float = GRID_PAD_M,
+    def build(cls, mesh, lo, hi, *, pitch: float | None = None, pad: float = GRID_PAD_M,
               max_cells: int = GRID_MAX_CELLS) -> DistanceGrid:
         lo = np.asarray(lo, dtype=float) - pad
         hi = np.asarray(hi, dtype=float) + pad
         extent = hi - lo
+        if pitch is None:
+            pitch = next((p for p in GRID_PITCHES_M
+                          if np.prod(np.ceil(extent / p)) <= max_cells), GRID_PITCHES_M[-1])
         while np.prod(np.ceil(extent / pitch)) > max_cells:
             pitch *= 1.25
         shape = np.ceil(extent / pitch).astype(np.int64)
@@ -207,9 +218,10 @@ class CollisionGuard:
         g[ls.G_ON] = 1.0 if self.world._obj is not None else 0.0
         g[ls.G_R] = self.radii[i]
         g[ls.G_ANCHOR] = -math.inf
-        g[ls.G_FREE] = 0.0
+        g[ls.G_RR] = -1.0
         g[ls.G_BOUNDS] = 1.0 if self.check_volume else 0.0
         g[ls.G_OUT] = 1.0 if self._outside(self._sim.x[i, d.X_POS:d.X_POS + 3]) else 0.0
+        self._sim.plant.env[i, d.E_GROUND_Z] = self.world.floor_z
         self.crashed[i] = False
 
     def _outside(self, p) -> str:
@@ -242,7 +254,7 @@ class CollisionGuard:
         g = sim._gd[i]
         trip = int(g[ls.G_TRIP])
         g[ls.G_TRIP] = 0.0
-        g[ls.G_FREE] = 0.0  # a full check at the next step
+        g[ls.G_RR] = -1.0  # a full check at the next step
         x = sim.x[i]
         a = g[ls.G_AX:ls.G_AZ + 1].copy()
         b = x[d.X_POS:d.X_POS + 3].copy()
@@ -253,7 +265,7 @@ class CollisionGuard:
             seg = float(np.linalg.norm(b - a))
             contact, c = self.world.step_check(a, b, seg, r, float(g[ls.G_LBA]))
             if contact is None:
-                g[ls.G_ANCHOR], g[ls.G_FLOWN] = c, 0.0
+                self._anchor(g, b, c)
             else:
                 first = not self.crashed[i]
                 self.crashed[i] = True
@@ -284,8 +296,25 @@ class CollisionGuard:
             speed_t = float(np.linalg.norm(vt))
             keep = max(0.0, speed_t - FRICTION * (-vn)) / speed_t if speed_t > 0.0 else 0.0
             x[d.X_VEL:d.X_VEL + 3] = vt * keep
+        if self.crashed[i] and n[2] > SUPPORT_NZ:
+            # a crashed vehicle lying on top of an obstacle rests there like on the floor
+            # (the plant's ground contact holds it), instead of touching it every step
+            env = sim.plant.env[i]
+            env[d.E_GROUND_Z] = max(env[d.E_GROUND_Z], x[d.X_POS + 2])
         g = sim._gd[i]
         p = x[d.X_POS:d.X_POS + 3].copy()
         c = self.world._nearest(p)[0] - self.radii[i]
-        g[ls.G_ANCHOR] = c if c > self.world.contact_tol else -math.inf
-        g[ls.G_FLOWN] = 0.0
+        self._anchor(g, p, c if c > self.world.contact_tol else -math.inf)
+
+    @staticmethod
+    def _anchor(g, p, c: float) -> None:
+        g[ls.G_ANCHOR] = c
+        g[ls.G_OX:ls.G_OZ + 1] = p
+        g[ls.G_RR] = -1.0
+
+    def clearance_bound(self, i: int) -> float:
+        """A lower bound (m) of vehicle i's obstacle clearance now, from the guard's
+        anchor (no query; -inf when unknown)."""
+        g = self._sim._gd[i]
+        p = self._sim.x[i, d.X_POS:d.X_POS + 3]
+        return float(g[ls.G_ANCHOR] - np.linalg.norm(p - g[ls.G_OX:ls.G_OZ + 1]))
