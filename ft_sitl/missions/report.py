@@ -1,0 +1,687 @@
+"""The campaign report: figures, tables and run facts from the results table.
+
+:func:`write_report` writes into ``<out_dir>/report/``:
+
+* ``report.html`` -- one self-contained page (figures embedded as base64 PNG, styles
+  inline, no external asset);
+* ``summary.md`` -- the same facts and tables in Markdown, linking the PNG files;
+* every figure as ``<name>.png`` and ``<name>.svg``:
+
+  ``success_by_family``         per-scenario success, one bar per algorithm, 95 % CI
+  ``success_vs_indicators``     success vs TWR_max, alpha_xy,max (log x), alpha_z,max;
+                                one marker per platform and algorithm, pooled over
+                                scenarios, with CI bars
+  ``platform_grid``             one small bar chart per platform, placed by alpha_xy,max
+                                (rows, bottom to top) and TWR_max (left to right in a row)
+  ``heatmap_<algorithm>``       per algorithm: platforms (y, by TWR_max) x scenarios (x)
+  ``composite_score``           Score and FinalScore per algorithm
+  ``failures_by_algorithm``     exit reasons, stacked fractions per algorithm
+  ``failures_by_family``        exit reasons per scenario family, one panel per algorithm
+
+Figures are drawn on :class:`matplotlib.figure.Figure` objects rendered by the Agg / SVG
+backends: no pyplot, no global state (style settings are applied inside
+``matplotlib.rc_context`` and restored). The files carry no date, and SVG ids are salted
+with a constant, so the same table gives byte-identical figures; only the report's
+"generated" time and the timestamps passed in ``meta`` change between runs.
+
+The statistics are those of :mod:`ft_sitl.missions.scoring`; what they mean and what the
+report contains is written up in ``docs/scoring.md``.
+"""
+
+from __future__ import annotations
+
+import base64
+import html
+import io
+import json
+import math
+import re
+from collections.abc import Mapping, Sequence
+from datetime import UTC, datetime
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+
+from ft_sitl.missions import scoring
+from ft_sitl.missions.results import REASONS
+
+#: ``meta`` keys the report reads, in the order it shows them; any other key of ``meta``
+#: is listed after them as given.
+META_KEYS = ("code_version", "machine", "started_utc", "finished_utc", "wall_time_s")
+#: ``meta["machine"]`` keys shown first when it is a mapping (as bench/benchutil writes).
+MACHINE_KEYS = ("cpu_model", "n_cpus")
+#: Heatmaps carry the value in each cell up to this many cells.
+ANNOTATE_MAX_CELLS = 400
+#: Metric columns summarised (median over successful trials) per algorithm.
+METRICS_SHOWN = ("time_to_goal_s", "path_length_m", "mean_speed_m_s", "max_speed_m_s",
+                 "min_clearance_m", "max_tilt_deg", "saturation_fraction", "energy_j",
+                 "replans", "planner_time_s")
+
+REASON_COLOURS = {"success": "#2ca02c", "collision": "#d62728", "out_of_bounds": "#ff7f0e",
+                  "timeout": "#7f7f7f", "unstable": "#9467bd", "loss_of_control": "#8c564b",
+                  "navigator_error": "#17becf"}
+_RC = {"svg.hashsalt": "ft-sitl-report", "svg.fonttype": "none", "font.size": 9,
+       "axes.titlesize": 9, "axes.labelsize": 9, "legend.fontsize": 8,
+       "xtick.labelsize": 8, "ytick.labelsize": 8, "figure.dpi": 100}
+_DPI = 120
+_REQUIRED = ("algorithm", "platform", "platform_category", "twr_max", "alpha_xy_max",
+             "alpha_z_max", "family", "scenario_category", "success", "reason")
+
+
+# --------------------------------------------------------------------------- data
+class _Tables:
+    """Everything the figures and tables need, computed once."""
+
+    def __init__(self, df: pd.DataFrame, B: int, seed: int, weights: Mapping | None = None):
+        from ft_sitl.scenarios.families import FAMILIES, PAPER_NAMES
+
+        self.df = df
+        self.algorithms = sorted(df["algorithm"].astype(str).unique())
+        present = set(df["family"].astype(str).unique())
+        self.families = [f for f in FAMILIES if f in present] + sorted(present - set(FAMILIES))
+        self.family_label = {f: PAPER_NAMES.get(f, f) for f in self.families}
+        keep = ["platform", "platform_category", "twr_max", "alpha_xy_max", "alpha_z_max"]
+        ind = df[keep].astype({"platform": str, "platform_category": str})
+        ind = ind.drop_duplicates("platform").set_index("platform")
+        self.indicators = ind
+        self.platforms_by_twr = list(
+            ind.assign(_n=ind.index).sort_values(["twr_max", "alpha_xy_max", "_n"],
+                                                 na_position="last").index)
+        self.cells = scoring.success_table(df, ("algorithm", "family", "platform"), B=B,
+                                           seed=seed)
+        self.by_family = scoring.success_table(df, ("algorithm", "family"), B=B, seed=seed)
+        self.by_platform = scoring.success_table(df, ("algorithm", "platform"), B=B,
+                                                 seed=seed)
+        self.by_algorithm = scoring.success_table(df, ("algorithm",), B=B, seed=seed)
+        w = dict(weights or {})
+        self.scores = scoring.composite_score(
+            df, scenario_weights=w.get("scenarios"), platform_weights=w.get("platforms"),
+            beta=w.get("beta", 0.3))
+        self.fail_algo = scoring.failure_breakdown(df, ("algorithm",))
+        self.fail_family = scoring.failure_breakdown(df, ("algorithm", "family"))
+        self.B = B
+        self.seed = seed
+
+    def colour(self, algo: str):
+        from matplotlib import colormaps
+
+        i = self.algorithms.index(algo)
+        cmap = colormaps["tab10" if len(self.algorithms) <= 10 else "tab20"]
+        return cmap(i % cmap.N)
+
+
+def _lookup(table: pd.DataFrame, keys: Sequence[str], values: Sequence) -> pd.Series | None:
+    mask = np.ones(len(table), dtype=bool)
+    for k, v in zip(keys, values, strict=True):
+        mask &= (table[k].astype(str) == str(v)).to_numpy()
+    if not mask.any():
+        return None
+    return table[mask].iloc[0]
+
+
+def _yerr(rate: np.ndarray, lo: np.ndarray, hi: np.ndarray) -> np.ndarray:
+    return np.vstack([np.clip(rate - lo, 0, None), np.clip(hi - rate, 0, None)])
+
+
+# --------------------------------------------------------------------------- layout
+def platform_grid_layout(indicators: pd.DataFrame) -> tuple[int, int, dict[str, tuple]]:
+    """Where each platform goes in the platform grid: ``(nrows, ncols, {name: (row,
+    col)})`` with row 0 at the bottom.
+
+    ``ncols = ceil(sqrt(n))``, ``nrows = ceil(n / ncols)``. Platforms are sorted by
+    (alpha_xy_max, twr_max, name) and cut into consecutive rows of ``ncols``: the bottom row
+    holds the ``ncols`` lowest alpha_xy,max, the top row the highest (and is the short one
+    when ``n`` is not a multiple of ``ncols``). Inside a row, platforms are ordered by
+    (twr_max, alpha_xy_max, name), left to right. Missing indicators sort last. For the 36
+    catalog platforms this is the paper's 6 x 6 arrangement: up = more roll/pitch
+    authority, right = more thrust."""
+    ind = indicators.assign(_name=indicators.index.astype(str))
+    n = len(ind)
+    if n == 0:
+        raise ValueError("platform_grid_layout: no platforms")
+    ncols = math.ceil(math.sqrt(n))
+    nrows = math.ceil(n / ncols)
+    by_axy = ind.sort_values(["alpha_xy_max", "twr_max", "_name"], na_position="last")
+    where = {}
+    for r in range(nrows):
+        chunk = by_axy.iloc[r * ncols:(r + 1) * ncols]
+        chunk = chunk.sort_values(["twr_max", "alpha_xy_max", "_name"], na_position="last")
+        for c, name in enumerate(chunk["_name"]):
+            where[name] = (r, c)
+    return nrows, ncols, where
+
+
+# --------------------------------------------------------------------------- figures
+def _new_figure(w: float, h: float):
+    from matplotlib.figure import Figure
+
+    return Figure(figsize=(w, h), layout="constrained")
+
+
+def _fig_success_by_family(t: _Tables):
+    fig = _new_figure(max(6.0, 1.1 * len(t.families) + 2.0), 3.8)
+    ax = fig.add_subplot()
+    n_alg = len(t.algorithms)
+    width = 0.8 / n_alg
+    x0 = np.arange(len(t.families))
+    for i, algo in enumerate(t.algorithms):
+        xs, r, lo, hi = [], [], [], []
+        for j, fam in enumerate(t.families):
+            row = _lookup(t.by_family, ("algorithm", "family"), (algo, fam))
+            if row is None:
+                continue
+            xs.append(x0[j] + (i - (n_alg - 1) / 2) * width)
+            r.append(row["rate"])
+            lo.append(row["ci_lo"])
+            hi.append(row["ci_hi"])
+        for j, fam in enumerate(t.families):
+            if _lookup(t.by_family, ("algorithm", "family"), (algo, fam)) is None:
+                ax.text(x0[j] + (i - (n_alg - 1) / 2) * width, 0.01, "n/a", rotation=90,
+                        ha="center", va="bottom", fontsize=6, color="#555555")
+        if not xs:
+            continue
+        r, lo, hi = map(np.asarray, (r, lo, hi))
+        ax.bar(xs, r, width=width * 0.95, color=t.colour(algo), label=algo,
+               yerr=_yerr(r, lo, hi), capsize=2, error_kw={"elinewidth": 0.8})
+    ax.set_xticks(x0, [t.family_label[f] for f in t.families], rotation=20, ha="right")
+    ax.set_ylim(0, 1.05)
+    ax.set_ylabel("success rate")
+    fig.legend(loc="outside upper center", ncols=min(n_alg, 6), frameon=False)
+    ax.grid(axis="y", alpha=0.3)
+    return fig
+
+
+def _fig_success_vs_indicators(t: _Tables):
+    fig = _new_figure(12.0, 3.8)
+    axes = fig.subplots(1, 3, sharey=True)
+    specs = (("twr_max", r"$\mathrm{TWR}_{\max}$", False),
+             ("alpha_xy_max", r"$\alpha_{xy,\max}$ (rad/s$^2$, log)", True),
+             ("alpha_z_max", r"$\alpha_{z,\max}$ (rad/s$^2$)", False))
+    markers = "osD^vP*Xh<>p"
+    for ax, (col, label, log) in zip(axes, specs, strict=True):
+        for i, algo in enumerate(t.algorithms):
+            sub = t.by_platform[t.by_platform["algorithm"].astype(str) == algo]
+            x = t.indicators.loc[sub["platform"].astype(str), col].to_numpy(dtype=float)
+            ok = np.isfinite(x) & ((x > 0) if log else True)
+            if not ok.any():
+                continue
+            r = sub["rate"].to_numpy()[ok]
+            ax.errorbar(x[ok], r, yerr=_yerr(r, sub["ci_lo"].to_numpy()[ok],
+                                             sub["ci_hi"].to_numpy()[ok]),
+                        fmt=markers[i % len(markers)], color=t.colour(algo), ms=4,
+                        capsize=1.5, elinewidth=0.6, alpha=0.85, label=algo)
+        if log:
+            ax.set_xscale("log")
+        ax.set_xlabel(label)
+        ax.set_ylim(-0.03, 1.05)
+        ax.grid(alpha=0.3)
+    axes[0].set_ylabel("success rate (pooled over scenarios)")
+    handles, labels = axes[0].get_legend_handles_labels()
+    if handles:
+        fig.legend(handles, labels, loc="outside upper center", ncols=min(len(labels), 6),
+                   frameon=False)
+    return fig
+
+
+def _fig_platform_grid(t: _Tables):
+    nrows, ncols, where = platform_grid_layout(t.indicators)
+    fig = _new_figure(max(4.0, 1.75 * ncols), max(2.6, 1.45 * nrows + 0.9))
+    axes = fig.subplots(nrows, ncols, squeeze=False, sharey=True)
+    n_alg = len(t.algorithms)
+    used = set()
+    for name, (r, c) in where.items():
+        ax = axes[nrows - 1 - r][c]
+        used.add((r, c))
+        sub = t.by_platform[t.by_platform["platform"].astype(str) == name]
+        for i, algo in enumerate(t.algorithms):
+            row = _lookup(sub, ("algorithm",), (algo,))
+            if row is None:
+                continue
+            rate = np.array([row["rate"]])
+            ax.bar([i], rate, width=0.8, color=t.colour(algo),
+                   yerr=_yerr(rate, np.array([row["ci_lo"]]), np.array([row["ci_hi"]])),
+                   capsize=1.5, error_kw={"elinewidth": 0.6})
+        ind = t.indicators.loc[name]
+        ax.set_title(f"{name}\nTWR {ind['twr_max']:.2f}  "
+                     rf"$\alpha_{{xy}}$ {ind['alpha_xy_max']:.0f}", fontsize=6, pad=2)
+        ax.set_xlim(-0.6, n_alg - 0.4)
+        ax.set_ylim(0, 1.05)
+        ax.set_xticks([])
+        ax.tick_params(labelsize=6)
+        ax.grid(axis="y", alpha=0.3)
+    for r in range(nrows):
+        for c in range(ncols):
+            if (r, c) not in used:
+                axes[nrows - 1 - r][c].set_axis_off()
+    from matplotlib.patches import Patch
+
+    fig.legend([Patch(color=t.colour(a)) for a in t.algorithms], t.algorithms,
+               loc="outside upper center", ncols=min(n_alg, 6), frameon=False)
+    fig.supxlabel(r"$\mathrm{TWR}_{\max}$ increases left to right within each row", fontsize=8)
+    fig.supylabel(r"$\alpha_{xy,\max}$ increases bottom to top (rows)", fontsize=8)
+    return fig
+
+
+def _fig_heatmap(t: _Tables, algo: str):
+    from matplotlib import colormaps
+
+    plats = t.platforms_by_twr
+    sub = t.cells[t.cells["algorithm"].astype(str) == algo]
+    grid = (sub.assign(platform=sub["platform"].astype(str), family=sub["family"].astype(str))
+            .pivot(index="platform", columns="family", values="rate")
+            .reindex(index=plats, columns=t.families))
+    values = grid.to_numpy(dtype=float)
+    n_p, n_f = values.shape
+    fig = _new_figure(max(4.5, 0.75 * n_f + 3.2), max(2.5, 0.22 * n_p + 1.6))
+    ax = fig.add_subplot()
+    cmap = colormaps["viridis"].with_extremes(bad="#d9d9d9")
+    im = ax.imshow(np.ma.masked_invalid(values), cmap=cmap, vmin=0.0, vmax=1.0,
+                   aspect="auto", origin="lower", interpolation="nearest")
+    ax.set_xticks(np.arange(n_f), [t.family_label[f] for f in t.families], rotation=30,
+                  ha="right")
+    twr = t.indicators["twr_max"]
+    ax.set_yticks(np.arange(n_p), [f"{p} ({twr[p]:.2f})" for p in plats],
+                  fontsize=6 if n_p > 12 else 8)
+    ax.set_ylabel(r"platform ($\mathrm{TWR}_{\max}$), sorted by $\mathrm{TWR}_{\max}$")
+    ax.set_title(f"{algo}: success rate per platform and scenario")
+    if n_p * n_f <= ANNOTATE_MAX_CELLS:
+        size = 6 if n_p > 12 else 8
+        for (i, j), v in np.ndenumerate(values):
+            text = "n/a" if not np.isfinite(v) else f"{v:.1f}"
+            colour = "black" if (not np.isfinite(v) or v > 0.6) else "white"
+            ax.text(j, i, text, ha="center", va="center", fontsize=size, color=colour)
+    fig.colorbar(im, ax=ax, label="success rate", fraction=0.05)
+    return fig
+
+
+def _fig_composite(t: _Tables):
+    s = t.scores
+    fig = _new_figure(max(5.0, 1.0 * len(s) + 3.0), 3.6)
+    ax = fig.add_subplot()
+    x = np.arange(len(s))
+    ax.bar(x - 0.2, s["Score"], width=0.4, color="#9ecae1", label="Score (no penalty)")
+    ax.bar(x + 0.2, s["FinalScore"], width=0.4, color="#08519c", label="FinalScore")
+    labels = [a if comp else f"{a} †" for a, comp in zip(s["algorithm"], s["comparable"],
+                                                         strict=True)]
+    ax.set_xticks(x, labels, rotation=15, ha="right")
+    for xi, v in zip(x, s["FinalScore"], strict=True):
+        ax.text(xi + 0.2, v + 1.0, f"{v:.2f}", ha="center", va="bottom", fontsize=7)
+    ax.set_ylim(0, 105)
+    ax.set_ylabel("score (%)")
+    ax.set_title(f"Composite score (beta = {t.scores.attrs['beta']:g}; "
+                 "† = not directly comparable)")
+    ax.legend(frameon=False, loc="upper right")
+    ax.grid(axis="y", alpha=0.3)
+    return fig
+
+
+def _stack(ax, xs, fractions: dict[str, np.ndarray], width: float):
+    bottom = np.zeros(len(xs))
+    for reason in REASONS:
+        f = fractions[reason]
+        ax.bar(xs, f, width=width, bottom=bottom, color=REASON_COLOURS[reason], label=reason)
+        bottom = bottom + f
+
+
+def _fractions(table: pd.DataFrame, keys: Sequence[str], groups: Sequence[tuple]):
+    out = {r: np.zeros(len(groups)) for r in REASONS}
+    for i, g in enumerate(groups):
+        mask = np.ones(len(table), dtype=bool)
+        for k, v in zip(keys, g, strict=True):
+            mask &= (table[k].astype(str) == str(v)).to_numpy()
+        for reason, frac in zip(table.loc[mask, "reason"].astype(str),
+                                table.loc[mask, "fraction"], strict=True):
+            out[reason][i] = frac
+    return out
+
+
+def _reason_legend(fig):
+    from matplotlib.patches import Patch
+
+    fig.legend([Patch(color=REASON_COLOURS[r]) for r in REASONS], list(REASONS),
+               loc="outside right center", frameon=False)
+
+
+def _fig_failures_by_algorithm(t: _Tables):
+    fig = _new_figure(max(4.5, 0.9 * len(t.algorithms) + 3.0), 3.6)
+    ax = fig.add_subplot()
+    groups = [(a,) for a in t.algorithms]
+    _stack(ax, np.arange(len(groups)), _fractions(t.fail_algo, ("algorithm",), groups), 0.7)
+    ax.set_xticks(np.arange(len(groups)), t.algorithms, rotation=15, ha="right")
+    ax.set_ylim(0, 1.0)
+    ax.set_ylabel("fraction of trials")
+    ax.set_title("Exit reasons per algorithm")
+    _reason_legend(fig)
+    return fig
+
+
+def _fig_failures_by_family(t: _Tables):
+    n = len(t.algorithms)
+    ncols = min(n, 3)
+    nrows = math.ceil(n / ncols)
+    fig = _new_figure(max(5.0, (0.55 * len(t.families) + 1.2) * ncols + 1.8), 3.2 * nrows)
+    axes = fig.subplots(nrows, ncols, squeeze=False, sharey=True)
+    x = np.arange(len(t.families))
+    for k, algo in enumerate(t.algorithms):
+        ax = axes[k // ncols][k % ncols]
+        groups = [(algo, f) for f in t.families]
+        fr = _fractions(t.fail_family, ("algorithm", "family"), groups)
+        _stack(ax, x, fr, 0.7)
+        ax.set_xticks(x, [t.family_label[f] for f in t.families], rotation=30, ha="right",
+                      fontsize=7)
+        ax.set_title(algo)
+        ax.set_ylim(0, 1.0)
+    for k in range(n, nrows * ncols):
+        axes[k // ncols][k % ncols].set_axis_off()
+    axes[0][0].set_ylabel("fraction of trials")
+    _reason_legend(fig)
+    return fig
+
+
+def _slug(text: str) -> str:
+    return re.sub(r"[^A-Za-z0-9._-]+", "_", text).strip("_") or "algorithm"
+
+
+def _figures(t: _Tables) -> list[tuple[str, str, object]]:
+    figs = [
+        ("success_by_family", "Mean success per scenario family, one bar per algorithm, "
+         "pooled over platforms; error bars: 95 % percentile-bootstrap CI.",
+         _fig_success_by_family),
+        ("success_vs_indicators", "Success per platform (pooled over scenario families) "
+         "against the kinodynamic indicators TWR_max, alpha_xy,max (log x) and alpha_z,max; "
+         "one marker per platform and algorithm, 95 % CI bars.", _fig_success_vs_indicators),
+        ("platform_grid", "One panel per platform: success per algorithm pooled over "
+         "scenario families, 95 % CI. Rows are bands of alpha_xy,max (bottom: lowest); "
+         "within a row, TWR_max increases to the right.", _fig_platform_grid),
+    ]
+    used = set()
+    for algo in t.algorithms:
+        slug = _slug(algo)
+        name = f"heatmap_{slug}"
+        k = 2
+        while name in used:
+            name = f"heatmap_{slug}_{k}"
+            k += 1
+        used.add(name)
+        figs.append((name, f"{algo}: success rate per platform (y, sorted by TWR_max) and "
+                     "scenario family (x); grey = no trials.",
+                     lambda t, a=algo: _fig_heatmap(t, a)))
+    figs += [
+        ("composite_score", "Composite score per algorithm (eqs. 12-19): Score without "
+         "penalty and the variance-penalised FinalScore.", _fig_composite),
+        ("failures_by_algorithm", "Exit reasons as fractions of each algorithm's trials.",
+         _fig_failures_by_algorithm),
+        ("failures_by_family", "Exit reasons per scenario family, one panel per algorithm.",
+         _fig_failures_by_family),
+    ]
+    return figs
+
+
+def _render(fig) -> tuple[bytes, bytes]:
+    png, svg = io.BytesIO(), io.BytesIO()
+    fig.savefig(png, format="png", dpi=_DPI, metadata={"Software": None})
+    fig.savefig(svg, format="svg", metadata={"Date": None, "Creator": None})
+    return png.getvalue(), svg.getvalue()
+
+
+# --------------------------------------------------------------------------- tables
+def _fmt(v, spec: str) -> str:
+    if v is None or (isinstance(v, float) and not math.isfinite(v)) or v is pd.NA:
+        return "–"
+    return format(v, spec)
+
+
+def _score_rows(t: _Tables) -> tuple[list[str], list[list[str]]]:
+    head = ["Algorithm", "Score (no penalty)", "Var", "Var_norm", "FinalScore",
+            "Missing scenarios", "Comparable", "Trials", "Missing cells"]
+    rows = []
+    for r in t.scores.itertuples(index=False):
+        miss = ", ".join(t.family_label.get(f, f) for f in r.missing_scenarios) or "–"
+        rows.append([str(r.algorithm), f"{r.Score:.2f}", f"{r.Var:.3f}", f"{r.Var_norm:.3f}",
+                     f"{r.FinalScore:.2f}", miss, "yes" if r.comparable else "no †",
+                     _fmt(r.n_trials, "d"), str(r.missing_cells)])
+    return head, rows
+
+
+def _ci_text(row) -> str:
+    return f"{row['rate']:.2f} [{row['ci_lo']:.2f}, {row['ci_hi']:.2f}] (n={row['n']})"
+
+
+def _family_rows(t: _Tables) -> tuple[list[str], list[list[str]]]:
+    head = ["Algorithm", *[t.family_label[f] for f in t.families], "All"]
+    rows = []
+    for algo in t.algorithms:
+        row = [algo]
+        for fam in t.families:
+            r = _lookup(t.by_family, ("algorithm", "family"), (algo, fam))
+            row.append("–" if r is None else _ci_text(r))
+        row.append(_ci_text(_lookup(t.by_algorithm, ("algorithm",), (algo,))))
+        rows.append(row)
+    return head, rows
+
+
+def _failure_rows(t: _Tables) -> tuple[list[str], list[list[str]]]:
+    head = ["Algorithm", "Trials", *REASONS]
+    rows = []
+    for algo in t.algorithms:
+        sub = t.fail_algo[t.fail_algo["algorithm"].astype(str) == algo]
+        counts = dict(zip(sub["reason"].astype(str), sub["count"], strict=True))
+        n = int(sub["n"].iloc[0])
+        rows.append([algo, str(n), *[f"{counts[r]} ({counts[r] / n:.0%})" for r in REASONS]])
+    return head, rows
+
+
+def _metric_rows(t: _Tables) -> tuple[list[str], list[list[str]]]:
+    cols = [c for c in METRICS_SHOWN if c in t.df.columns]
+    head = ["Algorithm", "Successes", *cols]
+    rows = []
+    ok = t.df[t.df["success"].astype(bool)]
+    for algo in t.algorithms:
+        sub = ok[ok["algorithm"].astype(str) == algo]
+        row = [algo, str(len(sub))]
+        for c in cols:
+            v = pd.to_numeric(sub[c], errors="coerce").astype(float)
+            v = v[np.isfinite(v)]
+            row.append("–" if v.empty else f"{float(v.median()):.3g}")
+        rows.append(row)
+    return head, rows
+
+
+def _run_facts(df: pd.DataFrame, meta: Mapping) -> list[tuple[str, str]]:
+    facts: list[tuple[str, str]] = []
+    campaigns = sorted(df["campaign"].dropna().astype(str).unique()) if "campaign" in df else []
+    if campaigns:
+        facts.append(("campaign", ", ".join(campaigns)))
+    facts.append(("code version", str(meta.get("code_version", "not recorded"))))
+    machine = meta.get("machine")
+    if isinstance(machine, Mapping):
+        items = [(k, machine[k]) for k in MACHINE_KEYS if k in machine]
+        items += [(k, v) for k, v in machine.items() if k not in MACHINE_KEYS]
+        facts.append(("machine", "; ".join(f"{k}: {v}" for k, v in items) or "not recorded"))
+    else:
+        facts.append(("machine", "not recorded" if machine is None else str(machine)))
+    facts.append(("started (UTC)", str(meta.get("started_utc", "not recorded"))))
+    facts.append(("finished (UTC)", str(meta.get("finished_utc", "not recorded"))))
+    wall = meta.get("wall_time_s")
+    n = len(df)
+    facts.append(("trials", f"{n}"))
+    if isinstance(wall, int | float) and math.isfinite(wall) and wall > 0:
+        facts.append(("wall time", f"{wall:.1f} s"))
+        facts.append(("trials per second", f"{n / wall:.3g}"))
+    else:
+        facts.append(("wall time", "not recorded" if wall is None else str(wall)))
+        facts.append(("trials per second", "–"))
+    if "wall_time_s" in df:
+        tw = pd.to_numeric(df["wall_time_s"], errors="coerce").astype(float)
+        tw = tw[np.isfinite(tw)]
+        if not tw.empty:
+            facts.append(("sum of per-trial wall time", f"{float(tw.sum()):.1f} s"))
+    for k in sorted(set(meta) - set(META_KEYS), key=str):
+        facts.append((str(k), _plain(meta[k])))
+    return facts
+
+
+def _plain(v) -> str:
+    if isinstance(v, Mapping | list | tuple):
+        return json.dumps(_jsonable(v), sort_keys=False)
+    return str(v)
+
+
+def _jsonable(obj):
+    return json.loads(json.dumps(obj, default=str))
+
+
+def _spec_text(campaign_spec: Mapping) -> str:
+    import yaml
+
+    return yaml.safe_dump(_jsonable(dict(campaign_spec)), sort_keys=False,
+                          default_flow_style=False, allow_unicode=True).rstrip()
+
+
+# --------------------------------------------------------------------------- HTML, MD
+_CSS = """
+body{font-family:system-ui,-apple-system,Segoe UI,Helvetica,Arial,sans-serif;margin:2em auto;
+max-width:1250px;padding:0 1em;color:#222;line-height:1.4}
+h1{font-size:1.5em}h2{font-size:1.2em;margin-top:1.8em;border-bottom:1px solid #ddd}
+table{border-collapse:collapse;margin:.6em 0;font-size:.85em}
+th,td{border:1px solid #ccc;padding:.25em .5em;text-align:left;vertical-align:top}
+th{background:#f2f2f2}td.num{text-align:right}
+figure{margin:1.2em 0}figure img{max-width:100%;height:auto;border:1px solid #eee}
+figcaption{font-size:.85em;color:#555}pre{background:#f7f7f7;padding:.8em;overflow-x:auto;
+font-size:.8em}.note{font-size:.85em;color:#555}
+"""
+
+
+def _html_table(head: Sequence[str], rows: Sequence[Sequence[str]], cls: str = "") -> str:
+    e = html.escape
+    out = [f'<table class="{e(cls)}">' if cls else "<table>", "<thead><tr>"]
+    out += [f"<th>{e(h)}</th>" for h in head]
+    out.append("</tr></thead><tbody>")
+    for r in rows:
+        out.append("<tr>" + "".join(f"<td>{e(c)}</td>" for c in r) + "</tr>")
+    out.append("</tbody></table>")
+    return "".join(out)
+
+
+def _md_table(head: Sequence[str], rows: Sequence[Sequence[str]]) -> str:
+    def cell(s: str) -> str:
+        return str(s).replace("|", "\\|").replace("\n", " ")
+
+    lines = ["| " + " | ".join(cell(h) for h in head) + " |",
+             "|" + "---|" * len(head)]
+    lines += ["| " + " | ".join(cell(c) for c in r) + " |" for r in rows]
+    return "\n".join(lines)
+
+
+def _method_notes(t: _Tables) -> list[str]:
+    a = t.scores.attrs
+    sw = ", ".join(f"{k} {v:g}" for k, v in a["scenario_weight_table"].items())
+    pw = ", ".join(f"{k} {v:g}" for k, v in a["platform_weight_table"].items())
+    return [
+        f"Success rates with 95 % percentile-bootstrap confidence intervals, B = {t.B} "
+        f"resamples, seed {t.seed} (resampling trials with replacement, drawn as binomial "
+        "counts); pooled rates take the trials of all platforms / scenarios together.",
+        f"Composite score (eqs. 12-19): scenario weights {sw}; platform weights {pw}; "
+        f"beta = {a['beta']:g}. A scenario family without any trial of an algorithm is "
+        "dropped for it and its scenario weights renormalised (eq. 19); † marks scores not "
+        "computed over the full (family x platform) grid.",
+        "Definitions: docs/scoring.md.",
+    ]
+
+
+def _html(t: _Tables, facts, figures, spec_text: str, generated: str) -> str:
+    e = html.escape
+    parts = ["<!DOCTYPE html>", '<html lang="en">', "<head>", '<meta charset="utf-8">',
+             "<title>FLYINGTRUST benchmark report</title>", f"<style>{_CSS}</style>",
+             "</head>", "<body>", "<h1>FLYINGTRUST benchmark report</h1>",
+             f'<p class="note">Generated {e(generated)} by ft_sitl.missions.report.</p>',
+             "<h2>Run</h2>", _html_table(("", ""), facts, "facts"),
+             "<h2>Composite score</h2>", _html_table(*_score_rows(t), "scores")]
+    parts.append("<ul class=\"note\">" + "".join(f"<li>{e(n)}</li>" for n in _method_notes(t))
+                 + "</ul>")
+    parts.append("<h2>Figures</h2>")
+    for name, caption, png in figures:
+        b64 = base64.b64encode(png).decode("ascii")
+        parts.append(f'<figure id="fig-{e(name)}"><img alt="{e(name)}" '
+                     f'src="data:image/png;base64,{b64}">'
+                     f"<figcaption><b>{e(name)}</b>: {e(caption)}</figcaption></figure>")
+    parts += ["<h2>Success per scenario family</h2>",
+              '<p class="note">rate [95 % CI] (trials), pooled over platforms.</p>',
+              _html_table(*_family_rows(t), "families"),
+              "<h2>Exit reasons</h2>", _html_table(*_failure_rows(t), "failures"),
+              "<h2>Metrics of successful trials (median)</h2>",
+              _html_table(*_metric_rows(t), "metrics"),
+              "<h2>Campaign spec</h2>", f"<pre>{e(spec_text)}</pre>",
+              "</body>", "</html>"]
+    return "\n".join(parts) + "\n"
+
+
+def _markdown(t: _Tables, facts, figures, spec_text: str, generated: str) -> str:
+    lines = ["# FLYINGTRUST benchmark report", "", f"Generated {generated}.", "", "## Run",
+             "", _md_table(("", ""), facts), "", "## Composite score", "",
+             _md_table(*_score_rows(t)), ""]
+    lines += [f"- {n}" for n in _method_notes(t)]
+    lines += ["", "## Success per scenario family", "",
+              "rate [95 % CI] (trials), pooled over platforms.", "",
+              _md_table(*_family_rows(t)), "", "## Exit reasons", "",
+              _md_table(*_failure_rows(t)), "", "## Metrics of successful trials (median)", "",
+              _md_table(*_metric_rows(t)), "", "## Figures", ""]
+    for name, caption, _ in figures:
+        lines += [f"![{name}]({name}.png)", "", f"*{name}*: {caption} "
+                  f"([SVG]({name}.svg))", ""]
+    lines += ["## Campaign spec", "", "```yaml", spec_text, "```", ""]
+    return "\n".join(lines)
+
+
+# --------------------------------------------------------------------------- entry
+def write_report(df: pd.DataFrame, out_dir, *, campaign_spec: Mapping, meta: Mapping,
+                 B: int = 1000, seed: int = 0) -> dict[str, Path]:
+    """Write the report of a results table into ``<out_dir>/report/``.
+
+    ``df`` is the table of :func:`ft_sitl.missions.results.to_frame`. ``campaign_spec`` is
+    shown as YAML. ``meta`` keys read: ``code_version``, ``machine`` (a mapping, e.g.
+    ``{"cpu_model": ..., "n_cpus": ...}``, or a string), ``started_utc``,
+    ``finished_utc``, ``wall_time_s`` (campaign wall time; trials per second = rows /
+    wall time). A key that is absent shows as "not recorded"; other keys are listed as
+    given. ``B`` and ``seed`` are the bootstrap's.
+
+    Returns ``{file name: path}`` for every file written (``report.html``, ``summary.md``,
+    ``<figure>.png``, ``<figure>.svg``).
+    """
+    if not isinstance(df, pd.DataFrame):
+        raise ValueError(f"write_report: df must be a pandas DataFrame, got {type(df).__name__}")
+    if len(df) == 0:
+        raise ValueError("write_report: the results table is empty")
+    scoring._require_columns(df, _REQUIRED, "write_report")
+    if not isinstance(campaign_spec, Mapping):
+        raise ValueError("write_report: campaign_spec must be a mapping")
+    if not isinstance(meta, Mapping):
+        raise ValueError("write_report: meta must be a mapping")
+
+    from matplotlib import rc_context
+
+    rdir = Path(out_dir) / "report"
+    rdir.mkdir(parents=True, exist_ok=True)
+    t = _Tables(df, B, seed, campaign_spec.get("weights"))
+    paths: dict[str, Path] = {}
+    rendered = []
+    with rc_context(_RC):
+        for name, caption, make in _figures(t):
+            fig = make(t)
+            png, svg = _render(fig)
+            fig.clear()
+            for ext, data in (("png", png), ("svg", svg)):
+                p = rdir / f"{name}.{ext}"
+                p.write_bytes(data)
+                paths[p.name] = p
+            rendered.append((name, caption, png))
+    facts = _run_facts(df, meta)
+    spec_text = _spec_text(campaign_spec)
+    generated = datetime.now(UTC).strftime("%Y-%m-%dT%H:%M:%SZ")
+    for fname, text in (("report.html", _html(t, facts, rendered, spec_text, generated)),
+                        ("summary.md", _markdown(t, facts, rendered, spec_text, generated))):
+        p = rdir / fname
+        p.write_text(text, encoding="utf-8")
+        paths[fname] = p
+    return paths

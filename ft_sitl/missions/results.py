@@ -1,0 +1,70 @@
+"""The results table: one row per trial, the same columns everywhere.
+
+A campaign writes each finished trial as one JSON object per line (``trials.jsonl``, see
+``ft_sitl.missions.store``); :func:`to_frame` turns such rows into the tidy pandas table
+that scoring, reports and users read (Parquet ``trials.parquet``, CSV on request).
+
+Column meanings (units in the name; NaN where a value does not apply):
+
+identity
+    ``trial_id`` (stable key of the trial's spec), ``campaign``, ``algorithm`` (navigator
+    name), ``algorithm_params`` (JSON), ``platform``, ``platform_category`` (real /
+    virtual / user), ``mass_kg``, ``twr_max``, ``alpha_xy_max``, ``alpha_z_max`` (rad/s^2),
+    ``family``, ``scenario_category`` (classic / theoretical / user), ``scenario_index``,
+    ``scenario_seed``, ``scenario`` (name), ``trial`` (0-based repetition), ``seed``.
+outcome
+    ``success`` (bool), ``reason`` (one of :data:`REASONS`), ``detail`` (what was hit,
+    which bound, the navigator's exception ...).
+metrics (navigation phase)
+    ``time_to_goal_s`` (first entry into the goal sphere, from navigation start),
+    ``nav_time_s``, ``path_length_m``, ``mean_speed_m_s``, ``max_speed_m_s``,
+    ``min_clearance_m`` (obstacle clearance of the collision sphere, sampled),
+    ``max_tilt_deg``, ``saturation_fraction`` (physics steps with any rotor at a limit),
+    ``energy_j`` (motor mechanical energy), ``replans``, ``planner_time_s`` (navigator
+    compute, wall clock), ``planner_calls``.
+run
+    ``sim_time_s``, ``wall_time_s``, ``code_version``, ``finished_utc``, ``spec`` (the
+    full trial spec as JSON: enough to rerun the trial alone).
+"""
+
+from __future__ import annotations
+
+REASONS = ("success", "collision", "out_of_bounds", "timeout", "unstable",
+           "loss_of_control", "navigator_error")
+
+IDENTITY = ("trial_id", "campaign", "algorithm", "algorithm_params", "platform",
+            "platform_category", "mass_kg", "twr_max", "alpha_xy_max", "alpha_z_max",
+            "family", "scenario_category", "scenario_index", "scenario_seed", "scenario",
+            "trial", "seed")
+OUTCOME = ("success", "reason", "detail")
+METRICS = ("time_to_goal_s", "nav_time_s", "path_length_m", "mean_speed_m_s",
+           "max_speed_m_s", "min_clearance_m", "max_tilt_deg", "saturation_fraction",
+           "energy_j", "replans", "planner_time_s", "planner_calls")
+RUN = ("sim_time_s", "wall_time_s", "code_version", "finished_utc", "spec")
+COLUMNS = IDENTITY + OUTCOME + METRICS + RUN
+
+CATEGORICAL = ("campaign", "algorithm", "platform", "platform_category", "family",
+               "scenario_category", "scenario", "reason")
+INTEGER = ("scenario_index", "scenario_seed", "trial", "seed", "replans", "planner_calls")
+FLOAT = ("mass_kg", "twr_max", "alpha_xy_max", "alpha_z_max") + tuple(
+    m for m in METRICS if m not in ("replans", "planner_calls")) + ("sim_time_s",
+                                                                     "wall_time_s")
+
+
+def to_frame(rows):
+    """The tidy table of trial rows (dicts with :data:`COLUMNS`), typed: categoricals
+    for the grouping columns (``reason`` with every category of :data:`REASONS`)."""
+    import pandas as pd
+
+    df = pd.DataFrame(list(rows), columns=list(COLUMNS))
+    for c in INTEGER:
+        df[c] = pd.to_numeric(df[c], errors="coerce").astype("Int64")
+    for c in FLOAT:
+        df[c] = pd.to_numeric(df[c], errors="coerce").astype("float64")
+    df["success"] = df["success"].astype(bool)
+    for c in CATEGORICAL:
+        if c == "reason":
+            df[c] = pd.Categorical(df[c], categories=list(REASONS))
+        else:
+            df[c] = df[c].astype("category")
+    return df
