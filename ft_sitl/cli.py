@@ -629,6 +629,10 @@ def build_parser() -> argparse.ArgumentParser:
     parl.add_argument("--json", action="store_true", help="machine-readable output")
     parl.set_defaults(func=cmd_params_list)
 
+    from ft_sitl.cli_missions import add_parsers
+
+    add_parsers(sub)
+
     _add_scenarios_parser(sub)
     return ap
 

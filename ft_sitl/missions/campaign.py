@@ -1,0 +1,622 @@
+"""Campaigns: the algorithm x platform x scenario x trial matrix, run and resumed.
+
+A campaign file (TOML or YAML) names what to run; every key is optional except
+``algorithms``::
+
+    name = "my-campaign"
+    trials = 10                      # per (algorithm, platform, scenario family)
+    seed = 0                         # trial seeds derive from it
+    scenario_seed = 0                # seed of the scenario configurations
+    platforms = ["real"]             # names, categories (real, virtual, user) or "all"
+    platform_files = ["mine.toml"]   # user platforms (relative to this file)
+    scenarios = "all"                # families (paper names work), {family, indices},
+                                     # {file = "yard.yaml"} (a user scenario), or "all"
+    indices = "all"                  # default configurations of each family (1..10)
+    physics_hz = 1000
+
+    [[algorithms]]                   # or: algorithms = "all" / ["straight", ...]
+    name = "straight"                # a registered navigator
+    label = "straight-3"             # optional: its name in the results
+    params = { speed_m_s = 3.0 }
+
+    [limits]                         # the protocol's defaults
+    max_speed_m_s = 4.0
+    timeout_s = 90.0
+    goal_radius_m = 2.0
+    hold_s = 3.0
+
+    [weights]                        # composite score (paper defaults)
+    scenarios = { classic = 1.2, theoretical = 1.0 }
+    platforms = { real = 1.5, virtual = 1.0 }
+    beta = 0.3
+
+Trial ``t`` (0-based) of a combination flies configuration ``indices[t % len(indices)]``,
+so 10 trials over the ten configurations fly each once, as in the paper. Its seed is
+derived from the campaign seed, the combination and ``t``.
+
+Running: :func:`run_campaign` hands trials, grouped by scenario configuration (a worker
+builds each scenario's collision grid once), to an :class:`Executor`: in-process
+(``workers=1``) or a pool of worker processes; a distributed executor only has to
+implement :meth:`Executor.imap`. Each finished trial is written to the
+:class:`~ft_sitl.missions.store.ResultStore` at once; a rerun of the same campaign into
+the same directory skips finished trials.
+"""
+
+from __future__ import annotations
+
+import difflib
+import hashlib
+import math
+import os
+import time
+import tomllib
+from collections.abc import Callable, Iterable, Iterator
+from concurrent.futures import FIRST_COMPLETED, ProcessPoolExecutor, wait
+from concurrent.futures.process import BrokenProcessPool
+from dataclasses import dataclass, field
+from importlib import resources
+from pathlib import Path
+
+from ft_sitl import __version__
+from ft_sitl.missions.trial import TrialSpec, run_trial
+from ft_sitl.navigation.base import Limits
+
+PRESETS = ("quick", "paper")
+TOP_KEYS = ("name", "trials", "seed", "scenario_seed", "platforms", "platform_files",
+            "scenarios", "indices", "physics_hz", "algorithms", "limits", "weights",
+            "description")
+CHUNK_MAX = 40
+
+
+class CampaignError(ValueError):
+    """A campaign file or request is invalid; the message names the file and the key."""
+
+
+# --- reading a campaign file ----------------------------------------------------------------
+def _read(path: Path) -> dict:
+    try:
+        text = path.read_text()
+    except FileNotFoundError:
+        raise CampaignError(f"{path}: no such campaign file (presets: "
+                            f"{', '.join(PRESETS)})") from None
+    except (OSError, UnicodeDecodeError) as exc:
+        raise CampaignError(f"{path}: cannot read it ({exc})") from None
+    suffix = path.suffix.lower()
+    if suffix == ".toml":
+        try:
+            doc = tomllib.loads(text)
+        except tomllib.TOMLDecodeError as exc:
+            raise CampaignError(f"{path}: TOML syntax error: {exc}") from None
+    elif suffix in (".yaml", ".yml"):
+        import yaml
+
+        try:
+            doc = yaml.safe_load(text)
+        except yaml.YAMLError as exc:
+            mark = getattr(exc, "problem_mark", None)
+            where = f" at line {mark.line + 1}" if mark is not None else ""
+            raise CampaignError(f"{path}: YAML syntax error{where}: "
+                                f"{getattr(exc, 'problem', exc)}") from None
+    else:
+        raise CampaignError(f"{path}: a campaign file must end in .toml, .yaml or .yml")
+    if not isinstance(doc, dict):
+        raise CampaignError(f"{path}: the campaign must be a table of keys, got "
+                            f"{type(doc).__name__}")
+    return doc
+
+
+def preset_path(name: str) -> Path:
+    return Path(str(resources.files("ft_sitl.missions") / "presets" / f"{name}.toml"))
+
+
+def load_campaign(source: str | Path) -> Campaign:
+    """A campaign from a file, or a preset by name (``quick``, ``paper``)."""
+    text = str(source)
+    path = Path(text)
+    if text in PRESETS and not path.exists():
+        path = preset_path(text)
+    return parse_campaign(_read(path), path)
+
+
+def _unknown(where: str, key: str, allowed: Iterable[str]) -> CampaignError:
+    close = difflib.get_close_matches(key, list(allowed), n=1)
+    hint = f"; did you mean {close[0]!r}?" if close else ""
+    return CampaignError(f"{where}: unknown key {key!r}{hint}")
+
+
+def _int(where: str, v, lo: int = 0, hi: int | None = None) -> int:
+    if isinstance(v, bool) or not isinstance(v, int) or v < lo or (hi is not None and v > hi):
+        rng = f"{lo}..{hi}" if hi is not None else f">= {lo}"
+        raise CampaignError(f"{where}: must be an integer {rng}, got {v!r}")
+    return v
+
+
+def _list(where: str, v) -> list:
+    if isinstance(v, (str, dict)):
+        return [v]
+    if not isinstance(v, list) or not v:
+        raise CampaignError(f"{where}: must be a non-empty list, got {v!r}")
+    return v
+
+
+@dataclass(frozen=True)
+class AlgorithmEntry:
+    name: str
+    label: str
+    params: dict
+
+
+@dataclass(frozen=True)
+class ScenarioEntry:
+    family: str
+    indices: tuple[int, ...]
+    file: str | None = None
+
+
+@dataclass
+class Campaign:
+    name: str
+    algorithms: list[AlgorithmEntry]
+    platforms: list  # Platform objects
+    scenarios: list[ScenarioEntry]
+    trials: int = 10
+    seed: int = 0
+    scenario_seed: int = 0
+    limits: Limits = field(default_factory=Limits)
+    weights: dict = field(default_factory=dict)
+    physics_hz: int = 1000
+    source: str = ""
+    doc: dict = field(default_factory=dict)
+
+    def spec_dict(self) -> dict:
+        """The campaign as data: what resuming compares, what reports print."""
+        return {
+            "name": self.name, "trials": self.trials, "seed": self.seed,
+            "scenario_seed": self.scenario_seed, "physics_hz": self.physics_hz,
+            "algorithms": [{"name": a.name, "label": a.label, "params": a.params}
+                           for a in self.algorithms],
+            "platforms": [p.name for p in self.platforms],
+            "scenarios": [{"family": s.family, "indices": list(s.indices),
+                           **({"file": s.file} if s.file else {})} for s in self.scenarios],
+            "limits": self.limits.as_dict(), "weights": self.weights,
+        }
+
+    def trial_specs(self) -> list[TrialSpec]:
+        """Every trial of the matrix, grouped by scenario configuration."""
+        out = []
+        for sc in self.scenarios:
+            for a in self.algorithms:
+                for p in self.platforms:
+                    for t in range(self.trials):
+                        index = sc.indices[t % len(sc.indices)]
+                        key = f"{self.seed}|{a.label}|{p.name}|{sc.family}|{t}".encode()
+                        seed = int.from_bytes(hashlib.sha256(key).digest()[:4], "little")
+                        out.append(TrialSpec(
+                            algorithm=a.name, label=a.label, algorithm_params=a.params,
+                            platform=p.name,
+                            platform_def=p.physical_dict() if p.category == "user" else None,
+                            family=sc.family, scenario_index=index,
+                            scenario_seed=self.scenario_seed, scenario_file=sc.file,
+                            trial=t, seed=seed, limits=self.limits, campaign=self.name,
+                            physics_hz=self.physics_hz))
+        out.sort(key=lambda s: (s.scenario_file or "", s.family, s.scenario_index))
+        return out
+
+
+def parse_campaign(doc: dict, path: Path | None = None) -> Campaign:
+    where = str(path) if path is not None else "campaign"
+    base = path.parent if path is not None else Path(".")
+    for k in doc:
+        if k not in TOP_KEYS:
+            raise _unknown(where, k, TOP_KEYS)
+    if "algorithms" not in doc:
+        raise CampaignError(f"{where}: missing key 'algorithms' (which navigators to run)")
+    name = doc.get("name", path.stem if path is not None else "campaign")
+    if not isinstance(name, str) or not name:
+        raise CampaignError(f"{where}: name: must be a non-empty string")
+    trials = _int(f"{where}: trials", doc.get("trials", 10), 1, 10_000)
+    seed = _int(f"{where}: seed", doc.get("seed", 0))
+    scenario_seed = _int(f"{where}: scenario_seed", doc.get("scenario_seed", 0))
+    physics_hz = _int(f"{where}: physics_hz", doc.get("physics_hz", 1000), 100, 10_000)
+    if 1_000_000 % physics_hz:
+        raise CampaignError(f"{where}: physics_hz: {physics_hz} must divide 1,000,000")
+    limits_doc = doc.get("limits", {})
+    if not isinstance(limits_doc, dict):
+        raise CampaignError(f"{where}: limits: must be a table")
+    allowed = ("max_speed_m_s", "timeout_s", "goal_radius_m", "hold_s")
+    for k in limits_doc:
+        if k not in allowed:
+            raise _unknown(f"{where}: limits", k, allowed)
+    try:
+        limits = Limits(**limits_doc)
+    except ValueError as exc:
+        raise CampaignError(f"{where}: {exc}") from None
+    return Campaign(
+        name=name, algorithms=_algorithms(where, doc["algorithms"]),
+        platforms=_platforms(where, doc.get("platforms", "all"),
+                             doc.get("platform_files", []), base),
+        scenarios=_scenarios(where, doc.get("scenarios", "all"), doc.get("indices", "all"),
+                             base),
+        trials=trials, seed=seed, scenario_seed=scenario_seed, limits=limits,
+        weights=_weights(where, doc.get("weights", {})), physics_hz=physics_hz,
+        source=str(path) if path is not None else "", doc=doc)
+
+
+def _algorithms(where: str, v) -> list[AlgorithmEntry]:
+    from ft_sitl.navigation.registry import NavigatorError, available, create
+
+    if v == "all":
+        v = sorted(n for n, c in available().items() if not isinstance(c, str))
+    out, labels = [], set()
+    for k, item in enumerate(_list(f"{where}: algorithms", v)):
+        w = f"{where}: algorithms[{k}]"
+        if isinstance(item, str):
+            item = {"name": item}
+        if not isinstance(item, dict):
+            raise CampaignError(f"{w}: must be a navigator name or a table with 'name'")
+        for key in item:
+            if key not in ("name", "label", "params"):
+                raise _unknown(w, key, ("name", "label", "params"))
+        name = item.get("name")
+        if not isinstance(name, str):
+            raise CampaignError(f"{w}: missing 'name' (a registered navigator)")
+        params = item.get("params", {})
+        if not isinstance(params, dict):
+            raise CampaignError(f"{w}: params: must be a table of parameters")
+        try:
+            create(name, params)  # validates the name and the parameters now
+        except NavigatorError as exc:
+            raise CampaignError(f"{w}: {exc}") from None
+        label = item.get("label", name)
+        if not isinstance(label, str) or not label:
+            raise CampaignError(f"{w}: label: must be a non-empty string")
+        if label in labels:
+            raise CampaignError(f"{w}: label {label!r} is used twice; give each entry its "
+                                "own label")
+        labels.add(label)
+        out.append(AlgorithmEntry(name, label, dict(params)))
+    return out
+
+
+def _platforms(where: str, v, files, base: Path) -> list:
+    from ft_sitl.physics.catalog import PlatformRegistry
+    from ft_sitl.physics.platform import PlatformError
+
+    files = _list(f"{where}: platform_files", files) if files else []
+    try:
+        reg = PlatformRegistry([base / f for f in files])
+    except (PlatformError, OSError, ValueError) as exc:
+        raise CampaignError(f"{where}: platform_files: {exc}") from None
+    everything = reg.all()
+    chosen: list = []
+    for k, item in enumerate(_list(f"{where}: platforms", v)):
+        if not isinstance(item, str):
+            raise CampaignError(f"{where}: platforms[{k}]: must be a platform name or a "
+                                f"category, got {item!r}")
+        if item == "all":
+            picked = everything
+        elif item in ("real", "virtual", "user"):
+            picked = [p for p in everything if p.category == item]
+            if not picked:
+                raise CampaignError(f"{where}: platforms: no {item} platforms "
+                                    f"(user platforms come from platform_files)")
+        else:
+            try:
+                picked = [reg.get(item)]
+            except (PlatformError, KeyError, ValueError) as exc:
+                raise CampaignError(f"{where}: platforms[{k}]: {exc}") from None
+        for p in picked:
+            if p.name not in {q.name for q in chosen}:
+                chosen.append(p)
+    return chosen
+
+
+def _indices(where: str, v) -> tuple[int, ...]:
+    if v == "all":
+        return tuple(range(1, 11))
+    items = _list(where, v if not isinstance(v, int) else [v])
+    return tuple(_int(where, i, 1, 10) for i in items)
+
+
+def _scenarios(where: str, v, default_indices, base: Path) -> list[ScenarioEntry]:
+    from ft_sitl.scenarios.families import FAMILIES, resolve_family
+    from ft_sitl.scenarios.scenario import ScenarioError
+
+    indices = _indices(f"{where}: indices", default_indices)
+    if v == "all":
+        return [ScenarioEntry(f, indices) for f in FAMILIES]
+    out = []
+    for k, item in enumerate(_list(f"{where}: scenarios", v)):
+        w = f"{where}: scenarios[{k}]"
+        if isinstance(item, str):
+            item = {"family": item}
+        if not isinstance(item, dict):
+            raise CampaignError(f"{w}: must be a family name or a table")
+        for key in item:
+            if key not in ("family", "indices", "file"):
+                raise _unknown(w, key, ("family", "indices", "file"))
+        if "file" in item:
+            from ft_sitl.scenarios.io import load_scenario
+
+            f = base / str(item["file"])
+            try:
+                sc = load_scenario(f)
+            except ScenarioError as exc:
+                raise CampaignError(f"{w}: {exc}") from None
+            out.append(ScenarioEntry(sc.family, (1,), str(f.resolve())))
+            continue
+        try:
+            fam = resolve_family(item.get("family"))
+        except ScenarioError as exc:
+            raise CampaignError(f"{w}: {exc}") from None
+        idx = _indices(f"{w}: indices", item["indices"]) if "indices" in item else indices
+        out.append(ScenarioEntry(fam, idx))
+    return out
+
+
+def _weights(where: str, v) -> dict:
+    if not isinstance(v, dict):
+        raise CampaignError(f"{where}: weights: must be a table")
+    out = {}
+    for key, val in v.items():
+        if key == "beta":
+            if isinstance(val, bool) or not isinstance(val, (int, float)) \
+                    or not 0.0 <= val <= 1.0:
+                raise CampaignError(f"{where}: weights.beta: must be within 0..1, got {val!r}")
+            out["beta"] = float(val)
+        elif key in ("scenarios", "platforms"):
+            if not isinstance(val, dict):
+                raise CampaignError(f"{where}: weights.{key}: must be a table of weights")
+            for name, w in val.items():
+                if isinstance(w, bool) or not isinstance(w, (int, float)) \
+                        or not math.isfinite(w) or w < 0:
+                    raise CampaignError(f"{where}: weights.{key}.{name}: must be a "
+                                        f"non-negative number, got {w!r}")
+            out[key] = {str(k): float(w) for k, w in val.items()}
+        else:
+            raise _unknown(f"{where}: weights", key, ("scenarios", "platforms", "beta"))
+    return out
+
+
+# --- executors ------------------------------------------------------------------------------
+def run_chunk(specs: list[dict]) -> list[tuple[str, dict | None, str | None]]:
+    """Run trials (as spec dicts) one after the other: (trial_id, row or None, error)."""
+    out = []
+    for d in specs:
+        spec = TrialSpec.from_dict(d)
+        try:
+            out.append((spec.trial_id, run_trial(spec).row, None))
+        except Exception as exc:  # noqa: BLE001 - reported, the campaign goes on
+            out.append((spec.trial_id, None, f"{type(exc).__name__}: {exc}"))
+    return out
+
+
+class Executor:
+    """Runs chunks of trials somewhere; yields each chunk's results as it finishes."""
+
+    def imap(self, fn: Callable[[list[dict]], list], chunks: list[list[dict]]) -> Iterator:
+        raise NotImplementedError
+
+    def close(self) -> None:
+        pass
+
+
+class SerialExecutor(Executor):
+    """In this process, in order (``--workers 1``)."""
+
+    def imap(self, fn, chunks):
+        for chunk in chunks:
+            yield chunk, fn(chunk)
+
+
+def _worker_init() -> None:
+    os.environ.setdefault("OMP_NUM_THREADS", "1")
+    import signal
+
+    signal.signal(signal.SIGINT, signal.SIG_IGN)  # the parent handles Ctrl-C
+
+
+class ProcessExecutor(Executor):
+    """A pool of worker processes. A worker that dies (a navigator's segfault, the OOM
+    killer) takes only its chunk down: that chunk is retried one trial per process, and a
+    trial that kills its process again is recorded as a navigator error."""
+
+    def __init__(self, workers: int):
+        self.workers = workers
+        self._pool = None
+
+    def _new_pool(self):
+        import multiprocessing as mp
+
+        return ProcessPoolExecutor(self.workers, mp_context=mp.get_context("spawn"),
+                                   initializer=_worker_init)
+
+    def imap(self, fn, chunks):
+        pending = list(chunks)
+        suspect: list[list[dict]] = []
+        self._pool = self._new_pool()
+        running = {}
+        while pending or running or suspect:
+            while (pending or suspect) and len(running) < 2 * self.workers:
+                chunk = suspect.pop() if suspect else pending.pop(0)
+                running[self._pool.submit(fn, chunk)] = chunk
+            done, _ = wait(running, return_when=FIRST_COMPLETED)
+            broken = False
+            for fut in done:
+                chunk = running.pop(fut)
+                try:
+                    yield chunk, fut.result()
+                except BrokenProcessPool:
+                    broken = True
+                    if len(chunk) == 1:
+                        yield chunk, [_died(chunk[0])]
+                    else:
+                        suspect.extend([[d] for d in chunk])
+            if broken:
+                for chunk in running.values():
+                    suspect.extend([[d] for d in chunk] if len(chunk) > 1 else [chunk])
+                running.clear()
+                self._pool.shutdown(wait=False, cancel_futures=True)
+                self._pool = self._new_pool()
+        self.close()
+
+    def close(self) -> None:
+        if self._pool is not None:
+            self._pool.shutdown(wait=False, cancel_futures=True)
+            self._pool = None
+
+
+def _died(d: dict):
+    """The row of a trial whose process died: a navigator error (it is the only foreign
+    code a trial runs)."""
+    spec = TrialSpec.from_dict(d)
+    return spec.trial_id, {"__died__": True, "spec": d}, None
+
+
+def _chunks(specs: list[TrialSpec]) -> list[list[dict]]:
+    groups: dict = {}
+    for s in specs:
+        groups.setdefault((s.scenario_file, s.family, s.scenario_index), []).append(
+            s.to_dict())
+    out = []
+    for g in groups.values():
+        for k in range(0, len(g), CHUNK_MAX):
+            out.append(g[k:k + CHUNK_MAX])
+    return out
+
+
+def died_row(d: dict) -> dict:
+    """A navigator-error row for a trial whose worker process died."""
+    from ft_sitl.missions.trial import _identity_row, load_scenario_for, platform_for
+
+    spec = TrialSpec.from_dict(d)
+    p = platform_for(spec)
+    sc = load_scenario_for(spec)
+    row = _identity_row(spec, p, p.indicators(), sc)
+    row.update({"success": False, "reason": "navigator_error",
+                "detail": "the trial's process died (a crash in native code?)",
+                "code_version": __version__, "spec": spec.to_json(),
+                "finished_utc": time.strftime("%Y-%m-%dT%H:%M:%SZ", time.gmtime())})
+    return row
+
+
+def machine_info() -> dict:
+    """CPU model, cores, OS and Python of this machine (for reports)."""
+    import platform as pyplatform
+
+    model = pyplatform.processor() or ""
+    try:
+        with open("/proc/cpuinfo") as fh:
+            for line in fh:
+                if line.lower().startswith("model name"):
+                    model = line.split(":", 1)[1].strip()
+                    break
+    except OSError:
+        pass
+    return {"cpu_model": model or "unknown", "n_cpus": os.cpu_count(),
+            "os": f"{pyplatform.system()} {pyplatform.release()}",
+            "python": pyplatform.python_version()}
+
+
+def record_run(out_dir: Path, entry: dict) -> None:
+    """Append one run's facts to DIR/runs.json (every run and resume of the campaign)."""
+    import json
+
+    path = Path(out_dir) / "runs.json"
+    runs = []
+    if path.exists():
+        try:
+            runs = json.loads(path.read_text())
+        except (OSError, ValueError):
+            runs = []
+    runs.append(entry)
+    tmp = path.with_suffix(".tmp")
+    tmp.write_text(json.dumps(runs, indent=2))
+    os.replace(tmp, path)
+
+
+def report_meta(out_dir: Path, campaign: dict) -> dict:
+    """The report's run facts from DIR/runs.json."""
+    import json
+
+    path = Path(out_dir) / "runs.json"
+    runs = []
+    if path.exists():
+        try:
+            runs = json.loads(path.read_text())
+        except (OSError, ValueError):
+            runs = []
+    meta = {"code_version": campaign.get("code_version", __version__),
+            "machine": runs[-1]["machine"] if runs else machine_info()}
+    if runs:
+        meta["started_utc"] = runs[0]["started_utc"]
+        meta["finished_utc"] = runs[-1]["finished_utc"]
+        meta["wall_time_s"] = round(sum(r["wall_time_s"] for r in runs), 2)
+        meta["runs (resumes)"] = len(runs)
+        meta["workers"] = runs[-1].get("workers")
+    return meta
+
+
+@dataclass
+class RunSummary:
+    total: int
+    skipped: int
+    ran: int
+    errors: list[tuple[str, str]]
+    wall_s: float
+
+
+def run_campaign(campaign: Campaign, out_dir: str | Path, *, workers: int = 1,
+                 executor: Executor | None = None, progress: bool = True,
+                 limit: int | None = None) -> RunSummary:
+    """Run (or resume) a campaign into out_dir. ``limit``: stop after that many new trials
+    (tests, smoke runs)."""
+    from ft_sitl.missions.store import ResultStore
+
+    specs = campaign.trial_specs()
+    meta = {"spec": campaign.spec_dict(), "total_trials": len(specs),
+            "code_version": __version__}
+    store = ResultStore(out_dir)
+    store.open(meta)
+    todo = [s for s in specs if s.trial_id not in store.done]
+    skipped = len(specs) - len(todo)
+    if limit is not None:
+        todo = todo[:limit]
+    ex = executor or (SerialExecutor() if workers <= 1 else ProcessExecutor(workers))
+    errors: list[tuple[str, str]] = []
+    t0 = time.perf_counter()
+    started = time.strftime("%Y-%m-%dT%H:%M:%SZ", time.gmtime())
+    bar = None
+    if progress:
+        from tqdm import tqdm
+
+        bar = tqdm(total=len(specs), initial=skipped, unit="trial", dynamic_ncols=True,
+                   desc=campaign.name, smoothing=0.05)
+    ran = 0
+    try:
+        for _chunk, results in ex.imap(run_chunk, _chunks(todo)):
+            for tid, row, err in results:
+                if row is not None and row.get("__died__"):
+                    row = died_row(row["spec"])
+                if row is not None:
+                    store.append(row)
+                    ran += 1
+                else:
+                    errors.append((tid, err))
+                if bar is not None:
+                    bar.update(1)
+    finally:
+        if bar is not None:
+            bar.close()
+        ex.close()
+        store.close()
+        wall = time.perf_counter() - t0
+        record_run(Path(out_dir), {
+            "started_utc": started,
+            "finished_utc": time.strftime("%Y-%m-%dT%H:%M:%SZ", time.gmtime()),
+            "wall_time_s": round(wall, 3), "trials_run": ran, "trials_skipped": skipped,
+            "errors": len(errors), "workers": workers, "machine": machine_info(),
+            "code_version": __version__})
+    if store.done:
+        store.write_tables()
+    return RunSummary(len(specs), skipped, ran, errors, wall)

@@ -1,0 +1,149 @@
+"""A campaign's result directory: durable, append-only, resumable.
+
+Layout of ``DIR``::
+
+    campaign.json      the campaign as run (spec, resolved trial count, code version);
+                       written once, compared on resume
+    trials.jsonl       one finished trial per line (the results-table row as JSON),
+                       appended, flushed and fsync'ed as each trial completes
+    trials.parquet     the tidy table, rewritten from trials.jsonl at the end of a run
+    report/            ``ft-sitl campaign report``
+
+A trial counts as done once its line is completely on disk. Killing the runner at any
+moment (kill -9, power loss) loses at most the trials still in flight; a torn last line (a
+write cut short) is dropped on the next open, and the file is truncated back to its last
+complete line before anything is appended. Resuming skips every trial id already in the
+file, so no trial is lost or duplicated.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+from pathlib import Path
+
+SPEC_FILE = "campaign.json"
+TRIALS_FILE = "trials.jsonl"
+PARQUET_FILE = "trials.parquet"
+
+
+class StoreError(ValueError):
+    """The result directory cannot be used (another campaign's results, unreadable files)."""
+
+
+class ResultStore:
+    def __init__(self, directory: str | Path):
+        self.dir = Path(directory)
+        self.trials_path = self.dir / TRIALS_FILE
+        self.spec_path = self.dir / SPEC_FILE
+        self._fh = None
+        self.done: dict[str, dict] = {}
+
+    # --- opening ------------------------------------------------------------------------
+    def open(self, campaign: dict) -> None:
+        """Create the directory or reopen it for the same campaign; load finished trials."""
+        try:
+            self.dir.mkdir(parents=True, exist_ok=True)
+        except OSError as exc:
+            raise StoreError(f"--out {self.dir}: cannot create the directory: "
+                             f"{exc.strerror}") from None
+        if self.spec_path.exists():
+            try:
+                old = json.loads(self.spec_path.read_text())
+            except (OSError, ValueError) as exc:
+                raise StoreError(f"{self.spec_path}: unreadable ({exc})") from None
+            if old.get("spec") != campaign.get("spec"):
+                raise StoreError(f"{self.dir} holds the results of a different campaign "
+                                 f"({old.get('spec', {}).get('name', '?')!r}); use another "
+                                 f"--out directory, or the same campaign file to resume")
+        else:
+            tmp = self.spec_path.with_suffix(".tmp")
+            tmp.write_text(json.dumps(campaign, indent=2, sort_keys=True))
+            os.replace(tmp, self.spec_path)
+        self.done = self._load(repair=True)
+        self._fh = open(self.trials_path, "ab")  # noqa: SIM115 - kept open while running
+
+    def _load(self, repair: bool = False) -> dict[str, dict]:
+        done: dict[str, dict] = {}
+        if not self.trials_path.exists():
+            return done
+        data = self.trials_path.read_bytes()
+        good = 0
+        pos = 0
+        while True:
+            nl = data.find(b"\n", pos)
+            if nl < 0:
+                break
+            line = data[pos:nl]
+            try:
+                row = json.loads(line)
+                tid = row["trial_id"]
+            except (ValueError, KeyError, TypeError):
+                break  # a damaged line: keep what precedes it
+            done.setdefault(tid, row)
+            pos = good = nl + 1
+        if repair and good < len(data):  # a torn tail (killed mid-write): cut it off
+            with open(self.trials_path, "r+b") as fh:
+                fh.truncate(good)
+        return done
+
+    # --- writing ------------------------------------------------------------------------
+    def append(self, row: dict) -> None:
+        """Write one finished trial durably (flush + fsync) before anything else happens."""
+        if row["trial_id"] in self.done:
+            return
+        line = json.dumps(row, sort_keys=True, allow_nan=True, default=_plain) + "\n"
+        self._fh.write(line.encode())
+        self._fh.flush()
+        os.fsync(self._fh.fileno())
+        self.done[row["trial_id"]] = row
+
+    def close(self) -> None:
+        if self._fh is not None:
+            self._fh.close()
+            self._fh = None
+
+    # --- reading ------------------------------------------------------------------------
+    def rows(self) -> list[dict]:
+        return list(self.done.values())
+
+    def frame(self):
+        from ft_sitl.missions.results import to_frame
+
+        return to_frame(self.rows())
+
+    def write_tables(self, csv: bool = False) -> list[Path]:
+        """trials.parquet (and trials.csv) from the finished trials."""
+        df = self.frame()
+        out = [self.dir / PARQUET_FILE]
+        tmp = out[0].with_suffix(".parquet.tmp")
+        df.to_parquet(tmp, index=False)
+        os.replace(tmp, out[0])
+        if csv:
+            out.append(self.dir / "trials.csv")
+            df.to_csv(out[1], index=False)
+        return out
+
+
+def load_rows(directory: str | Path) -> tuple[dict, list[dict]]:
+    """(campaign.json contents, finished trial rows) of a result directory."""
+    d = Path(directory)
+    spec_path = d / SPEC_FILE
+    if not spec_path.exists():
+        raise StoreError(f"{d}: not a campaign result directory (no {SPEC_FILE})")
+    try:
+        campaign = json.loads(spec_path.read_text())
+    except (OSError, ValueError) as exc:
+        raise StoreError(f"{spec_path}: unreadable ({exc})") from None
+    store = ResultStore(d)
+    return campaign, list(store._load().values())
+
+
+def _plain(v):
+    import numpy as np
+
+    if isinstance(v, np.generic):
+        return v.item()
+    if isinstance(v, np.ndarray):
+        return v.tolist()
+    raise TypeError(f"not JSON serialisable: {type(v).__name__}")

@@ -1,0 +1,460 @@
+"""One trial of the FLYINGTRUST protocol, in-process and in lockstep.
+
+``run_trial(spec)`` flies one :class:`TrialSpec` with the same flight-controller code the
+MAVLink layer serves (a :class:`~ft_sitl.autopilot.fleet.Fleet` with its commander, cascade
+and plant, and the scenario's collision guard) and returns the trial's row of the results
+table (:mod:`ft_sitl.missions.results`).
+
+Protocol (``../shared/docs/benchmark-protocol.md``, paper Sec. IV-B):
+
+1. *Approach.* Spawn on the floor at the scenario's takeoff point facing the goal, arm,
+   take off (PX4 AUTO.TAKEOFF) to the start altitude, then hold until the vehicle is
+   stable at the start waypoint: within 0.3 m of it and slower than 0.3 m/s for 1 s
+   (limit: 30 s, else the trial fails as ``loss_of_control`` "could not reach the start").
+2. *Navigation.* Offboard mode; every ``1 / navigator.rate_hz`` s of simulated time the
+   navigator gets an :class:`~ft_sitl.navigation.Observation` (and a depth frame when
+   its camera is due) and returns a setpoint. ``MPC_XY_VEL_MAX`` is the speed cap (4 m/s).
+3. *Outcome*, checked every 20 ms of simulated time (the commander's tick) and at every
+   physics step for contacts (the guard): the first of
+
+   - ``collision``: the collision sphere touched an obstacle (the guard's event);
+   - ``out_of_bounds``: the centre left the flight volume (area sides, ceiling), or the
+     vehicle touched the floor during navigation;
+   - ``loss_of_control``: tilt beyond 90 deg or a non-finite state;
+   - ``navigator_error``: the navigator raised, or returned something that is not a
+     valid Setpoint;
+   - ``timeout``: not in the goal sphere 90 s after navigation start, or the navigator
+     gave up (``GiveUp``: "no plan");
+   - ``unstable``: entered the goal sphere but left it within the 3 s hold window;
+   - ``success``: entered the goal sphere (within 90 s) and stayed in it for 3 s.
+
+Everything but ``wall_time_s`` and ``planner_time_s`` is a pure function of the spec:
+the same spec gives the same row (``ft-sitl trial rerun`` checks this).
+"""
+
+from __future__ import annotations
+
+import datetime
+import hashlib
+import json
+import math
+import time
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from ft_sitl import __version__
+from ft_sitl.autopilot.cascade import C_SAT_STEPS
+from ft_sitl.autopilot.commander import MAIN_OFFBOARD
+from ft_sitl.autopilot.fleet import Fleet
+from ft_sitl.autopilot.params import ParamSet
+from ft_sitl.autopilot.setpoints import Setpoint
+from ft_sitl.navigation.base import GiveUp, Limits, Observation, Task
+from ft_sitl.physics import dynamics as d
+
+APPROACH_TIMEOUT_S = 30.0
+STABLE_POS_M = 0.3
+STABLE_SPEED_M_S = 0.3
+STABLE_FOR_S = 1.0
+TICK_S = 0.02
+MAX_TILT_RAD = math.pi / 2
+
+
+class TrialSpecError(ValueError):
+    """A trial spec is invalid; the message names the field."""
+
+
+def _int(name, v, lo=0):
+    if isinstance(v, bool) or not isinstance(v, int) or v < lo:
+        raise TrialSpecError(f"{name}: must be an integer >= {lo}, got {v!r}")
+    return v
+
+
+@dataclass(frozen=True)
+class TrialSpec:
+    """Everything that decides a trial. ``platform_def`` (the platform's physical fields)
+    and ``scenario_file`` make user platforms and scenarios rerunnable on their own."""
+
+    algorithm: str
+    platform: str
+    family: str
+    scenario_index: int = 1
+    scenario_seed: int = 0
+    trial: int = 0
+    seed: int = 0
+    algorithm_params: dict = field(default_factory=dict)
+    limits: Limits = field(default_factory=Limits)
+    campaign: str = ""
+    label: str = ""  # the algorithm's name in the results (default: the navigator's name)
+    platform_def: dict | None = None
+    scenario_file: str | None = None
+    physics_hz: int = 1000
+
+    def __post_init__(self):
+        for name in ("algorithm", "platform", "family"):
+            v = getattr(self, name)
+            if not isinstance(v, str) or not v:
+                raise TrialSpecError(f"{name}: must be a non-empty string, got {v!r}")
+        _int("scenario_index", self.scenario_index, 1)
+        _int("scenario_seed", self.scenario_seed)
+        _int("trial", self.trial)
+        _int("seed", self.seed)
+        _int("physics_hz", self.physics_hz, 1)
+        if not isinstance(self.algorithm_params, dict):
+            raise TrialSpecError("algorithm_params: must be a table of parameters")
+        if not isinstance(self.limits, Limits):
+            raise TrialSpecError("limits: must be a Limits")
+
+    # --- serialisation -------------------------------------------------------------------
+    def to_dict(self) -> dict:
+        return {
+            "algorithm": self.algorithm, "algorithm_params": self.algorithm_params,
+            "platform": self.platform, "platform_def": self.platform_def,
+            "family": self.family, "scenario_index": self.scenario_index,
+            "scenario_seed": self.scenario_seed, "scenario_file": self.scenario_file,
+            "trial": self.trial, "seed": self.seed, "limits": self.limits.as_dict(),
+            "campaign": self.campaign, "label": self.label, "physics_hz": self.physics_hz,
+        }
+
+    @classmethod
+    def from_dict(cls, d: dict) -> TrialSpec:
+        if not isinstance(d, dict):
+            raise TrialSpecError("a trial spec must be a table")
+        d = dict(d)
+        d.pop("code_version", None)
+        try:
+            limits = Limits(**d.pop("limits", {}))
+        except TypeError as exc:
+            raise TrialSpecError(f"limits: {exc}") from None
+        except ValueError as exc:
+            raise TrialSpecError(str(exc)) from None
+        try:
+            return cls(limits=limits, **d)
+        except TypeError as exc:
+            raise TrialSpecError(f"trial spec: {exc}") from None
+
+    def to_json(self) -> str:
+        return json.dumps(self.to_dict(), sort_keys=True, separators=(",", ":"))
+
+    @property
+    def trial_id(self) -> str:
+        """16 hex digits of the SHA-256 of the canonical spec (the campaign's key)."""
+        return hashlib.sha256(self.to_json().encode()).hexdigest()[:16]
+
+
+# --- per-process caches: scenarios, collision worlds and grids are reused across trials ---
+_SCENARIOS: dict = {}
+_GRIDS: dict = {}
+_CACHE_MAX = 8
+
+
+def _cached(cache: dict, key, make):
+    if key not in cache:
+        if len(cache) >= _CACHE_MAX:
+            cache.pop(next(iter(cache)))
+        cache[key] = make()
+    return cache[key]
+
+
+def load_scenario_for(spec: TrialSpec):
+    if spec.scenario_file:
+        from ft_sitl.scenarios.io import load_scenario
+
+        return _cached(_SCENARIOS, ("file", spec.scenario_file),
+                       lambda: load_scenario(spec.scenario_file))
+    from ft_sitl.scenarios.families import build_scenario
+
+    key = (spec.family, spec.scenario_index, spec.scenario_seed)
+    return _cached(_SCENARIOS, key, lambda: build_scenario(*key))
+
+
+def _world_and_grid(scenario):
+    from ft_sitl.scenarios.collision import CollisionWorld
+    from ft_sitl.scenarios.guard import DistanceGrid
+
+    def make():
+        return (CollisionWorld(scenario.mesh, scenario.bounds_min, scenario.bounds_max),
+                DistanceGrid.build(scenario.mesh, scenario.bounds_min, scenario.bounds_max))
+    return _cached(_GRIDS, id(scenario), make)
+
+
+def platform_for(spec: TrialSpec):
+    if spec.platform_def is not None:
+        from ft_sitl.physics.catalog import platform_from_mapping
+
+        return platform_from_mapping(dict(spec.platform_def), f"trial spec platform "
+                                                               f"{spec.platform!r}")
+    from ft_sitl.physics.catalog import get_platform
+
+    return get_platform(spec.platform)
+
+
+# --- the trial -----------------------------------------------------------------------------
+@dataclass
+class TrialOutcome:
+    row: dict
+    trajectory: np.ndarray | None = None  # (K, 4): t_s (from navigation start), x, y, z
+    scenario: object = None
+
+
+class _Fail(Exception):
+    def __init__(self, reason: str, detail: str = ""):
+        super().__init__(reason)
+        self.reason, self.detail = reason, detail
+
+
+def run_trial(spec: TrialSpec, *, record: bool = False, navigator=None) -> TrialOutcome:
+    """Fly one trial; the row of the results table (and the trajectory when ``record``).
+    ``navigator`` overrides the registry lookup (an instance; tests)."""
+    from ft_sitl.navigation.registry import create
+    from ft_sitl.scenarios.guard import CollisionGuard
+
+    wall0 = time.perf_counter()
+    sc = load_scenario_for(spec)
+    platform = platform_for(spec)
+    nav = navigator if navigator is not None else create(spec.algorithm,
+                                                         spec.algorithm_params)
+    world, grid = _world_and_grid(sc)
+    guard = CollisionGuard(world, [platform.collision_radius_m], grid=grid,
+                           names=sc.obstacle_name)
+    params = ParamSet({"MPC_XY_VEL_MAX": spec.limits.max_speed_m_s})
+    fleet = Fleet([platform], params=[params], spawn=[sc.takeoff], spawn_yaw=[sc.start_yaw],
+                  physics_hz=spec.physics_hz, guard=guard)
+    cmd = fleet.commanders[0]
+    ind = platform.indicators()
+    row = _identity_row(spec, platform, ind, sc)
+    m = _Metrics()
+    traj: list = []
+    reason, detail = "success", ""
+    # navigation-phase baselines (the approach may fail before they are taken)
+    t_nav0_us, sat0, steps0, e0 = None, 0.0, 0, math.nan
+    try:
+        _approach(fleet, sc)
+        t_nav0_us = fleet.time_us
+        sat0 = float(fleet.sim.ctrl[0, C_SAT_STEPS])
+        steps0 = fleet.sim.steps
+        e0 = fleet.sim.energy_j(0)
+        n_events = len(fleet.events)
+        task = Task(start=sc.start.copy(), start_yaw=sc.start_yaw, goal=sc.goal.copy(),
+                    limits=spec.limits, bounds_min=sc.bounds_min.copy(),
+                    bounds_max=sc.bounds_max.copy(),
+                    collision_radius_m=platform.collision_radius_m, twr_max=ind.twr_max,
+                    alpha_xy_max=ind.alpha_xy_max_rad_s2, alpha_z_max=ind.alpha_z_max_rad_s2,
+                    rng=np.random.default_rng(np.random.SeedSequence(
+                        [spec.seed, spec.trial])))
+        camera = _camera(nav, sc)
+        cam_rng = np.random.default_rng(np.random.SeedSequence([spec.seed, spec.trial, 1]))
+        try:
+            t = time.perf_counter()
+            nav.reset(task)
+            m.planner_s += time.perf_counter() - t
+        except GiveUp as exc:
+            raise _Fail("timeout", f"navigator gave up: {exc}") from None
+        except Exception as exc:  # noqa: BLE001 - any navigator failure fails the trial
+            raise _Fail("navigator_error", f"reset raised {type(exc).__name__}: {exc}") from None
+        period_us = max(fleet.sim.dt_us, round(1e6 / float(nav.rate_hz)))
+        next_nav_us = t_nav0_us
+        next_cam_us = t_nav0_us
+        cam_period_us = round(1e6 / camera.config.rate_hz) if camera is not None else 0
+        timeout_us = round(spec.limits.timeout_s * 1e6)
+        hold_us = round(spec.limits.hold_s * 1e6)
+        entered_us = None
+        prev = fleet.state(0).position.copy()
+        tick_us = round(TICK_S * 1e6)
+        while True:
+            now = fleet.time_us
+            t_nav_us = now - t_nav0_us
+            s = fleet.state(0)
+            if now >= next_nav_us:
+                depth = None
+                if camera is not None and now >= next_cam_us:
+                    depth = camera.capture(t_nav_us, fleet.sim.position(0),
+                                           fleet.sim.attitude(0), rng=cam_rng)
+                    next_cam_us += cam_period_us
+                obs = Observation(time_s=t_nav_us * 1e-6, position=s.position,
+                                  velocity=s.velocity, yaw=s.yaw,
+                                  attitude=fleet.sim.attitude(0),
+                                  angular_velocity=fleet.sim.x[0, d.X_OMEGA:d.X_OMEGA + 3].copy(),
+                                  depth=depth)
+                sp = _ask(nav, obs, m)
+                fleet.offboard_setpoint(0, sp)
+                if cmd.main_mode != MAIN_OFFBOARD:  # PX4: a setpoint first, then the mode
+                    res = cmd.set_mode(MAIN_OFFBOARD)
+                    if res.name != "ACCEPTED" or cmd.main_mode != MAIN_OFFBOARD:
+                        raise _Fail("navigator_error", "the flight controller refused "
+                                                       "offboard mode")
+                    fleet.offboard_setpoint(0, sp)
+                next_nav_us += period_us
+            fleet.run_us(min(tick_us, next_nav_us - fleet.time_us) if next_nav_us >
+                         fleet.time_us else tick_us)
+            s = fleet.state(0)
+            m.sample(fleet, guard, prev, s)
+            prev = s.position.copy()
+            t_nav_us = fleet.time_us - t_nav0_us
+            if record:
+                traj.append((t_nav_us * 1e-6, *s.position))
+            _check(fleet, n_events, s, spec)
+            dist = float(np.linalg.norm(s.position - sc.goal))
+            if dist <= spec.limits.goal_radius_m:
+                if entered_us is None:
+                    entered_us = t_nav_us
+                    m.time_to_goal_s = t_nav_us * 1e-6
+                elif t_nav_us - entered_us >= hold_us:
+                    break
+            elif entered_us is not None:
+                raise _Fail("unstable", f"left the goal sphere {(t_nav_us - entered_us) * 1e-6:.2f}"
+                                        f" s after entering it (hold {spec.limits.hold_s:g} s)")
+            if entered_us is None and t_nav_us >= timeout_us:
+                raise _Fail("timeout", f"not in the goal sphere after {spec.limits.timeout_s:g}"
+                                       f" s ({dist:.1f} m away)")
+    except _Fail as f:
+        reason, detail = f.reason, f.detail
+    if reason == "collision":
+        m.min_clear = 0.0  # it touched (the contact response leaves it 1 mm off)
+    navigated = t_nav0_us is not None
+    nav_steps = fleet.sim.steps - steps0 if navigated else 0
+    row.update(m.row())
+    row.update({
+        "success": reason == "success", "reason": reason, "detail": detail,
+        "nav_time_s": (fleet.time_us - t_nav0_us) * 1e-6 if navigated else 0.0,
+        "saturation_fraction": (float(fleet.sim.ctrl[0, C_SAT_STEPS] - sat0) / nav_steps
+                                if nav_steps else math.nan),
+        "energy_j": fleet.sim.energy_j(0) - e0 if navigated else math.nan,
+        "replans": int(getattr(nav, "replans", 0) or 0),
+        "sim_time_s": fleet.time_us * 1e-6,
+        "wall_time_s": time.perf_counter() - wall0,
+        "code_version": __version__,
+        "finished_utc": datetime.datetime.now(datetime.UTC).strftime("%Y-%m-%dT%H:%M:%SZ"),
+        "spec": spec.to_json(),
+    })
+    return TrialOutcome(row, np.array(traj) if record else None, sc)
+
+
+def _identity_row(spec, platform, ind, sc) -> dict:
+    return {
+        "trial_id": spec.trial_id, "campaign": spec.campaign,
+        "algorithm": spec.label or spec.algorithm,
+        "algorithm_params": json.dumps(spec.algorithm_params, sort_keys=True),
+        "platform": platform.name, "platform_category": platform.category,
+        "mass_kg": platform.mass_kg, "twr_max": ind.twr_max,
+        "alpha_xy_max": ind.alpha_xy_max_rad_s2, "alpha_z_max": ind.alpha_z_max_rad_s2,
+        "family": sc.family, "scenario_category": sc.category,
+        "scenario_index": sc.index, "scenario_seed": sc.seed, "scenario": sc.name,
+        "trial": spec.trial, "seed": spec.seed,
+    }
+
+
+def _approach(fleet: Fleet, sc) -> None:
+    """Arm, take off to the start altitude, settle at the start waypoint."""
+    cmd = fleet.commanders[0]
+    res = cmd.arm()
+    if res.name != "ACCEPTED":
+        texts = [t for _, t in cmd.statustexts]
+        raise _Fail("loss_of_control", f"arming refused: {texts[-1] if texts else res.name}")
+    cmd.takeoff(float(sc.start[2]))
+    stable_us = 0
+    tick_us = round(TICK_S * 1e6)
+    t_end = fleet.time_us + round(APPROACH_TIMEOUT_S * 1e6)
+    reposition = False
+    while fleet.time_us < t_end:
+        fleet.run_us(tick_us)
+        s = fleet.state(0)
+        if fleet.events and fleet.events[-1].kind == "collision":
+            ev = fleet.events[-1]
+            raise _Fail("collision", f"hit {ev.what} before navigation started")
+        if not reposition and abs(s.position[2] - sc.start[2]) < STABLE_POS_M:
+            cmd.reposition(sc.start.copy(), sc.start_yaw)
+            reposition = True
+        err = float(np.linalg.norm(s.position - sc.start))
+        if reposition and err < STABLE_POS_M and float(np.linalg.norm(s.velocity)) \
+                < STABLE_SPEED_M_S:
+            stable_us += tick_us
+            if stable_us >= round(STABLE_FOR_S * 1e6):
+                return
+        else:
+            stable_us = 0
+    s = fleet.state(0)
+    raise _Fail("loss_of_control", f"could not reach the start in {APPROACH_TIMEOUT_S:g} s "
+                                   f"({np.linalg.norm(s.position - sc.start):.2f} m off)")
+
+
+def _camera(nav, sc):
+    if getattr(nav, "camera", None) is None:
+        return None
+    from ft_sitl.scenarios.camera import DepthCamera
+
+    return DepthCamera(sc.mesh, nav.camera)
+
+
+def _ask(nav, obs, m) -> Setpoint:
+    t = time.perf_counter()
+    try:
+        sp = nav.step(obs)
+    except GiveUp as exc:
+        raise _Fail("timeout", f"navigator gave up: {exc}") from None
+    except Exception as exc:  # noqa: BLE001 - any navigator failure fails the trial
+        raise _Fail("navigator_error", f"step raised {type(exc).__name__}: {exc}") from None
+    finally:
+        m.planner_s += time.perf_counter() - t
+        m.planner_calls += 1
+    if not isinstance(sp, Setpoint):
+        raise _Fail("navigator_error", f"step returned {type(sp).__name__}, not a Setpoint")
+    row = sp.row
+    if row.shape != Setpoint.off().row.shape or np.isinf(row).any():
+        raise _Fail("navigator_error", "step returned a malformed setpoint")
+    if sp.kind in (0, 1):  # OFF / IDLE: not an offboard setpoint
+        raise _Fail("navigator_error", "step returned a motors-off/idle setpoint")
+    return sp
+
+
+def _check(fleet: Fleet, n_events: int, s, spec) -> None:
+    for ev in fleet.events[n_events:]:
+        if ev.kind == "collision":
+            raise _Fail("collision", f"hit {ev.what} at {ev.speed_m_s:.1f} m/s")
+        if ev.kind == "left_volume":
+            raise _Fail("out_of_bounds", f"left the flight volume past the {ev.what}"
+                        if ev.what != "ceiling" else "climbed above the ceiling")
+    x = fleet.sim.x[0]
+    if not np.all(np.isfinite(x)):
+        raise _Fail("loss_of_control", "non-finite state")
+    if s.tilt > MAX_TILT_RAD:
+        raise _Fail("loss_of_control", f"tilt {math.degrees(s.tilt):.0f} deg")
+    if s.on_ground:
+        raise _Fail("out_of_bounds", "touched the floor")
+
+
+class _Metrics:
+    def __init__(self):
+        self.path = 0.0
+        self.speed_sum = 0.0
+        self.n = 0
+        self.max_speed = 0.0
+        self.min_clear = math.inf
+        self.max_tilt = 0.0
+        self.planner_s = 0.0
+        self.planner_calls = 0
+        self.time_to_goal_s = math.nan
+
+    def sample(self, fleet, guard, prev, s) -> None:
+        self.path += float(np.linalg.norm(s.position - prev))
+        v = float(np.linalg.norm(s.velocity))
+        self.speed_sum += v
+        self.n += 1
+        self.max_speed = max(self.max_speed, v)
+        self.max_tilt = max(self.max_tilt, s.tilt)
+        # an exact (fcl) clearance only when the guard's lower bound does not rule out a
+        # new minimum
+        if not guard.clearance_bound(0) > self.min_clear:
+            self.min_clear = min(self.min_clear, guard.clearance(0))
+
+    def row(self) -> dict:
+        return {
+            "time_to_goal_s": self.time_to_goal_s,
+            "path_length_m": self.path,
+            "mean_speed_m_s": self.speed_sum / self.n if self.n else math.nan,
+            "max_speed_m_s": self.max_speed if self.n else math.nan,
+            "min_clearance_m": self.min_clear if math.isfinite(self.min_clear) else math.nan,
+            "max_tilt_deg": math.degrees(self.max_tilt) if self.n else math.nan,
+            "planner_time_s": self.planner_s,
+            "planner_calls": self.planner_calls,
+        }

@@ -1,0 +1,119 @@
+"""The Navigator protocol: what a navigation algorithm sees and what it returns.
+
+A navigator flies one trial's navigation phase. The trial runner (``ft_sitl.missions``)
+calls :meth:`Navigator.reset` once with the :class:`Task` (start, goal, limits, flight
+volume, platform indicators, a seeded RNG), then :meth:`Navigator.step` at the
+navigator's own rate (``rate_hz``, simulated time) with an :class:`Observation`, and sends
+the returned :class:`~ft_sitl.autopilot.setpoints.Setpoint` to the flight controller as a
+PX4 offboard setpoint: exactly what a MAVSDK/MAVLink navigator does over the wire
+(``ft_sitl.navigation`` over MAVSDK uses the same objects).
+
+A navigator that needs depth images sets ``camera`` to a
+:class:`~ft_sitl.scenarios.camera.CameraConfig`; it then gets a fresh
+:class:`~ft_sitl.scenarios.camera.DepthFrame` in ``Observation.depth`` whenever one is due
+at the camera's rate (else None).
+
+A navigator that cannot go on (no path) raises :class:`GiveUp`; the trial then fails as a
+timeout with the navigator's reason (the protocol counts "no plan" as a timeout). Any other
+exception, or a return value that is not a valid Setpoint, fails the trial as a navigator
+error; the campaign goes on.
+
+Frames: world ENU (x east, y north, z up), metres, radians, like the rest of ft_sitl.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from ft_sitl.autopilot.setpoints import Setpoint
+
+
+class GiveUp(Exception):  # noqa: N818 - a signal, not an error
+    """Raised by a navigator that has no way to the goal; the message says why."""
+
+
+@dataclass(frozen=True)
+class Limits:
+    """The benchmark's limits, identical for every algorithm (protocol Sec. IV-B)."""
+
+    max_speed_m_s: float = 4.0
+    timeout_s: float = 90.0
+    goal_radius_m: float = 2.0
+    hold_s: float = 3.0
+
+    def __post_init__(self):
+        for name in ("max_speed_m_s", "timeout_s", "goal_radius_m", "hold_s"):
+            v = getattr(self, name)
+            if isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v) \
+                    or v <= 0:
+                raise ValueError(f"limits.{name}: must be a positive number, got {v!r}")
+            object.__setattr__(self, name, float(v))
+
+    def as_dict(self) -> dict:
+        return {"max_speed_m_s": self.max_speed_m_s, "timeout_s": self.timeout_s,
+                "goal_radius_m": self.goal_radius_m, "hold_s": self.hold_s}
+
+
+@dataclass(frozen=True, eq=False)
+class Task:
+    """What a navigator is told at the start of a navigation phase."""
+
+    start: np.ndarray
+    start_yaw: float
+    goal: np.ndarray
+    limits: Limits
+    bounds_min: np.ndarray
+    bounds_max: np.ndarray
+    collision_radius_m: float
+    twr_max: float
+    alpha_xy_max: float
+    alpha_z_max: float
+    rng: np.random.Generator = field(default_factory=lambda: np.random.default_rng(0))
+
+    @property
+    def ceiling(self) -> float:
+        return float(self.bounds_max[2])
+
+
+@dataclass(frozen=True, eq=False)
+class Observation:
+    """The vehicle's state as the flight controller estimates it, at ``time_s`` seconds
+    after navigation start (simulated time)."""
+
+    time_s: float
+    position: np.ndarray
+    velocity: np.ndarray
+    yaw: float
+    attitude: np.ndarray  # quaternion w, x, y, z (ENU / FLU)
+    angular_velocity: np.ndarray  # body rates (FLU), rad/s
+    depth: object | None = None  # a DepthFrame when one is due
+
+
+class Navigator:
+    """Base class of navigators. Subclasses set ``name`` and implement :meth:`step`.
+
+    Constructor keyword arguments are the navigator's parameters (they are stored with
+    every trial's spec); ``rate_hz`` is how often :meth:`step` is called; ``replans`` is
+    a counter the navigator increments when it plans again.
+    """
+
+    name: str = ""
+    rate_hz: float = 20.0
+    camera = None  # a CameraConfig to receive depth frames
+
+    def __init__(self, **params):
+        if params:
+            raise TypeError(f"{type(self).__name__} takes no parameter "
+                            f"{', '.join(sorted(params))}")
+        self.replans = 0
+
+    def reset(self, task: Task) -> None:
+        """Called once before the first step of a navigation phase."""
+        self.task = task
+        self.replans = 0
+
+    def step(self, obs: Observation) -> Setpoint:  # pragma: no cover - abstract
+        raise NotImplementedError
