@@ -17,8 +17,15 @@ travels north, from near the short side ``y = 0`` to near ``y = length``.
 * goal: ``(width / 2, length - 3 m, start altitude)`` (Maze: the centre of its last
   cell), reached within 2 m;
 * bounds: the area times ``[0, ceiling]``; obstacles may rise above the ceiling.
-* At least one obstacle crosses the straight start->goal segment (checked at build time)
-  and a collision-free path exists for the largest catalog platform's collision radius
+* Obstacles sit on the straight start->goal segment (checked at build time): in five
+  families at least one crosses it; in the two open classic families, Forest and Urban,
+  at least one stands within ``LINE_CORRIDOR_M`` (0.6 m) of it -- on it, or beside it
+  with a gap smaller than most platforms' collision radius (0.15-0.38 m). Flying the line
+  straight then hits something in most configurations, and a small platform slips past in
+  a few: the paper's straight-flight baseline succeeds in 10-20 % of its Forest and Urban
+  trials and never elsewhere (Sec. IV-B, A4), which strict blocking could not reproduce.
+  Urban lays its centre line along an open boulevard (walls only) with probability 0.35.
+* A collision-free path exists for the largest catalog platform's collision radius
   (0.384 m): see :mod:`ft_sitl.scenarios.solvability` and the tests.
 * Random families keep obstacles at least 3 m (horizontally) from the takeoff/start column
   and the goal.
@@ -85,6 +92,13 @@ START_MARGIN_M = 3.0
 CLEAR_RADIUS_M = 3.0
 """Random obstacles keep this horizontal distance from the takeoff/start column and goal."""
 CYLINDER_SECTIONS = 16
+#: in the open classic families (Forest, Urban) the obstacle "on the line" may stand up to
+#: this far beside it (m): a vehicle flying the line straight hits it unless its collision
+#: radius is smaller than the gap (see the module docstring)
+LINE_CORRIDOR_M = 0.6
+#: Urban: probability that the centre line runs along an open boulevard (walls only)
+BOULEVARD_PROBABILITY = 0.35
+OPEN_FAMILIES = ("forest", "urban")
 """Sides of the prisms that stand for cylinders (circumscribed: they contain the circle)."""
 
 
@@ -222,7 +236,7 @@ def _plain(v):
 def _make(family: str, category: str, index: int, seed: int, builder: _MeshBuilder, *,
           width: float, length: float, ceiling: float, altitude: float,
           parameters: dict, layout: dict, obstacle_count: int,
-          start_xy=None, goal_xy=None, pitch=None) -> Scenario:
+          start_xy=None, goal_xy=None, pitch=None, corridor: float = 0.0) -> Scenario:
     sx, sy = start_xy if start_xy is not None else (width / 2.0, START_MARGIN_M)
     gx, gy = goal_xy if goal_xy is not None else (width / 2.0, length - START_MARGIN_M)
     provenance = {
@@ -248,8 +262,9 @@ def _make(family: str, category: str, index: int, seed: int, builder: _MeshBuild
         start_yaw=math.atan2(gy - sy, gx - sx),
         goal=(gx, gy, altitude), provenance=provenance,
     )
-    if not sc.line_blocked(0.0):  # every generator guarantees this; a bug if not
-        raise RuntimeError(f"{sc.name}: no obstacle on the straight start->goal line")
+    if not sc.line_blocked(corridor):  # every generator guarantees this; a bug if not
+        raise RuntimeError(f"{sc.name}: no obstacle within {corridor} m of the straight "
+                           "start->goal line")
     return sc
 
 
@@ -276,8 +291,10 @@ def forest(index: int, seed: int = 0) -> Scenario:
     Trunks are vertical cylinders from the ground, radius U(0.15, 0.30) m, height
     U(6, 12) m (canopies would sit above the 3 m ceiling and are omitted). Positions are
     uniform with rejection: trunk surfaces >= 1.5 m apart and >= 3 m from the takeoff
-    column and the goal. If no trunk crosses the start->goal line, the trunk nearest to it
-    is moved onto it (keeping the density exact).
+    column and the goal. If no trunk comes within 0.6 m (LINE_CORRIDOR_M) of the
+    start->goal line, the trunk nearest to it is moved beside it, its surface a uniform
+    0-0.6 m from the line (keeping the density exact): a vehicle flying the line straight
+    hits it unless its collision radius is smaller than the gap.
     """
     family = "forest"
     _check(family, index, seed)
@@ -303,29 +320,36 @@ def forest(index: int, seed: int = 0) -> Scenario:
             continue
         trees.append([x, y, r, h])
     moved = None
-    on_line = [i for i, (x, y, r, _) in enumerate(trees)
-               if abs(x - line_x) < r and keep_out[0][1] < y < keep_out[1][1]]
-    if not on_line:
+    # a trunk whose surface comes within LINE_CORRIDOR_M of the line blocks the largest
+    # platform; if none does, the nearest trunk is moved beside the line, its surface a
+    # uniform 0..LINE_CORRIDOR_M from it
+    near_line = [i for i, (x, y, r, _) in enumerate(trees)
+                 if abs(x - line_x) - r < LINE_CORRIDOR_M
+                 and keep_out[0][1] < y < keep_out[1][1]]
+    if not near_line:
+        offset = rng.uniform(0.0, LINE_CORRIDOR_M)
+        side = 1.0 if rng.random() < 0.5 else -1.0
         for i in sorted(range(count), key=lambda i: (abs(trees[i][0] - line_x), i)):
             x, y, r, h = trees[i]
             others = trees[:i] + trees[i + 1:]
-            if _tree_ok(line_x, y, r, others, keep_out, gap):
-                trees[i][0] = line_x
+            nx = line_x + side * (r + offset)
+            if _tree_ok(nx, y, r, others, keep_out, gap):
+                trees[i][0] = nx
                 moved = i
                 break
         else:
-            raise RuntimeError(f"forest #{index}: no trunk can be moved onto the line")
+            raise RuntimeError(f"forest #{index}: no trunk can be moved beside the line")
     b = _MeshBuilder()
     for x, y, r, h in trees:
         b.cylinder((x, y, 0.0), (x, y, h), r, kind="tree")
     return _make(
         family, "classic", index, seed, b, width=width, length=length, ceiling=ceiling,
-        altitude=alt, obstacle_count=count,
+        altitude=alt, obstacle_count=count, corridor=LINE_CORRIDOR_M,
         parameters={"size_m": [width, length], "ceiling_m": ceiling, "density_per_m2": density,
                     "tree_count": count, "trunk_radius_m": [0.15, 0.30],
                     "trunk_height_m": [6.0, 12.0], "min_trunk_gap_m": gap,
                     "clear_radius_m": CLEAR_RADIUS_M, "start_altitude_m": alt},
-        layout={"trees_xyrh": trees, "moved_onto_line": moved},
+        layout={"trees_xyrh": trees, "moved_beside_line": moved},
     )
 
 
@@ -462,9 +486,13 @@ def urban(index: int, seed: int = 0) -> Scenario:
         y += row_w[j] + (row_streets[j] if j < nrows - 1 else 0.0)
     mid = ncols // 2
     alley = 1.2
+    # the middle column as an open boulevard: no buildings, a wall beside the line instead
+    boulevard = bool(rng.random() < BOULEVARD_PROBABILITY)
     b = _MeshBuilder()
     buildings, walls = [], []
     for i, (x0, x1) in enumerate(cols):
+        if boulevard and i == mid:
+            continue
         for y0, y1 in rows:
             park = rng.random() < 0.15
             if park and i != mid:
@@ -499,17 +527,26 @@ def urban(index: int, seed: int = 0) -> Scenario:
             lo, hi = (xw, yw, 0.0), (xw + wlen, yw + thick, h)
         b.box(lo, hi, "wall")
         walls.append([*lo, *hi])
+    if boulevard:  # a wall along the line, its near face 0..LINE_CORRIDOR_M beside it
+        thick, wlen, h = 0.3, rng.uniform(3.0, 10.0), rng.uniform(3.0, 6.0)
+        offset = rng.uniform(0.0, LINE_CORRIDOR_M)
+        yw = rng.uniform(zone_y[0], zone_y[1] - wlen)
+        x_near = cx + offset if rng.random() < 0.5 else cx - offset - thick
+        lo, hi = (x_near, yw, 0.0), (x_near + thick, yw + wlen, h)
+        b.box(lo, hi, "wall")
+        walls.append([*lo, *hi])
     return _make(
         family, "classic", index, seed, b, width=width, length=length, ceiling=ceiling,
-        altitude=alt, obstacle_count=len(buildings) + len(walls),
+        altitude=alt, obstacle_count=len(buildings) + len(walls), corridor=LINE_CORRIDOR_M,
         parameters={"size_m": [width, length], "ceiling_m": ceiling, "block_zone_x_m": zone_x,
                     "block_zone_y_m": zone_y, "park_probability": 0.15,
                     "tall_probability": 0.75, "tall_height_m": [12.0, 40.0],
                     "low_height_m": [3.0, 7.0], "alley_m": alley,
                     "wall_height_m": [2.0, 6.0], "wall_length_m": [3.0, 10.0],
-                    "start_altitude_m": alt},
+                    "boulevard_probability": BOULEVARD_PROBABILITY,
+                    "line_corridor_m": LINE_CORRIDOR_M, "start_altitude_m": alt},
         layout={"columns_x_m": cols, "rows_y_m": rows, "buildings_lo_hi": buildings,
-                "walls_lo_hi": walls},
+                "walls_lo_hi": walls, "boulevard": boulevard},
     )
 
 
