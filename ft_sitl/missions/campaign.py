@@ -410,7 +410,6 @@ class SerialExecutor(Executor):
 
 
 def _worker_init() -> None:
-    os.environ.setdefault("OMP_NUM_THREADS", "1")
     import signal
 
     signal.signal(signal.SIGINT, signal.SIG_IGN)  # the parent handles Ctrl-C
@@ -427,6 +426,11 @@ class ProcessExecutor(Executor):
 
     def _new_pool(self):
         import multiprocessing as mp
+
+        # workers inherit the environment: one BLAS/OpenMP thread each (set before their
+        # numpy loads; small solves are far slower with idle BLAS threads spinning)
+        for var in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS"):
+            os.environ.setdefault(var, "1")
 
         return ProcessPoolExecutor(self.workers, mp_context=mp.get_context("spawn"),
                                    initializer=_worker_init)
