@@ -378,12 +378,17 @@ def _approach(fleet: Fleet, sc) -> None:
                                    f"({np.linalg.norm(s.position - sc.start):.2f} m off)")
 
 
+_CAMERAS: dict = {}
+
+
 def _camera(nav, sc):
-    if getattr(nav, "camera", None) is None:
+    """The navigator's camera in this scenario (its ray-casting BVH cached per process)."""
+    cfg = getattr(nav, "camera", None)
+    if cfg is None:
         return None
     from ft_sitl.scenarios.camera import DepthCamera
 
-    return DepthCamera(sc.mesh, nav.camera)
+    return _cached(_CAMERAS, (id(sc), cfg), lambda: DepthCamera(cfg, sc.mesh))
 
 
 def _ask(nav, obs, m) -> Setpoint:

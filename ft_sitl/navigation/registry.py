@@ -27,9 +27,10 @@ class NavigatorError(ValueError):
 
 
 def _builtin() -> dict[str, type[Navigator]]:
+    from ft_sitl.navigation.ego import EgoPlanner
     from ft_sitl.navigation.straight import StraightLine
 
-    return {StraightLine.name: StraightLine}
+    return {StraightLine.name: StraightLine, EgoPlanner.name: EgoPlanner}
 
 
 def available() -> dict[str, type[Navigator] | str]:

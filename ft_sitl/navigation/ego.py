@@ -1,0 +1,339 @@
+"""EGO-Planner as a navigator: local map from the depth camera, min-snap global reference,
+rebound B-spline optimisation, replanning, emergency stop, yaw toward the path ahead.
+
+What it does each call (``rate_hz`` 100, the original's command rate), in simulated time:
+
+1. **Perception.** A depth frame (when the camera is due) is fused into the
+   :class:`~ft_sitl.navigation.mapping.LocalMap`; the planner only knows what the camera
+   saw. Unknown space counts as free, the scenario ceiling is a virtual ceiling.
+2. **Global reference.** Once, at the start: a min-snap polynomial start -> goal through a
+   point every 4 m (:func:`~ft_sitl.navigation.minsnap.global_reference`).
+3. **Replanning** (EGO's FSM):
+
+   * the first plan is made at once;
+   * a new plan when the vehicle is more than ``replan_threshold_m`` (1.5 m) from the
+     current trajectory's start, unless the goal is within ``no_replan_threshold_m`` (2 m);
+   * a collision check of the remaining trajectory's first 2/3 against the map at 20 Hz:
+     a collision triggers a replan, and an emergency stop (hover where it is, then plan
+     from rest) when it is less than ``emergency_time_s`` (0.8 s) ahead;
+   * a plan: the local target ``planning_horizon_m`` (7.5 m) ahead on the reference (at
+     rest when the goal is that close), a one-segment polynomial to it from the current
+     trajectory's state, fitted to a uniform cubic B-spline, optimised by
+     :class:`~ft_sitl.navigation.ego_optim.EgoOptimizer` (rebound + refinement).
+
+   A plan that fails is retried after 0.05 s, doubling with each failure in a row up to
+   1 s; after ``GIVE_UP_AFTER`` (8) failures in a row from the same state with the same
+   map the planner gives up ("no plan": the trial ends as a timeout, as it would after 90 s
+   of identical failures, since the optimiser is deterministic).
+
+4. **Latency.** A plan does not act at once: it is computed from the trajectory's state
+   ``latency_s`` ahead and replaces the current trajectory ``latency_s`` later (simulated
+   time). The default is a fixed estimate of the original's compute time per replan on a
+   desktop CPU (:data:`DEFAULT_LATENCY_S`), so a fast or slow host CPU does not change how
+   the planner flies; ``measured_latency=True`` uses this process's measured compute time
+   instead.
+5. **Output.** Position + velocity + acceleration + yaw from the current trajectory; yaw
+   points at the trajectory 1 s ahead, rate-limited to pi rad/s, low-pass 0.5.
+
+Camera. The originals fuse a 640 x 480 RealSense stream at 30 Hz with every second pixel
+(320 x 240 rays). Ray casting that here costs ~0.5 CPU-s per simulated second, more than
+everything else together, so the benchmark default is a 160 x 120 frame (the same field of
+view) at 15 Hz; ``camera="d435"`` selects the faithful 320 x 240 @ 30 Hz rays
+(``camera_width``/``camera_height``/``camera_rate_hz`` set any other).
+"""
+
+from __future__ import annotations
+
+import math
+import time
+
+import numpy as np
+
+from ft_sitl.autopilot.setpoints import Setpoint
+from ft_sitl.navigation.base import GiveUp, Navigator, Observation, Task
+
+#: estimated compute time of one EGO replan in the original C++ (optimisation ~1 ms, plus
+#: A* and map work; the paper's authors report a few ms on a desktop CPU)
+DEFAULT_LATENCY_S = 0.01
+SAFETY_CHECK_HZ = 20.0
+#: EGO's control-point spacing of the initial path (m)
+CTRL_PT_DIST_M = 0.4
+#: after a failed plan, the next attempt waits this long (simulated s), doubling with each
+#: further failure in a row up to RETRY_MAX_S
+RETRY_S = 0.05
+RETRY_MAX_S = 1.0
+#: failed plans in a row from the same state with the same map before giving up ("no
+#: plan": the trial ends as a timeout, as it would after 90 s of the same failures)
+GIVE_UP_AFTER = 8
+
+
+def _resample(path: np.ndarray, spacing: float, min_points: int = 7) -> np.ndarray:
+    """Points every ``spacing`` metres of arc length along the polyline ``path`` (its last
+    point included); the spacing shrinks by 1.5 until there are ``min_points`` (EGO)."""
+    seg = np.linalg.norm(np.diff(path, axis=0), axis=1)
+    cum = np.concatenate([[0.0], np.cumsum(seg)])
+    total = float(cum[-1])
+    if total <= 0.0:
+        return np.repeat(path[:1], min_points, axis=0)
+    while True:
+        s = np.arange(0.0, total, spacing)
+        if len(s) + 1 >= min_points or spacing < 1e-3:
+            break
+        spacing /= 1.5
+    s = np.append(s[s < total - 1e-6], total)
+    return np.column_stack([np.interp(s, cum, path[:, k]) for k in range(3)])
+
+
+def _wrap(a: float) -> float:
+    return (a + math.pi) % (2.0 * math.pi) - math.pi
+
+
+def camera_config(camera: str, width: int | None, height: int | None, rate_hz: float | None):
+    """The planners' depth camera: "benchmark" (160 x 120 @ 15 Hz) or "d435" (the originals'
+    stream with every second pixel: 320 x 240 @ 30 Hz), optionally resized."""
+    from dataclasses import replace
+
+    from ft_sitl.scenarios.camera import CameraConfig
+
+    base = CameraConfig(max_range_m=10.0)
+    if camera == "benchmark":
+        cfg = replace(base.subsampled(4), rate_hz=15.0)
+    elif camera == "d435":
+        cfg = replace(base.subsampled(2), rate_hz=30.0)
+    else:
+        raise ValueError(f"camera: {camera!r} is not 'benchmark' or 'd435'")
+    if width is not None or height is not None:
+        w = int(width or cfg.width)
+        h = int(height or cfg.height)
+        if not (16 <= w <= 1280 and 12 <= h <= 960):
+            raise ValueError(f"camera_width/height: {w} x {h} outside 16..1280 x 12..960")
+        step_x = base.width / w
+        cfg = replace(base, width=w, height=h, fx=base.fx / step_x, fy=base.fy / step_x,
+                      cx=(w - 1) / 2.0, cy=(h - 1) / 2.0, rate_hz=cfg.rate_hz)
+    if rate_hz is not None:
+        if not (isinstance(rate_hz, (int, float)) and 1.0 <= rate_hz <= 60.0):
+            raise ValueError(f"camera_rate_hz: {rate_hz!r} must be within 1..60")
+        cfg = replace(cfg, rate_hz=float(rate_hz))
+    return cfg
+
+
+class _Traj:
+    """A B-spline trajectory started at ``t0`` (navigation time, s)."""
+
+    def __init__(self, spline, t0: float):
+        self.spline = spline
+        self.t0 = t0
+        self.start = spline.position(0.0)
+
+    def state(self, t: float):
+        tau = min(max(t - self.t0, 0.0), self.spline.duration)
+        return (self.spline.position(tau), self.spline.velocity(tau),
+                self.spline.acceleration(tau))
+
+    @property
+    def end_time(self) -> float:
+        return self.t0 + self.spline.duration
+
+
+class EgoPlanner(Navigator):
+    """EGO-Planner (Zhou et al. 2021): ESDF-free gradient-based local planning."""
+
+    name = "ego"
+    rate_hz = 100.0
+
+    def __init__(self, max_acc_m_s2: float = 3.0, planning_horizon_m: float = 7.5,
+                 replan_threshold_m: float = 1.5, no_replan_threshold_m: float = 2.0,
+                 emergency_time_s: float = 0.8, latency_s: float = DEFAULT_LATENCY_S,
+                 measured_latency: bool = False, camera: str = "benchmark",
+                 camera_width: int | None = None, camera_height: int | None = None,
+                 camera_rate_hz: float | None = None):
+        super().__init__()
+        for name, v, lo, hi in (("max_acc_m_s2", max_acc_m_s2, 0.5, 20.0),
+                                ("planning_horizon_m", planning_horizon_m, 2.0, 20.0),
+                                ("replan_threshold_m", replan_threshold_m, 0.2, 10.0),
+                                ("no_replan_threshold_m", no_replan_threshold_m, 0.0, 10.0),
+                                ("emergency_time_s", emergency_time_s, 0.0, 5.0),
+                                ("latency_s", latency_s, 0.0, 1.0)):
+            if isinstance(v, bool) or not isinstance(v, (int, float)) or not lo <= v <= hi:
+                raise ValueError(f"{name}: {v!r} must be a number within {lo}..{hi}")
+        self.max_acc = float(max_acc_m_s2)
+        self.horizon = float(planning_horizon_m)
+        self.replan_threshold = float(replan_threshold_m)
+        self.no_replan_threshold = float(no_replan_threshold_m)
+        self.emergency_time = float(emergency_time_s)
+        self.latency = float(latency_s)
+        self.measured_latency = bool(measured_latency)
+        self.camera = camera_config(camera, camera_width, camera_height, camera_rate_hz)
+
+    # --- set-up ---------------------------------------------------------------------------
+    def reset(self, task: Task) -> None:
+        from ft_sitl.navigation.astar import OccupancyView
+        from ft_sitl.navigation.ego_optim import EgoOptimizer, EgoParams
+        from ft_sitl.navigation.mapping import LocalMap, MapConfig
+        from ft_sitl.navigation.minsnap import global_reference
+
+        super().reset(task)
+        self.vmax = task.limits.max_speed_m_s
+        self.map = LocalMap(MapConfig(skip_pixel=1), task.ceiling, float(task.bounds_min[2]),
+                            camera=self.camera, center_m=tuple(task.start[:2]))
+        lo = np.array(task.bounds_min, dtype=float)
+        hi = np.array(task.bounds_max, dtype=float)
+        self.grid = OccupancyView.from_map(self.map, bounds=(lo, hi))
+        self.optimizer = EgoOptimizer(self.grid, EgoParams(max_vel=self.vmax,
+                                                           max_acc=self.max_acc))
+        self.reference = global_reference(task.start, task.goal, self.vmax)
+        self.progress_t = 0.0
+        self.traj: _Traj | None = None
+        self.pending: _Traj | None = None
+        self.pending_at = math.inf
+        self.plan_now = True
+        self.from_rest = True
+        self.stop_at: np.ndarray | None = None
+        self.next_check = 0.0
+        self.yaw = task.start_yaw
+        self.failures = 0
+        self.retry_at = 0.0
+        self.fail_sig = None
+        self.same_failures = 0
+        self.compute_s: list[float] = []
+
+    # --- planning ---------------------------------------------------------------------------
+    def _plan(self, obs: Observation) -> None:
+        from ft_sitl.navigation.bspline import UniformBSpline
+        from ft_sitl.navigation.minsnap import min_snap, one_segment_time
+
+        t_start = time.perf_counter()
+        t_eff = obs.time_s + self.latency
+        vmax = self.vmax
+        ts = CTRL_PT_DIST_M / vmax * 1.5  # EGO's sampling step of the initial path
+        if self.traj is None or self.from_rest:
+            p0 = np.array(obs.position if self.stop_at is None else self.stop_at)
+            v0 = np.zeros(3) if self.stop_at is not None else np.array(obs.velocity)
+            a0 = np.zeros(3)
+            prefix = np.zeros((0, 3))
+        else:
+            p0, v0, a0 = self.traj.state(t_eff)
+            # the rest of the current trajectory, then a polynomial to the new target
+            tau = np.arange(t_eff - self.traj.t0, self.traj.spline.duration, ts)
+            prefix = self.traj.spline.position(tau) if len(tau) else np.zeros((0, 3))
+        target = self.reference.local_target(p0, self.progress_t, self.horizon, vmax,
+                                             self.max_acc)
+        self.progress_t = target.progress_time_s
+        self.replans += 1
+        if float(np.linalg.norm(target.point - p0)) < 0.1:  # there already: hold it
+            self._adopt(None, obs, t_start)
+            return
+        if len(prefix):
+            pe, ve, ae = self.traj.state(self.traj.end_time)
+            poly_t = float(np.linalg.norm(target.point - pe)) / vmax * 2.0
+        else:
+            pe, ve, ae = p0, v0, a0
+            dist = float(np.linalg.norm(target.point - p0))
+            poly_t = one_segment_time(dist, vmax, self.max_acc)
+        path = prefix
+        if poly_t > ts:
+            poly = min_snap(np.array([pe, target.point]), np.array([poly_t]), v0=ve, a0=ae,
+                            v1=target.velocity, a1=np.zeros(3), order=3)
+            path = np.vstack([prefix, poly.position(np.arange(0.0, poly_t, ts)),
+                              target.point])
+        else:
+            path = np.vstack([prefix, target.point]) if len(prefix) else np.array([p0,
+                                                                                   target.point])
+        points = _resample(path, CTRL_PT_DIST_M)
+        dt = CTRL_PT_DIST_M / vmax * 1.2 if len(points) > 2 else CTRL_PT_DIST_M / vmax * 5
+        spline = UniformBSpline.fit(points, dt, v0, target.velocity, a0, np.zeros(3))
+        res = self.optimizer.optimize(spline, v0, target.velocity, a0, np.zeros(3))
+        if not res.success:
+            self.failures += 1
+            sig = (self.map.occupied_count, tuple(np.round(p0 / 0.05).astype(int)))
+            self.same_failures = self.same_failures + 1 if sig == self.fail_sig else 1
+            self.fail_sig = sig
+            if self.same_failures >= GIVE_UP_AFTER:
+                # the same map, the same start state: the deterministic optimiser would
+                # fail the same way until the trial times out
+                raise GiveUp(f"no plan: {GIVE_UP_AFTER} attempts in a row failed "
+                             f"({res.status.value}) with an unchanged map")
+            self.compute_s.append(time.perf_counter() - t_start)
+            # try again, after RETRY_S doubling with each failure in a row up to
+            # RETRY_MAX_S (a hovering vehicle's map barely changes between attempts)
+            self.plan_now = True
+            self.retry_at = obs.time_s + min(RETRY_S * 2.0 ** (self.failures - 1),
+                                             RETRY_MAX_S)
+            return
+        self.failures = self.same_failures = 0
+        self._adopt(_Traj(res.spline, 0.0), obs, t_start)
+
+    def _adopt(self, traj: _Traj | None, obs: Observation, t_start: float) -> None:
+        dt = time.perf_counter() - t_start
+        self.compute_s.append(dt)
+        lat = dt if self.measured_latency else self.latency
+        if traj is None:
+            self.plan_now = False
+            return
+        traj.t0 = obs.time_s + lat
+        self.pending = traj
+        self.pending_at = obs.time_s + lat
+        self.plan_now = False
+        self.from_rest = False
+        self.stop_at = None
+
+    def _collision_ahead(self, t: float) -> float | None:
+        """Seconds until the current trajectory's first 2/3 meets an occupied voxel."""
+        from ft_sitl.navigation.ego_optim import first_collision_time
+
+        tr = self.traj
+        if tr is None:
+            return None
+        hit = first_collision_time(tr.spline, self.grid)
+        if hit is None:
+            return None
+        return tr.t0 + hit - t
+
+    # --- the step ---------------------------------------------------------------------------
+    def step(self, obs: Observation) -> Setpoint:
+        t = obs.time_s
+        if obs.depth is not None:
+            self.map.fuse(obs.depth)
+        if self.pending is not None and t >= self.pending_at:
+            self.traj, self.pending, self.pending_at = self.pending, None, math.inf
+        goal_dist = float(np.linalg.norm(self.task.goal - obs.position))
+        if self.traj is not None and self.pending is None and self.stop_at is None:
+            moved = float(np.linalg.norm(obs.position - self.traj.start))
+            if moved > self.replan_threshold and goal_dist > self.no_replan_threshold:
+                self.plan_now = True
+            if t >= self.next_check:
+                self.next_check = t + 1.0 / SAFETY_CHECK_HZ
+                ahead = self._collision_ahead(t)
+                if ahead is not None:
+                    self.plan_now = True
+                    if ahead < self.emergency_time:
+                        self.stop_at = np.array(obs.position)
+                        self.from_rest = True
+                        self.traj = None
+        if self.plan_now and self.pending is None and t >= self.retry_at:
+            self._plan(obs)
+        return self._setpoint(obs)
+
+    def _setpoint(self, obs: Observation) -> Setpoint:
+        t = obs.time_s
+        if self.traj is None:
+            hold = self.stop_at if self.stop_at is not None else obs.position
+            return Setpoint.position(hold, yaw=self.yaw)
+        p, v, a = self.traj.state(t)
+        ahead = self.traj.state(t + 1.0)[0]
+        d = ahead - p
+        if float(np.hypot(d[0], d[1])) > 0.1:
+            want = math.atan2(d[1], d[0])
+            step = _wrap(want - self.yaw)
+            limit = math.pi / self.rate_hz
+            step = max(-limit, min(limit, step))
+            self.yaw = _wrap(self.yaw + 0.5 * step)
+        if t > self.traj.end_time:
+            v = np.zeros(3)
+            a = np.zeros(3)
+        if not (np.all(np.isfinite(p)) and np.all(np.isfinite(v)) and np.all(np.isfinite(a))
+                and math.isfinite(self.yaw)):
+            # never command NaN: the trial fails as a navigator error instead
+            raise FloatingPointError(f"non-finite setpoint at t = {t:.2f} s: p {p}, v {v}, "
+                                     f"a {a}, yaw {self.yaw}")
+        return Setpoint.position(p, velocity=v, acceleration=a, yaw=self.yaw)
