@@ -60,6 +60,8 @@ def cmd_campaign_run(args) -> int:
     c = _campaign(args.campaign)
     if args.workers < 1:
         raise _cli_error()(f"--workers: {args.workers} must be at least 1")
+    if args.limit is not None and args.limit < 1:
+        raise _cli_error()(f"--limit: {args.limit} must be at least 1")
     out = Path(args.out)
     try:
         summary = run_campaign(c, out, workers=args.workers, progress=not args.quiet,
@@ -173,9 +175,15 @@ def _same(a, b) -> bool:
 
 def cmd_trial_rerun(args) -> int:
     from ft_sitl.missions.trial import run_trial
+    from ft_sitl.navigation.registry import NavigatorError
+    from ft_sitl.physics.platform import PlatformError
+    from ft_sitl.scenarios.scenario import ScenarioError
 
     spec, stored = _find_spec(args)
-    outcome = run_trial(spec, record=bool(args.trajectory or args.render))
+    try:
+        outcome = run_trial(spec, record=bool(args.trajectory or args.render))
+    except (NavigatorError, PlatformError, ScenarioError) as exc:
+        raise _cli_error()(f"cannot rerun trial {spec.trial_id}: {exc}") from None
     row = outcome.row
     print(f"trial {spec.trial_id}: {row['algorithm']} on {row['platform']} in "
           f"{row['scenario']} (trial {spec.trial}): {row['reason']}"

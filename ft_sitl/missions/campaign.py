@@ -113,7 +113,7 @@ def load_campaign(source: str | Path) -> Campaign:
     """A campaign from a file, or a preset by name (``quick``, ``paper``)."""
     text = str(source)
     path = Path(text)
-    if text in PRESETS and not path.exists():
+    if text in PRESETS:  # a bare preset name (a campaign file always has a suffix)
         path = preset_path(text)
     return parse_campaign(_read(path), path)
 
@@ -231,15 +231,32 @@ def parse_campaign(doc: dict, path: Path | None = None) -> Campaign:
         limits = Limits(**limits_doc)
     except ValueError as exc:
         raise CampaignError(f"{where}: {exc}") from None
+    platforms = _platforms(where, doc.get("platforms", "all"), doc.get("platform_files", []),
+                           base)
+    scenarios = _scenarios(where, doc.get("scenarios", "all"), doc.get("indices", "all"), base)
+    weights = _weights(where, doc.get("weights", {}))
+    _check_weights(where, weights, platforms, scenarios)
     return Campaign(
-        name=name, algorithms=_algorithms(where, doc["algorithms"]),
-        platforms=_platforms(where, doc.get("platforms", "all"),
-                             doc.get("platform_files", []), base),
-        scenarios=_scenarios(where, doc.get("scenarios", "all"), doc.get("indices", "all"),
-                             base),
-        trials=trials, seed=seed, scenario_seed=scenario_seed, limits=limits,
-        weights=_weights(where, doc.get("weights", {})), physics_hz=physics_hz,
+        name=name, algorithms=_algorithms(where, doc["algorithms"]), platforms=platforms,
+        scenarios=scenarios, trials=trials, seed=seed, scenario_seed=scenario_seed,
+        limits=limits, weights=weights, physics_hz=physics_hz,
         source=str(path) if path is not None else "", doc=doc)
+
+
+def _check_weights(where: str, weights: dict, platforms, scenarios) -> None:
+    """Refuse now what the score would refuse after every trial has flown."""
+    from ft_sitl.missions import scoring
+    from ft_sitl.scenarios.families import CATEGORY
+
+    fam = {s.family: ("user" if s.file else CATEGORY.get(s.family, "user")) for s in scenarios}
+    plat = {p.name: p.category for p in platforms}
+    try:
+        scoring._resolve_weights(weights.get("scenarios"), scoring.DEFAULT_SCENARIO_WEIGHTS,
+                                 fam, fam, "weights.scenarios")
+        scoring._resolve_weights(weights.get("platforms"), scoring.DEFAULT_PLATFORM_WEIGHTS,
+                                 plat, plat, "weights.platforms")
+    except ValueError as exc:
+        raise CampaignError(f"{where}: {exc}") from None
 
 
 def _algorithms(where: str, v) -> list[AlgorithmEntry]:
@@ -338,6 +355,9 @@ def _scenarios(where: str, v, default_indices, base: Path) -> list[ScenarioEntry
         if "file" in item:
             from ft_sitl.scenarios.io import load_scenario
 
+            if "indices" in item:
+                raise CampaignError(f"{w}: indices do not apply to a scenario file (it is "
+                                    "one configuration)")
             f = base / str(item["file"])
             try:
                 sc = load_scenario(f)
@@ -351,6 +371,14 @@ def _scenarios(where: str, v, default_indices, base: Path) -> list[ScenarioEntry
             raise CampaignError(f"{w}: {exc}") from None
         idx = _indices(f"{w}: indices", item["indices"]) if "indices" in item else indices
         out.append(ScenarioEntry(fam, idx))
+    seen: dict = {}
+    for k, e in enumerate(out):
+        key = e.file or e.family
+        if key in seen:
+            raise CampaignError(f"{where}: scenarios[{k}]: {key!r} is listed twice (also "
+                                f"scenarios[{seen[key]}]); give each family once, with all "
+                                "its indices")
+        seen[key] = k
     return out
 
 
@@ -386,7 +414,9 @@ def run_chunk(specs: list[dict]) -> list[tuple[str, dict | None, str | None]]:
         spec = TrialSpec.from_dict(d)
         try:
             out.append((spec.trial_id, run_trial(spec).row, None))
-        except Exception as exc:  # noqa: BLE001 - reported, the campaign goes on
+        except KeyboardInterrupt:
+            raise
+        except BaseException as exc:  # noqa: BLE001 - reported, the campaign goes on
             out.append((spec.trial_id, None, f"{type(exc).__name__}: {exc}"))
     return out
 
@@ -437,13 +467,26 @@ class ProcessExecutor(Executor):
 
     def imap(self, fn, chunks):
         pending = list(chunks)
-        suspect: list[list[dict]] = []
+        suspects: list[list[dict]] = []  # trials in flight when a worker died
         self._pool = self._new_pool()
-        running = {}
-        while pending or running or suspect:
-            while (pending or suspect) and len(running) < 2 * self.workers:
-                chunk = suspect.pop() if suspect else pending.pop(0)
+        running: dict = {}
+        while pending or running or suspects:
+            if suspects and not running:
+                # a suspect runs alone, so a death is its own
+                chunk = suspects.pop(0)
+                fut = self._pool.submit(fn, chunk)
+                try:
+                    yield chunk, fut.result()
+                except BrokenProcessPool:
+                    yield chunk, [_died(chunk[0])]
+                    self._pool.shutdown(wait=False, cancel_futures=True)
+                    self._pool = self._new_pool()
+                continue
+            while pending and not suspects and len(running) < 2 * self.workers:
+                chunk = pending.pop(0)
                 running[self._pool.submit(fn, chunk)] = chunk
+            if not running:
+                continue
             done, _ = wait(running, return_when=FIRST_COMPLETED)
             broken = False
             for fut in done:
@@ -452,13 +495,10 @@ class ProcessExecutor(Executor):
                     yield chunk, fut.result()
                 except BrokenProcessPool:
                     broken = True
-                    if len(chunk) == 1:
-                        yield chunk, [_died(chunk[0])]
-                    else:
-                        suspect.extend([[d] for d in chunk])
+                    suspects.extend([d] for d in chunk)
             if broken:
                 for chunk in running.values():
-                    suspect.extend([[d] for d in chunk] if len(chunk) > 1 else [chunk])
+                    suspects.extend([d] for d in chunk)
                 running.clear()
                 self._pool.shutdown(wait=False, cancel_futures=True)
                 self._pool = self._new_pool()

@@ -12,8 +12,10 @@ Layout of ``DIR``::
 A trial counts as done once its line is completely on disk. Killing the runner at any
 moment (kill -9, power loss) loses at most the trials still in flight; a torn last line (a
 write cut short) is dropped on the next open, and the file is truncated back to its last
-complete line before anything is appended. Resuming skips every trial id already in the
-file, so no trial is lost or duplicated.
+complete line before anything is appended; a damaged line elsewhere is skipped (counted in
+``damaged_lines``) without losing the lines after it. Resuming skips every trial id already
+in the file, so no trial is lost or duplicated. An exclusive lock on ``DIR/.lock`` keeps a
+second runner out of a directory in use.
 """
 
 from __future__ import annotations
@@ -60,31 +62,28 @@ class ResultStore:
             tmp = self.spec_path.with_suffix(".tmp")
             tmp.write_text(json.dumps(campaign, indent=2, sort_keys=True))
             os.replace(tmp, self.spec_path)
+        self._lock()
         self.done = self._load(repair=True)
         self._fh = open(self.trials_path, "ab")  # noqa: SIM115 - kept open while running
 
     def _load(self, repair: bool = False) -> dict[str, dict]:
         done: dict[str, dict] = {}
+        self.damaged_lines = 0
         if not self.trials_path.exists():
             return done
         data = self.trials_path.read_bytes()
-        good = 0
-        pos = 0
-        while True:
-            nl = data.find(b"\n", pos)
-            if nl < 0:
-                break
-            line = data[pos:nl]
+        end = data.rfind(b"\n") + 1  # after the last complete line
+        for line in data[:end].splitlines():
             try:
                 row = json.loads(line)
                 tid = row["trial_id"]
             except (ValueError, KeyError, TypeError):
-                break  # a damaged line: keep what precedes it
+                self.damaged_lines += 1  # skipped; the trial reruns if it is not elsewhere
+                continue
             done.setdefault(tid, row)
-            pos = good = nl + 1
-        if repair and good < len(data):  # a torn tail (killed mid-write): cut it off
+        if repair and end < len(data):  # a torn tail (killed mid-write): cut it off
             with open(self.trials_path, "r+b") as fh:
-                fh.truncate(good)
+                fh.truncate(end)
         return done
 
     # --- writing ------------------------------------------------------------------------
@@ -98,10 +97,26 @@ class ResultStore:
         os.fsync(self._fh.fileno())
         self.done[row["trial_id"]] = row
 
+    def _lock(self) -> None:
+        """One runner per directory: an exclusive lock on DIR/.lock, held while open."""
+        import fcntl
+
+        self._lock_fh = open(self.dir / ".lock", "w")  # noqa: SIM115 - held while running
+        try:
+            fcntl.flock(self._lock_fh, fcntl.LOCK_EX | fcntl.LOCK_NB)
+        except OSError:
+            self._lock_fh.close()
+            self._lock_fh = None
+            raise StoreError(f"{self.dir} is in use by another campaign run (wait for it, or "
+                             f"stop it; finished trials are kept)") from None
+
     def close(self) -> None:
         if self._fh is not None:
             self._fh.close()
             self._fh = None
+        if getattr(self, "_lock_fh", None) is not None:
+            self._lock_fh.close()  # releases the lock
+            self._lock_fh = None
 
     # --- reading ------------------------------------------------------------------------
     def rows(self) -> list[dict]:

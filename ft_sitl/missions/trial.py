@@ -44,6 +44,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from ft_sitl import __version__
+from ft_sitl.autopilot import cascade as cs
 from ft_sitl.autopilot.cascade import C_SAT_STEPS
 from ft_sitl.autopilot.commander import MAIN_OFFBOARD
 from ft_sitl.autopilot.fleet import Fleet
@@ -168,6 +169,11 @@ def load_scenario_for(spec: TrialSpec):
     return _cached(_SCENARIOS, key, lambda: build_scenario(*key))
 
 
+def _scenario_key(sc) -> tuple:
+    """What identifies a scenario's geometry (not its id(): ids are reused)."""
+    return (sc.name, sc.mesh_digest(), tuple(sc.bounds_min), tuple(sc.bounds_max))
+
+
 def _world_and_grid(scenario):
     from ft_sitl.scenarios.collision import CollisionWorld
     from ft_sitl.scenarios.guard import DistanceGrid
@@ -175,7 +181,7 @@ def _world_and_grid(scenario):
     def make():
         return (CollisionWorld(scenario.mesh, scenario.bounds_min, scenario.bounds_max),
                 DistanceGrid.build(scenario.mesh, scenario.bounds_min, scenario.bounds_max))
-    return _cached(_GRIDS, id(scenario), make)
+    return _cached(_GRIDS, _scenario_key(scenario), make)
 
 
 def platform_for(spec: TrialSpec):
@@ -250,9 +256,11 @@ def run_trial(spec: TrialSpec, *, record: bool = False, navigator=None) -> Trial
             m.planner_s += time.perf_counter() - t
         except GiveUp as exc:
             raise _Fail("timeout", f"navigator gave up: {exc}") from None
-        except Exception as exc:  # noqa: BLE001 - any navigator failure fails the trial
+        except KeyboardInterrupt:
+            raise
+        except BaseException as exc:  # noqa: BLE001 - even sys.exit() only fails the trial
             raise _Fail("navigator_error", f"reset raised {type(exc).__name__}: {exc}") from None
-        period_us = max(fleet.sim.dt_us, round(1e6 / float(nav.rate_hz)))
+        period_us = _period_us(nav, fleet.sim.dt_us)
         next_nav_us = t_nav0_us
         next_cam_us = t_nav0_us
         cam_period_us = round(1e6 / camera.config.rate_hz) if camera is not None else 0
@@ -260,6 +268,7 @@ def run_trial(spec: TrialSpec, *, record: bool = False, navigator=None) -> Trial
         hold_us = round(spec.limits.hold_s * 1e6)
         entered_us = None
         prev = fleet.state(0).position.copy()
+        t_sample_us = fleet.time_us
         tick_us = round(TICK_S * 1e6)
         while True:
             now = fleet.time_us
@@ -285,10 +294,11 @@ def run_trial(spec: TrialSpec, *, record: bool = False, navigator=None) -> Trial
                                                        "offboard mode")
                     fleet.offboard_setpoint(0, sp)
                 next_nav_us += period_us
-            fleet.run_us(min(tick_us, next_nav_us - fleet.time_us) if next_nav_us >
-                         fleet.time_us else tick_us)
+            # to the next navigator step or commander tick, at least one physics step
+            fleet.run_us(max(fleet.sim.dt_us, min(tick_us, next_nav_us - fleet.time_us)))
             s = fleet.state(0)
-            m.sample(fleet, guard, prev, s)
+            m.sample(fleet, guard, prev, s, (fleet.time_us - t_sample_us) * 1e-6)
+            t_sample_us = fleet.time_us
             prev = s.position.copy()
             t_nav_us = fleet.time_us - t_nav0_us
             if record:
@@ -320,7 +330,7 @@ def run_trial(spec: TrialSpec, *, record: bool = False, navigator=None) -> Trial
         "saturation_fraction": (float(fleet.sim.ctrl[0, C_SAT_STEPS] - sat0) / nav_steps
                                 if nav_steps else math.nan),
         "energy_j": fleet.sim.energy_j(0) - e0 if navigated else math.nan,
-        "replans": int(getattr(nav, "replans", 0) or 0),
+        "replans": _count(getattr(nav, "replans", 0)),
         "sim_time_s": fleet.time_us * 1e-6,
         "wall_time_s": time.perf_counter() - wall0,
         "code_version": __version__,
@@ -328,6 +338,13 @@ def run_trial(spec: TrialSpec, *, record: bool = False, navigator=None) -> Trial
         "spec": spec.to_json(),
     })
     return TrialOutcome(row, np.array(traj) if record else None, sc)
+
+
+def _count(v) -> int:
+    """A navigator's replan counter as an integer (-1 if it is not a count)."""
+    if isinstance(v, bool) or not isinstance(v, (int, np.integer)) or v < 0:
+        return -1
+    return int(v)
 
 
 def _identity_row(spec, platform, ind, sc) -> dict:
@@ -388,7 +405,19 @@ def _camera(nav, sc):
         return None
     from ft_sitl.scenarios.camera import DepthCamera
 
-    return _cached(_CAMERAS, (id(sc), cfg), lambda: DepthCamera(cfg, sc.mesh))
+    return _cached(_CAMERAS, (_scenario_key(sc), cfg), lambda: DepthCamera(cfg, sc.mesh))
+
+
+def _period_us(nav, dt_us: int) -> int:
+    """The navigator's step period, a whole number of physics steps (at least one)."""
+    rate = getattr(nav, "rate_hz", None)
+    if isinstance(rate, bool) or not isinstance(rate, (int, float)) or not (
+            math.isfinite(rate) and rate > 0):
+        raise _Fail("navigator_error", f"rate_hz must be a positive number, got {rate!r}")
+    return max(1, round(1e6 / float(rate) / dt_us)) * dt_us
+
+
+_OFFBOARD_KINDS = (cs.KIND_TRAJECTORY, cs.KIND_ATTITUDE, cs.KIND_RATES)
 
 
 def _ask(nav, obs, m) -> Setpoint:
@@ -397,19 +426,43 @@ def _ask(nav, obs, m) -> Setpoint:
         sp = nav.step(obs)
     except GiveUp as exc:
         raise _Fail("timeout", f"navigator gave up: {exc}") from None
-    except Exception as exc:  # noqa: BLE001 - any navigator failure fails the trial
+    except KeyboardInterrupt:
+        raise
+    except BaseException as exc:  # noqa: BLE001 - even sys.exit() only fails the trial
         raise _Fail("navigator_error", f"step raised {type(exc).__name__}: {exc}") from None
     finally:
         m.planner_s += time.perf_counter() - t
         m.planner_calls += 1
-    if not isinstance(sp, Setpoint):
-        raise _Fail("navigator_error", f"step returned {type(sp).__name__}, not a Setpoint")
-    row = sp.row
-    if row.shape != Setpoint.off().row.shape or np.isinf(row).any():
-        raise _Fail("navigator_error", "step returned a malformed setpoint")
-    if sp.kind in (0, 1):  # OFF / IDLE: not an offboard setpoint
-        raise _Fail("navigator_error", "step returned a motors-off/idle setpoint")
+    why = _invalid(sp)
+    if why:
+        raise _Fail("navigator_error", f"step returned {why}")
     return sp
+
+
+def _invalid(sp) -> str:
+    """Why sp is not a setpoint the flight controller can fly ("" if it is one)."""
+    if not isinstance(sp, Setpoint):
+        return f"{type(sp).__name__}, not a Setpoint"
+    row = sp.row
+    if not isinstance(row, np.ndarray) or row.shape != (cs.N_SP,) or row.dtype.kind != "f":
+        return "a malformed setpoint"
+    if np.isinf(row).any():
+        return "a setpoint with an infinite value"
+    kind = row[cs.SP_KIND]
+    if not math.isfinite(kind) or kind not in _OFFBOARD_KINDS:
+        if kind in (cs.KIND_OFF, cs.KIND_IDLE):
+            return "a motors-off/idle setpoint"
+        return f"a setpoint of unknown kind {kind!r}"
+    if kind == cs.KIND_TRAJECTORY:
+        p, v, a = (row[o:o + 3] for o in (cs.SP_POS, cs.SP_VEL, cs.SP_ACC))
+        if np.any(np.isnan(p) & np.isnan(v) & np.isnan(a)):
+            return "a trajectory setpoint with an uncontrolled axis"
+    elif kind == cs.KIND_ATTITUDE:
+        if np.isnan(row[cs.SP_Q:cs.SP_Q + 4]).any() or np.isnan(row[cs.SP_THRUST]):
+            return "an attitude setpoint with NaN"
+    elif np.isnan(row[cs.SP_RATES:cs.SP_RATES + 3]).any() or np.isnan(row[cs.SP_THRUST]):
+        return "a rates setpoint with NaN"
+    return ""
 
 
 def _check(fleet: Fleet, n_events: int, s, spec) -> None:
@@ -432,6 +485,7 @@ class _Metrics:
     def __init__(self):
         self.path = 0.0
         self.speed_sum = 0.0
+        self.time_s = 0.0
         self.n = 0
         self.max_speed = 0.0
         self.min_clear = math.inf
@@ -440,10 +494,11 @@ class _Metrics:
         self.planner_calls = 0
         self.time_to_goal_s = math.nan
 
-    def sample(self, fleet, guard, prev, s) -> None:
+    def sample(self, fleet, guard, prev, s, dt_s: float) -> None:
         self.path += float(np.linalg.norm(s.position - prev))
         v = float(np.linalg.norm(s.velocity))
-        self.speed_sum += v
+        self.speed_sum += v * dt_s  # time-weighted: samples are not evenly spaced
+        self.time_s += dt_s
         self.n += 1
         self.max_speed = max(self.max_speed, v)
         self.max_tilt = max(self.max_tilt, s.tilt)
@@ -456,7 +511,7 @@ class _Metrics:
         return {
             "time_to_goal_s": self.time_to_goal_s,
             "path_length_m": self.path,
-            "mean_speed_m_s": self.speed_sum / self.n if self.n else math.nan,
+            "mean_speed_m_s": self.speed_sum / self.time_s if self.time_s > 0 else math.nan,
             "max_speed_m_s": self.max_speed if self.n else math.nan,
             "min_clearance_m": self.min_clear if math.isfinite(self.min_clear) else math.nan,
             "max_tilt_deg": math.degrees(self.max_tilt) if self.n else math.nan,

@@ -90,5 +90,7 @@ def create(name: str, params: dict | None = None) -> Navigator:
                                  f"(parameters: {', '.join(known) or 'none'})")
     try:
         return cls(**params)
-    except (TypeError, ValueError) as exc:
-        raise NavigatorError(f"navigator {name!r}: {exc}") from None
+    except Exception as exc:  # noqa: BLE001 - a plug-in's constructor may raise anything
+        raise NavigatorError(f"navigator {name!r}: {type(exc).__name__}: {exc}"
+                             if not isinstance(exc, (TypeError, ValueError))
+                             else f"navigator {name!r}: {exc}") from None

@@ -1,0 +1,516 @@
+"""Campaigns (ft_sitl.missions.campaign, .store) and the navigator registry.
+
+Parsing: every mistake is one CampaignError naming the file and the key. Matrix: trial
+counts, configurations, seeds, ids. Running: a campaign killed with SIGKILL mid-run resumes
+to exactly the trials of an uninterrupted run; a navigator that kills its worker process is
+recorded and the campaign goes on. Registry: navigators from a real entry point (a
+``*.dist-info`` on the path, see conftest), broken ones reported without hiding the others.
+"""
+
+import collections
+import json
+import math
+import os
+import signal
+import subprocess
+import time
+
+import pandas as pd
+import pytest
+
+from ft_sitl.missions.campaign import CampaignError, load_campaign, run_campaign
+from ft_sitl.missions.results import COLUMNS
+from ft_sitl.missions.store import ResultStore, StoreError
+from ft_sitl.missions.trial import platform_for
+from ft_sitl.navigation.base import Limits, Navigator
+from ft_sitl.navigation.registry import NavigatorError, available, create, parameters
+from ft_sitl.navigation.straight import StraightLine
+from ft_sitl.physics.catalog import catalog
+from ft_sitl.scenarios.families import FAMILIES
+from tests.missions.conftest import (
+    EXE,
+    PLATFORM,
+    campaign_file,
+    read_jsonl,
+    run_exe,
+    write_yard,
+)
+
+WALL_CLOCK = ("wall_time_s", "planner_time_s", "finished_utc")
+
+
+def same(a, b) -> bool:
+    if isinstance(a, float) and isinstance(b, float) and math.isnan(a) and math.isnan(b):
+        return True
+    return a == b
+
+
+def _error(path) -> str:
+    with pytest.raises(CampaignError) as exc:
+        load_campaign(path)
+    return str(exc.value)
+
+
+# --- parse errors ----------------------------------------------------------------------------
+BASE = 'algorithms = ["straight"]\n'
+ERRORS = [
+    # (file body, what the message must contain after "FILE: ")
+    (BASE + "trails = 3", "unknown key 'trails'; did you mean 'trials'?"),
+    ("trials = 3", "missing key 'algorithms'"),
+    ('algorithms = ["stright"]',
+     "algorithms[0]: unknown navigator 'stright'; did you mean 'straight'?"),
+    ('algorithms = [{name = "straight", params = {speed = 3}}]',
+     "algorithms[0]: navigator 'straight' has no parameter 'speed'; did you mean "
+     "'speed_m_s'?"),
+    ('algorithms = [{name = "straight", params = {speed_m_s = -1}}]',
+     "algorithms[0]: navigator 'straight': speed_m_s: must be a positive number"),
+    ('algorithms = [{name = "straight", lable = "x"}]',
+     "algorithms[0]: unknown key 'lable'; did you mean 'label'?"),
+    ('algorithms = [{label = "x"}]', "algorithms[0]: missing 'name'"),
+    ('algorithms = ["straight", {name = "straight"}]',
+     "algorithms[1]: label 'straight' is used twice"),
+    ('algorithms = [{name = "straight", label = "a"}, {name = "straight", label = "a"}]',
+     "algorithms[1]: label 'a' is used twice"),
+    (BASE + 'platforms = ["1.00kg-SunnySk"]',
+     "platforms[0]: unknown platform '1.00kg-SunnySk'; did you mean '1.00kg-SunnySky'"),
+    (BASE + 'platforms = ["user"]', "platforms: no user platforms"),
+    (BASE + "platforms = [3]", "platforms[0]: must be a platform name or a category"),
+    (BASE + "scenarios = [3]", "scenarios[0]: must be a family name or a table"),
+    (BASE + 'scenarios = ["maze", "forst"]',
+     "scenarios[1]: unknown scenario family 'forst'; did you mean 'forest'?"),
+    (BASE + 'scenarios = [{family = "maze", index = 3}]',
+     "scenarios[0]: unknown key 'index'; did you mean 'indices'?"),
+    (BASE + "indices = [0]", "indices: must be an integer 1..10, got 0"),
+    (BASE + "indices = []", "indices: must be a non-empty list"),
+    (BASE + 'indices = ["1"]', "indices: must be an integer 1..10, got '1'"),
+    (BASE + 'scenarios = [{family = "maze", indices = [2, 11]}]',
+     "scenarios[0]: indices: must be an integer 1..10, got 11"),
+    (BASE + "trials = 0", "trials: must be an integer 1..10000, got 0"),
+    (BASE + "seed = -1", "seed: must be an integer >= 0, got -1"),
+    (BASE + "physics_hz = 333", "physics_hz: 333 must divide 1,000,000"),
+    (BASE + 'name = ""', "name: must be a non-empty string"),
+    (BASE + "limits = 3", "limits: must be a table"),
+    (BASE + "[limits]\ntimeout_s = -1", "limits.timeout_s: must be a positive number, got -1"),
+    (BASE + "[limits]\ntimeout = 5", "limits: unknown key 'timeout'; did you mean 'timeout_s'?"),
+    (BASE + '[limits]\nhold_s = "3"', "limits.hold_s: must be a positive number, got '3'"),
+    (BASE + "[weights]\nbeta = 2", "weights.beta: must be within 0..1, got 2"),
+    (BASE + "[weights]\nbeta = true", "weights.beta: must be within 0..1, got True"),
+    (BASE + "[weights]\nscenarios = {classic = -1}",
+     "weights.scenarios.classic: must be a non-negative number, got -1"),
+    (BASE + "[weights]\nscenarios = 3", "weights.scenarios: must be a table of weights"),
+    (BASE + "[weights]\ngamma = 1", "weights: unknown key 'gamma'"),
+    (BASE + "weights = 1", "weights: must be a table"),
+]
+
+
+@pytest.mark.parametrize("body, message", ERRORS, ids=[m[:40] for _, m in ERRORS])
+def test_a_bad_campaign_names_the_file_and_the_key(tmp_path, body, message):
+    path = campaign_file(tmp_path, "bad.toml", body)
+    assert _error(path).startswith(f"{path}: {message}")
+
+
+def test_a_missing_user_file_is_named(tmp_path):
+    path = campaign_file(tmp_path, "c.toml", BASE + 'scenarios = [{file = "nothere.yaml"}]')
+    assert _error(path) == f"{path}: scenarios[0]: {tmp_path / 'nothere.yaml'}: spec file " \
+                           "not found"
+    path = campaign_file(tmp_path, "c.toml", BASE + 'platform_files = ["nothere.toml"]')
+    msg = _error(path)
+    assert msg.startswith(f"{path}: platform_files: ") and "nothere.toml" in msg
+
+
+def test_syntax_errors_name_the_file_and_the_line(tmp_path):
+    path = campaign_file(tmp_path, "c.yaml", "algorithms: [straight\ntrials: 3\n")
+    msg = _error(path)
+    assert msg.startswith(f"{path}: YAML syntax error at line ") and "\n" not in msg
+    path = campaign_file(tmp_path, "c.toml", 'algorithms = ["straight"\ntrials = 3\n')
+    msg = _error(path)
+    assert msg.startswith(f"{path}: TOML syntax error: ") and "line 2" in msg
+    path = campaign_file(tmp_path, "list.yaml", "- straight\n- trials\n")
+    assert _error(path) == f"{path}: the campaign must be a table of keys, got list"
+    path = campaign_file(tmp_path, "empty.yaml", "")
+    assert _error(path) == f"{path}: the campaign must be a table of keys, got NoneType"
+
+
+def test_wrong_suffix_and_missing_file(tmp_path):
+    path = campaign_file(tmp_path, "c.json", '{"algorithms": ["straight"]}')
+    assert _error(path) == f"{path}: a campaign file must end in .toml, .yaml or .yml"
+    missing = tmp_path / "nothere.toml"
+    assert _error(missing) == f"{missing}: no such campaign file (presets: quick, paper)"
+    assert _error("quik") == "quik: no such campaign file (presets: quick, paper)"
+
+
+# --- presets and the matrix ------------------------------------------------------------------
+def test_the_paper_preset_is_the_papers_matrix():
+    c = load_campaign("paper")
+    assert c.name == "paper" and c.trials == 10 and c.limits == Limits()
+    assert len(c.platforms) == 36 and {p.name for p in c.platforms} == set(catalog())
+    assert [s.family for s in c.scenarios] == list(FAMILIES)
+    assert all(s.indices == tuple(range(1, 11)) for s in c.scenarios)
+    assert c.weights == {"scenarios": {"classic": 1.2, "theoretical": 1.0},
+                         "platforms": {"real": 1.5, "virtual": 1.0}, "beta": 0.3}
+    specs = c.trial_specs()
+    per_algorithm = collections.Counter(s.label for s in specs)
+    assert set(per_algorithm) == {a.label for a in c.algorithms} >= {"straight"}
+    assert set(per_algorithm.values()) == {2520}
+    # each (algorithm, platform, family) flies configurations 1..10 once each
+    combos = collections.defaultdict(list)
+    for s in specs:
+        combos[(s.label, s.platform, s.family)].append(s.scenario_index)
+    assert len(combos) == 36 * 7 * len(c.algorithms)
+    assert all(sorted(v) == list(range(1, 11)) for v in combos.values())
+
+
+def test_the_quick_preset():
+    c = load_campaign("quick")
+    assert collections.Counter(p.category for p in c.platforms) == {"real": 3, "virtual": 3}
+    assert all(s.indices == (1, 2, 3) for s in c.scenarios)
+    specs = c.trial_specs()
+    assert len(specs) == 6 * 7 * 3 * len(c.algorithms)
+    assert len({s.trial_id for s in specs}) == len(specs)
+
+
+MATRIX = """\
+name = "matrix"
+trials = 5
+seed = 11
+scenario_seed = 2
+physics_hz = 500
+platforms = ["1.00kg-SunnySky", "virtual", "0.55kg-UAV 1"]
+platform_files = ["mine.toml"]
+scenarios = ["Narrow-Gap", {family = "maze", indices = [4, 6]}]
+indices = [1, 2, 3]
+algorithms = ["straight", {name = "straight", label = "slow", params = {speed_m_s = 2.0}}]
+[limits]
+timeout_s = 30.0
+"""
+MINE = """\
+[platform]
+name = "1.30kg-lab-quad"
+layout = "quad_x"
+mass_kg = 1.30
+twr_max = 2.8
+alpha_xy_max_rad_s2 = 180.0
+alpha_z_max_rad_s2 = 12.0
+"""
+
+
+def test_trial_specs_cover_the_matrix(tmp_path):
+    campaign_file(tmp_path, "mine.toml", MINE)
+    c = load_campaign(campaign_file(tmp_path, "m.toml", MATRIX.replace(
+        '"0.55kg-UAV 1"]', '"0.55kg-UAV 1", "user"]')))
+    names = [p.name for p in c.platforms]
+    # categories expand in catalog order, names are not repeated
+    virtual = [p.name for p in catalog().values() if p.category == "virtual"]
+    assert names == ["1.00kg-SunnySky", *virtual, "1.30kg-lab-quad"]
+    specs = c.trial_specs()
+    assert len(specs) == 2 * len(names) * 2 * 5
+    assert len({s.trial_id for s in specs}) == len(specs)
+    assert len({s.seed for s in specs}) == len(specs)
+    for s in specs:
+        indices = (1, 2, 3) if s.family == "narrow_gap" else (4, 6)
+        assert s.scenario_index == indices[s.trial % len(indices)]
+        assert (s.campaign, s.scenario_seed, s.physics_hz) == ("matrix", 2, 500)
+        assert s.limits == Limits(timeout_s=30.0)
+        assert s.algorithm == "straight"
+        assert s.algorithm_params == ({"speed_m_s": 2.0} if s.label == "slow" else {})
+    # grouped by scenario configuration (a worker builds each collision grid once)
+    keys = [(s.family, s.scenario_index) for s in specs]
+    assert len(set(keys)) == len([k for i, k in enumerate(keys) if i == 0 or keys[i - 1] != k])
+    # a user platform travels with its trials; catalog platforms by name only
+    user = [s for s in specs if s.platform == "1.30kg-lab-quad"]
+    assert user and all(s.platform_def is not None for s in user)
+    p = platform_for(user[0])
+    assert p.physical_dict() == c.platforms[-1].physical_dict()
+    assert all(s.platform_def is None for s in specs if s.platform != "1.30kg-lab-quad")
+
+
+def test_seeds_do_not_depend_on_the_rest_of_the_matrix(tmp_path):
+    one = load_campaign(campaign_file(tmp_path, "a.toml", """\
+        trials = 2
+        seed = 11
+        platforms = ["1.00kg-SunnySky"]
+        scenarios = ["maze"]
+        algorithms = ["straight"]
+        """)).trial_specs()
+    campaign_file(tmp_path, "mine.toml", MINE)
+    big = load_campaign(campaign_file(tmp_path, "m.toml", MATRIX)).trial_specs()
+    seeds = {(s.label, s.platform, s.family, s.trial): s.seed for s in big}
+    assert [s.seed for s in one] == [seeds[("straight", PLATFORM, "maze", t)] for t in (0, 1)]
+    again = load_campaign(campaign_file(tmp_path, "b.toml", """\
+        trials = 2
+        seed = 12
+        platforms = ["1.00kg-SunnySky"]
+        scenarios = ["maze"]
+        algorithms = ["straight"]
+        """)).trial_specs()
+    assert {s.seed for s in again}.isdisjoint({s.seed for s in one})
+
+
+def test_yaml_and_toml_of_one_campaign_give_the_same_trials(tmp_path):
+    write_yard(tmp_path)
+    campaign_file(tmp_path, "mine.toml", MINE)
+    toml = campaign_file(tmp_path, "same.toml", """\
+        trials = 3
+        seed = 4
+        platforms = ["1.00kg-SunnySky", "user"]
+        platform_files = ["mine.toml"]
+        scenarios = ["sudden_drop", {family = "Maze", indices = [2]}, {file = "yard.yaml"}]
+        algorithms = [{name = "straight", label = "s3", params = {speed_m_s = 3.0}}]
+        [limits]
+        hold_s = 2.0
+        [weights]
+        beta = 0.5
+        """)
+    yaml = campaign_file(tmp_path, "same.yaml", """\
+        trials: 3
+        seed: 4
+        platforms: ["1.00kg-SunnySky", user]
+        platform_files: mine.toml
+        scenarios:
+          - sudden_drop
+          - {family: Maze, indices: 2}
+          - file: yard.yaml
+        algorithms:
+          - name: straight
+            label: s3
+            params: {speed_m_s: 3.0}
+        limits: {hold_s: 2.0}
+        weights: {beta: 0.5}
+        """)
+    a, b = load_campaign(toml), load_campaign(yaml)
+    assert a.name == b.name == "same"  # the file's stem
+    assert a.spec_dict() == b.spec_dict()
+    ids = [s.trial_id for s in a.trial_specs()]
+    assert ids == [s.trial_id for s in b.trial_specs()]
+    assert len(ids) == len(set(ids)) == 1 * 2 * 3 * 3
+    files = {s.scenario_file for s in a.trial_specs()} - {None}
+    assert files == {str((tmp_path / "yard.yaml").resolve())}
+
+
+# --- the registry and entry points -----------------------------------------------------------
+def test_only_the_builtin_navigators_without_plugins():
+    nav = available()
+    assert nav["straight"] is StraightLine
+    assert not any(name.startswith("t_") for name in nav)
+
+
+def test_entry_point_navigators_are_found_and_broken_ones_reported(plugins):
+    nav = available()
+    assert nav["straight"] is StraightLine
+    hover = nav["t_hover"]
+    assert isinstance(hover, type) and issubclass(hover, Navigator)
+    assert hover.__module__ == "ftnav_testplugins" and hover.__name__ == "Hover"
+    assert parameters(hover) == {"sleep_s": 0.0}
+    broken = nav["t_broken"]
+    assert isinstance(broken, str) and "failed to load" in broken
+    assert "No module named 'ftnav_testplugins_missing'" in broken
+    assert nav["t_notnav"] == "entry point 'ftnav_testplugins:NOT_A_NAVIGATOR' is not a " \
+                              "Navigator subclass"
+    assert isinstance(create("t_hover", {"sleep_s": 0.0}), hover)
+    with pytest.raises(NavigatorError, match="^navigator 't_broken': entry point .* failed"):
+        create("t_broken")
+    with pytest.raises(NavigatorError, match="has no parameter 'sleep'; did you mean "
+                                             "'sleep_s'"):
+        create("t_hover", {"sleep": 1})
+
+
+def test_a_campaign_flies_an_entry_point_navigator(plugins, yard, tmp_path):
+    body = f"""\
+        trials = 2
+        platforms = ["{PLATFORM}"]
+        scenarios = [{{file = "{yard}"}}]
+        algorithms = "all"
+        [limits]
+        timeout_s = 1.0
+        """
+    c = load_campaign(campaign_file(tmp_path, "c.toml", body))
+    loadable = sorted(n for n, cls in available().items() if not isinstance(cls, str))
+    assert [a.label for a in c.algorithms] == loadable
+    assert {"straight", "t_hover", "t_killer"} <= set(loadable)
+    assert not {"t_broken", "t_notnav"} & set(loadable)
+    bad = campaign_file(tmp_path, "b.toml", body.replace('"all"', '["t_hover", "t_broken"]'))
+    msg = _error(bad)
+    assert msg.startswith(f"{bad}: algorithms[1]: navigator 't_broken': entry point ")
+    c = load_campaign(campaign_file(tmp_path, "c.toml", body.replace('"all"', '["t_hover"]')))
+    summary = run_campaign(c, tmp_path / "out", progress=False)
+    assert (summary.total, summary.ran, summary.skipped, summary.errors) == (2, 2, 0, [])
+    rows = read_jsonl(tmp_path / "out" / "trials.jsonl")
+    assert [r["algorithm"] for r in rows] == ["t_hover"] * 2
+    assert all(r["reason"] == "timeout" for r in rows)
+
+
+# --- resume after SIGKILL --------------------------------------------------------------------
+RESUME = """\
+name = "resume"
+trials = 2
+seed = 3
+platforms = ["1.00kg-SunnySky"]
+scenarios = [{file = "yard_a.yaml"}, {file = "yard_b.yaml"}, {file = "yard_c.yaml"},
+             {file = "yard_d.yaml"}]
+algorithms = ["straight", {name = "t_hover", label = "hover", params = {sleep_s = 0.25}}]
+[limits]
+timeout_s = 3.0
+"""
+N_RESUME = 4 * 2 * 2
+
+
+def _resume_dir(root):
+    for k, name in enumerate(("yard_a", "yard_b", "yard_c", "yard_d")):
+        # four scenario configurations: four chunks of work, finishing one by one
+        write_yard(root, name, wall=((2.0 + k, 9.8, 0.0), (8.0 - k / 2, 10.2, 3.0)))
+    return campaign_file(root, "resume.toml", RESUME)
+
+
+def test_a_killed_campaign_resumes_to_the_uninterrupted_result(tmp_path, cli_env, plugins):
+    campaign = _resume_dir(tmp_path)
+    out = tmp_path / "killed"
+    trials = out / "trials.jsonl"
+    assert EXE
+    proc = subprocess.Popen([EXE, "campaign", "run", str(campaign), "--out", str(out),
+                             "--workers", "2", "--no-report", "--quiet"], env=cli_env,
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE,
+                            start_new_session=True)
+    try:
+        deadline = time.monotonic() + 120
+        while not (trials.exists() and trials.read_bytes().count(b"\n") >= 4):
+            assert proc.poll() is None, proc.communicate()
+            assert time.monotonic() < deadline, "no trial finished in 120 s"
+            time.sleep(0.02)
+    finally:
+        os.killpg(proc.pid, signal.SIGKILL)  # the runner and its worker processes
+        proc.communicate()
+    raw = trials.read_bytes()
+    written = raw[:raw.rfind(b"\n") + 1]  # (the kill may even have cut a write short)
+    done_before = [json.loads(line) for line in written.decode().splitlines()]
+    assert 4 <= len(done_before) < N_RESUME, "the kill must interrupt the campaign"
+    with open(trials, "ab") as fh:  # a write cut short
+        fh.write(b'{"trial_id": "0123456789abcdef", "algorithm": "stra')
+
+    proc = run_exe("campaign", "run", campaign, "--out", out, "--workers", "2", "--no-report",
+                   "--quiet", env=cli_env)
+    assert proc.returncode == 0, proc.stderr
+    assert proc.stdout.startswith(f"{N_RESUME - len(done_before)} trials run, "
+                                  f"{len(done_before)} already done, {N_RESUME} in the "
+                                  "campaign;")
+    rows = read_jsonl(trials)  # the torn line is gone, every line complete
+    ids = [r["trial_id"] for r in rows]
+    assert len(ids) == len(set(ids)) == N_RESUME
+    assert trials.read_bytes().startswith(written)  # nothing rewritten
+
+    reference = tmp_path / "reference"
+    summary = run_campaign(load_campaign(campaign), reference, progress=False)
+    assert (summary.ran, summary.errors) == (N_RESUME, [])
+    ref = {r["trial_id"]: r for r in read_jsonl(reference / "trials.jsonl")}
+    assert set(ref) == set(ids)
+    assert {r["trial_id"] for r in rows} == {s.trial_id for s in
+                                             load_campaign(campaign).trial_specs()}
+    for r in rows:
+        want = ref[r["trial_id"]]
+        assert [k for k in COLUMNS if k not in WALL_CLOCK and not same(r[k], want[k])] == []
+    assert collections.Counter(r["reason"] for r in rows if r["algorithm"] == "hover") == {
+        "timeout": N_RESUME // 2}
+
+    df = pd.read_parquet(out / "trials.parquet")
+    assert list(df.columns) == list(COLUMNS) and len(df) == N_RESUME
+    assert set(df["trial_id"]) == set(ids)
+    assert df["reason"].dtype.name == "category"
+    runs = json.loads((out / "runs.json").read_text())
+    assert [r["trials_run"] for r in runs] == [N_RESUME - len(done_before)]  # kill -9: no entry
+
+    # a different campaign into the same directory is refused, nothing is touched
+    before = trials.read_bytes()
+    other = load_campaign(campaign_file(tmp_path, "other.toml",
+                                        RESUME.replace("seed = 3", "seed = 4")))
+    with pytest.raises(StoreError, match=f"^{out} holds the results of a different campaign "
+                                         r"\('resume'\); use another --out directory"):
+        run_campaign(other, out, progress=False)
+    assert trials.read_bytes() == before
+
+
+def test_a_damaged_tail_is_cut_before_appending(tmp_path):
+    store = ResultStore(tmp_path)
+    store.open({"spec": {"name": "x"}})
+    store.append({"trial_id": "a", "v": 1})
+    store.append({"trial_id": "a", "v": 2})  # already done: ignored
+    store.close()
+    with open(tmp_path / "trials.jsonl", "ab") as fh:
+        fh.write(b'{"trial_id": "b", "v"')
+    store = ResultStore(tmp_path)
+    store.open({"spec": {"name": "x"}})
+    assert list(store.done) == ["a"]
+    store.append({"trial_id": "b", "v": 3})
+    store.close()
+    assert read_jsonl(tmp_path / "trials.jsonl") == [{"trial_id": "a", "v": 1},
+                                                    {"trial_id": "b", "v": 3}]
+    with pytest.raises(StoreError, match="holds the results of a different campaign"):
+        ResultStore(tmp_path).open({"spec": {"name": "y"}})
+
+
+# --- a navigator that kills its worker process -----------------------------------------------
+KILLER = """\
+name = "killer"
+trials = 2
+platforms = ["1.00kg-SunnySky"]
+scenarios = [{file = "yard.yaml"}]
+algorithms = [
+  "straight",
+  "t_killer",
+  {name = "t_hover", label = "hover", params = {sleep_s = 0.3}},
+]
+[limits]
+timeout_s = 2.0
+"""
+
+
+@pytest.fixture(scope="module")
+def killer_run(tmp_path_factory, cli_env):
+    root = tmp_path_factory.mktemp("killer")
+    write_yard(root)
+    campaign = campaign_file(root, "killer.toml", KILLER)
+    proc = run_exe("campaign", "run", campaign, "--out", root / "out", "--workers", "2",
+                   "--no-report", "--quiet", env=cli_env)
+    assert proc.returncode == 0, proc.stderr
+    return proc, read_jsonl(root / "out" / "trials.jsonl")
+
+
+def test_a_worker_killing_navigator_is_recorded_and_the_campaign_goes_on(killer_run):
+    proc, rows = killer_run
+    assert proc.returncode == 0, proc.stderr
+    assert proc.stdout.startswith("6 trials run, 0 already done, 6 in the campaign;")
+    assert len(rows) == len({r["trial_id"] for r in rows}) == 6
+    killed = [r for r in rows if r["algorithm"] == "t_killer"]
+    assert len(killed) == 2
+    for r in killed:
+        assert (r["reason"], r["success"]) == ("navigator_error", False)
+        assert r["detail"] == "the trial's process died (a crash in native code?)"
+        assert (r["platform"], r["family"], r["scenario"]) == (PLATFORM, "yard", "yard")
+        assert json.loads(r["spec"])["algorithm"] == "t_killer"
+    assert collections.Counter(r["algorithm"] for r in rows) == {"straight": 2, "t_killer": 2,
+                                                                 "hover": 2}
+
+
+def test_trials_next_to_a_worker_killing_navigator_keep_their_outcome(killer_run):
+    _, rows = killer_run
+    innocent = {(r["algorithm"], r["trial"]): r["reason"] for r in rows
+                if r["algorithm"] != "t_killer"}
+    assert innocent == {("straight", 0): "timeout", ("straight", 1): "timeout",
+                        ("hover", 0): "timeout", ("hover", 1): "timeout"}
+
+
+# --- known bugs (strict: each mark goes with its fix) ----------------------------------------
+def test_duplicate_scenario_entries_are_refused_or_merged(tmp_path):
+    path = campaign_file(tmp_path, "dup.toml", BASE + 'scenarios = ["narrow_gap", '
+                                                      '"Narrow-Gap"]\nindices = [1]\n')
+    try:
+        specs = load_campaign(path).trial_specs()
+    except CampaignError as exc:
+        assert str(exc).startswith(f"{path}: scenarios[1]: ")
+        return
+    assert len({s.trial_id for s in specs}) == len(specs)
+
+
+@pytest.mark.parametrize("weights", ["scenarios = {clasic = 1.2}", "platforms = {reel = 1.5}",
+                                     "scenarios = {classic = 0}"])
+def test_weights_the_score_refuses_are_refused_by_the_campaign(tmp_path, weights):
+    path = campaign_file(tmp_path, "w.toml", BASE + f"[weights]\n{weights}\n")
+    assert _error(path).startswith(f"{path}: weights.")

@@ -1,0 +1,476 @@
+"""One trial of the protocol (ft_sitl.missions.trial): outcomes, metrics, determinism, specs.
+
+Trials fly the real fleet (commander, cascade, plant) in real scenarios with the collision
+guard. The navigators here are small test classes handed to ``run_trial`` directly; the
+registry path is covered in test_campaign.py. Most trials fly in the ``yard`` (conftest):
+one wall across the start -> goal line, short flights.
+"""
+
+import dataclasses
+import hashlib
+import json
+import math
+import signal
+from contextlib import contextmanager
+
+import numpy as np
+import pytest
+import trimesh
+
+from ft_sitl.autopilot import cascade
+from ft_sitl.autopilot.setpoints import Setpoint
+from ft_sitl.missions.results import COLUMNS, REASONS
+from ft_sitl.missions.trial import (
+    TrialSpec,
+    TrialSpecError,
+    load_scenario_for,
+    platform_for,
+    run_trial,
+)
+from ft_sitl.navigation.base import GiveUp, Limits, Navigator
+from ft_sitl.scenarios.solvability import scenario_path
+from tests.missions.conftest import PLATFORM, YARD_GOAL, YARD_START
+
+# columns that depend on the wall clock, not on the spec
+WALL_CLOCK = ("wall_time_s", "planner_time_s", "finished_utc")
+TICK_S = 0.02  # the protocol checks the outcome at least every 20 ms of simulated time
+
+
+def yard_spec(yard, **kw) -> TrialSpec:
+    return TrialSpec(algorithm="straight", platform=PLATFORM, family="yard",
+                     scenario_file=str(yard), **kw)
+
+
+def same(a, b) -> bool:
+    if isinstance(a, float) and isinstance(b, float) and math.isnan(a) and math.isnan(b):
+        return True
+    return a == b
+
+
+# --- test navigators -------------------------------------------------------------------------
+class Carrot(Navigator):
+    """Flies a polyline: a position setpoint on the next waypoint, switched to the one
+    after once the vehicle is within ``lookahead`` of it. Once it has been in the goal
+    sphere it targets ``away`` instead (None: it stays)."""
+
+    name = "carrot"
+
+    def __init__(self, points, lookahead=1.0, away=None):
+        super().__init__()
+        self.points = np.asarray(points, dtype=float)
+        self.lookahead = lookahead
+        self.away = away
+        self.k = 1
+        self.arrived = False
+
+    def step(self, obs):
+        if np.linalg.norm(obs.position - self.task.goal) <= self.task.limits.goal_radius_m:
+            self.arrived = True
+        if self.arrived and self.away is not None:
+            return Setpoint.position(self.away, yaw=self.task.start_yaw)
+        while (self.k < len(self.points) - 1
+               and np.linalg.norm(obs.position - self.points[self.k]) < self.lookahead):
+            self.k += 1
+        return Setpoint.position(self.points[self.k], yaw=self.task.start_yaw)
+
+
+class Hover(Navigator):
+    name = "hover"
+
+    def step(self, obs):
+        return Setpoint.position(self.task.start, yaw=self.task.start_yaw)
+
+
+class Velocity(Navigator):
+    name = "velocity"
+
+    def __init__(self, v):
+        super().__init__()
+        self.v = v
+
+    def step(self, obs):
+        return Setpoint.velocity(self.v)
+
+
+class Raising(Navigator):
+    """Raises ``exc`` in reset or in the step at 0.5 s."""
+
+    name = "raising"
+
+    def __init__(self, where, exc):
+        super().__init__()
+        self.where, self.exc = where, exc
+
+    def reset(self, task):
+        super().reset(task)
+        if self.where == "reset":
+            raise self.exc
+
+    def step(self, obs):
+        if self.where == "step" and obs.time_s >= 0.5:
+            raise self.exc
+        return Setpoint.position(self.task.start)
+
+
+class Returning(Navigator):
+    """Returns ``value`` from its third step on (a valid setpoint before)."""
+
+    name = "returning"
+
+    def __init__(self, value):
+        super().__init__()
+        self.value = value
+        self.calls = 0
+
+    def step(self, obs):
+        self.calls += 1
+        return Setpoint.position(self.task.start) if self.calls < 3 else self.value
+
+
+def _with_inf() -> Setpoint:
+    row = Setpoint.position([1.0, 2.0, 3.0]).row.copy()
+    row[np.flatnonzero(~np.isnan(row))[-1]] = np.inf
+    return Setpoint(row)
+
+
+# --- fixtures --------------------------------------------------------------------------------
+@pytest.fixture(scope="module")
+def yard_path(yard):
+    """A collision-free polyline start -> goal in the yard, 0.4 m more clearance than the
+    platform's collision radius (for the tracking error)."""
+    spec = yard_spec(yard)
+    radius = platform_for(spec).collision_radius_m
+    path = scenario_path(load_scenario_for(spec), radius + 0.4)
+    assert path is not None, "the yard must be solvable with a margin"
+    return path
+
+
+@pytest.fixture(scope="module")
+def flown(yard, yard_path):
+    """The path follower's successful trial, with its trajectory."""
+    return run_trial(yard_spec(yard), record=True, navigator=Carrot(yard_path))
+
+
+# --- the baseline ----------------------------------------------------------------------------
+def _first_contact(scenario, radius):
+    """Distance along the straight start -> goal line at which a sphere of ``radius``
+    first touches an obstacle, and that obstacle's name (independent of the guard)."""
+    d = scenario.goal - scenario.start
+    length = float(np.linalg.norm(d))
+    s = np.arange(0.0, length, 0.01)
+    pts = scenario.start + s[:, None] * (d / length)
+    _, dist, tri = trimesh.proximity.closest_point(scenario.mesh, pts)
+    hit = np.flatnonzero(dist <= radius)
+    assert len(hit), "the scenario's straight line must be blocked"
+    return float(s[hit[0]]), scenario.obstacle_name(int(tri[hit[0]]))
+
+
+def test_the_baseline_hits_the_obstacle_on_the_line():
+    spec = TrialSpec("straight", PLATFORM, "narrow_gap", scenario_index=1)
+    out = run_trial(spec)
+    row = out.row
+    assert set(row) == set(COLUMNS)
+    radius = platform_for(spec).collision_radius_m
+    s_hit, name = _first_contact(out.scenario, radius)
+    assert name != "obstacle", "generated scenarios name their obstacles"
+    assert (row["reason"], row["success"]) == ("collision", False)
+    assert row["detail"].startswith(f"hit {name} at ")
+    assert row["min_clearance_m"] == 0.0
+    # it flew the line from the start waypoint until its sphere touched
+    assert row["path_length_m"] == pytest.approx(s_hit, abs=0.3)
+    assert math.isnan(row["time_to_goal_s"])
+    assert s_hit / 4.0 <= row["nav_time_s"] <= s_hit / 4.0 + 1.5  # 4 m/s after a ramp
+    assert 3.5 < row["max_speed_m_s"] < 4.2  # MPC_XY_VEL_MAX
+    assert row["algorithm"] == "straight" and row["platform"] == PLATFORM
+    assert (row["family"], row["scenario_index"], row["scenario"]) == (
+        "narrow_gap", 1, "narrow_gap-01-s0")
+    assert row["trial_id"] == spec.trial_id and json.loads(row["spec"]) == spec.to_dict()
+    assert row["planner_calls"] >= row["nav_time_s"] * 20 - 1  # 20 Hz
+    assert row["sim_time_s"] > row["nav_time_s"]  # plus the approach
+
+
+def test_the_same_spec_gives_the_same_row(yard):
+    spec = yard_spec(yard, trial=1, seed=5)
+    a, b = run_trial(spec).row, run_trial(spec).row
+    assert a["reason"] == "collision"
+    differ = [k for k in COLUMNS if k not in WALL_CLOCK and not same(a[k], b[k])]
+    assert differ == []
+    assert a["wall_time_s"] > 0 and a["planner_time_s"] >= 0
+
+
+# --- success and its metrics -----------------------------------------------------------------
+def test_a_navigator_on_a_collision_free_path_succeeds(flown, yard):
+    row, traj = flown.row, flown.trajectory
+    assert (row["reason"], row["success"], row["detail"]) == ("success", True, "")
+    limits = Limits()
+    # reached the goal sphere, then held it for 3 s (checked every tick)
+    assert row["time_to_goal_s"] < row["nav_time_s"]
+    assert limits.hold_s <= row["nav_time_s"] - row["time_to_goal_s"] <= limits.hold_s + TICK_S
+    # the trajectory: navigation time, ENU positions, one sample per check
+    assert traj.shape[1] == 4 and np.all(np.diff(traj[:, 0]) > 0)
+    assert traj[-1, 0] == pytest.approx(row["nav_time_s"])
+    assert np.diff(traj[:, 0]).max() <= TICK_S + 1e-9
+    dist = np.linalg.norm(traj[:, 1:] - np.array(YARD_GOAL), axis=1)
+    inside = dist <= limits.goal_radius_m
+    first = int(np.argmax(inside))
+    assert traj[first, 0] == pytest.approx(row["time_to_goal_s"])
+    assert inside[first:].all() and not inside[:first].any()
+    # metrics agree with the flown trajectory
+    steps = np.linalg.norm(np.diff(traj[:, 1:], axis=0), axis=1).sum()
+    assert steps <= row["path_length_m"] <= steps + 0.1
+    assert row["path_length_m"] > np.linalg.norm(np.subtract(YARD_GOAL, YARD_START)) - 2.0
+    radius = platform_for(yard_spec(yard)).collision_radius_m
+    clearance = trimesh.proximity.closest_point(flown.scenario.mesh, traj[:, 1:])[1] - radius
+    assert row["min_clearance_m"] == pytest.approx(clearance.min(), abs=1e-3)
+    assert 0.2 < row["min_clearance_m"] < 1.5
+    assert 0.0 < row["mean_speed_m_s"] < row["max_speed_m_s"] <= 4.2
+    assert 0.0 <= row["max_tilt_deg"] < 45.0
+    assert 0.0 <= row["saturation_fraction"] <= 1.0
+    assert row["energy_j"] > 0.0
+    assert row["replans"] == 0 and row["planner_calls"] > 0
+    assert row["sim_time_s"] > row["nav_time_s"]
+
+
+def test_entering_the_goal_before_the_timeout_and_holding_past_it_succeeds(flown, yard,
+                                                                        yard_path):
+    ttg = flown.row["time_to_goal_s"]
+    spec = yard_spec(yard, limits=Limits(timeout_s=ttg + 0.5))
+    row = run_trial(spec, navigator=Carrot(yard_path)).row
+    assert row["reason"] == "success" and row["nav_time_s"] > spec.limits.timeout_s
+
+
+def test_a_goal_radius_too_small_to_reach_is_a_timeout(yard, yard_path):
+    spec = yard_spec(yard, limits=Limits(goal_radius_m=0.01, timeout_s=12.0))
+    row = run_trial(spec, navigator=Carrot(yard_path)).row
+    assert row["reason"] == "timeout", row["detail"]
+
+
+# --- failures --------------------------------------------------------------------------------
+def test_leaving_the_goal_sphere_during_the_hold_is_unstable(yard, yard_path):
+    away = np.array(YARD_GOAL) + [4.0, 0.0, 0.0]  # 4 m beside the goal, inside the area
+    row = run_trial(yard_spec(yard), navigator=Carrot(yard_path, away=away)).row
+    assert row["reason"] == "unstable", row["detail"]
+    assert row["detail"].startswith("left the goal sphere ")
+    assert row["detail"].endswith(" s after entering it (hold 3 s)")
+    left_after = float(row["detail"].split()[4])
+    assert 0.0 < left_after < 3.0
+    assert row["nav_time_s"] == pytest.approx(row["time_to_goal_s"] + left_after, abs=0.01)
+
+
+@pytest.mark.parametrize("v, detail", [
+    ((0.0, 0.0, 2.0), "climbed above the ceiling"),
+    ((0.0, 0.0, -1.0), "touched the floor"),
+    ((-3.0, 0.0, 0.0), "left the flight volume past the west edge"),
+])
+def test_leaving_the_flight_volume_is_out_of_bounds(yard, v, detail):
+    row = run_trial(yard_spec(yard), navigator=Velocity(v)).row
+    assert (row["reason"], row["detail"]) == ("out_of_bounds", detail)
+    assert not row["success"] and math.isnan(row["time_to_goal_s"])
+
+
+def test_a_flip_is_a_loss_of_control(yard):
+    class Flip(Navigator):
+        def step(self, obs):
+            return Setpoint.body_rates([30.0, 0.0, 0.0], 0.6)
+
+    row = run_trial(yard_spec(yard), navigator=Flip()).row
+    assert row["reason"] == "loss_of_control"
+    assert row["detail"].startswith("tilt ") and row["max_tilt_deg"] > 90.0
+
+
+def test_hovering_times_out(yard):
+    spec = yard_spec(yard, limits=Limits(timeout_s=2.0))
+    row = run_trial(spec, navigator=Hover()).row
+    assert row["reason"] == "timeout"
+    assert row["detail"] == "not in the goal sphere after 2 s (16.0 m away)"
+    assert 2.0 <= row["nav_time_s"] <= 2.0 + TICK_S
+    assert math.isnan(row["time_to_goal_s"]) and row["path_length_m"] < 0.5
+
+
+class Hung(Exception):
+    """The trial did not end in time (wall clock)."""
+
+
+@contextmanager
+def watchdog(seconds):
+    def expire(signum, frame):
+        raise Hung(f"the trial did not end within {seconds} s of wall-clock time")
+
+    old = signal.signal(signal.SIGALRM, expire)
+    signal.setitimer(signal.ITIMER_REAL, seconds)
+    try:
+        yield
+    finally:
+        signal.setitimer(signal.ITIMER_REAL, 0)
+        signal.signal(signal.SIGALRM, old)
+
+
+class RateHover(Hover):
+    def __init__(self, rate_hz):
+        super().__init__()
+        self.rate_hz = rate_hz
+
+
+def test_the_navigator_is_stepped_at_its_rate(yard):
+    spec = yard_spec(yard, limits=Limits(timeout_s=1.0))
+    for rate_hz, calls in ((25.0, 25), (4.0, 4), (1000.0, 1000)):
+        with watchdog(20):
+            row = run_trial(spec, navigator=RateHover(rate_hz)).row
+        assert (row["reason"], row["planner_calls"]) == ("timeout", calls), rate_hz
+
+
+def test_a_rate_off_the_physics_step_grid_ends(yard):
+    spec = yard_spec(yard, limits=Limits(timeout_s=1.0))
+    with watchdog(3):
+        row = run_trial(spec, navigator=RateHover(30.0)).row
+    assert row["reason"] == "timeout" and 29 <= row["planner_calls"] <= 31
+
+
+@pytest.mark.parametrize("where", ["reset", "step"])
+def test_a_navigator_that_raises_is_a_navigator_error(yard, where):
+    nav = Raising(where, RuntimeError("boom: no map"))
+    row = run_trial(yard_spec(yard), navigator=nav).row
+    assert (row["reason"], row["success"]) == ("navigator_error", False)
+    assert row["detail"] == f"{where} raised RuntimeError: boom: no map"
+
+
+@pytest.mark.parametrize("value, detail", [
+    (None, "step returned NoneType, not a Setpoint"),
+    ("forward", "step returned str, not a Setpoint"),
+    (np.array([5.0, 18.0, 1.5]), "step returned ndarray, not a Setpoint"),
+    (_with_inf(), "step returned a setpoint with an infinite value"),
+    (Setpoint.off(), "step returned a motors-off/idle setpoint"),
+    (Setpoint.idle(), "step returned a motors-off/idle setpoint"),
+])
+def test_a_navigator_returning_garbage_is_a_navigator_error(yard, value, detail):
+    row = run_trial(yard_spec(yard), navigator=Returning(value)).row
+    assert (row["reason"], row["detail"]) == ("navigator_error", detail)
+    assert row["planner_calls"] == 3
+
+
+def _row_with(**entries) -> Setpoint:
+    row = Setpoint.position([5.0, 2.0, 1.5]).row.copy()
+    for index, value in entries.items():
+        row[getattr(cascade, index)] = value
+    return Setpoint(row)
+
+
+class Misbehaving(Navigator):
+    name = "misbehaving"
+
+    def __init__(self, case):
+        super().__init__()
+        self.case = case
+        if case == "rate 0":
+            self.rate_hz = 0.0
+        if case == "rate NaN":
+            self.rate_hz = math.nan
+
+    def step(self, obs):
+        if self.case == "sys.exit":
+            raise SystemExit(3)
+        if self.case == "replans not a number":
+            self.replans = "many"
+        return {
+            "NaN kind": lambda: _row_with(SP_KIND=math.nan),
+            "unknown kind": lambda: _row_with(SP_KIND=99),
+            "row not an array": lambda: Setpoint([1.0, 2.0]),
+            "no axis controlled": lambda: _row_with(SP_POS=math.nan),
+        }.get(self.case, lambda: Setpoint.position(self.task.start))()
+
+
+@pytest.mark.parametrize("case", ["rate 0", "rate NaN", "NaN kind", "unknown kind",
+                                  "row not an array", "no axis controlled",
+                                  "replans not a number", "sys.exit"])
+def test_navigator_mistakes_are_navigator_errors(yard, case):
+    spec = yard_spec(yard, limits=Limits(timeout_s=1.0))
+    try:
+        with watchdog(20):
+            row = run_trial(spec, navigator=Misbehaving(case)).row
+    except BaseException as exc:  # noqa: BLE001 - SystemExit included: report, do not exit
+        pytest.fail(f"run_trial raised {type(exc).__name__}: {exc}")
+    if case == "replans not a number":
+        # a broken counter does not change how the trial flew: it is recorded as -1
+        assert row["replans"] == -1 and row["reason"] == "timeout", row["detail"]
+        return
+    assert row["reason"] == "navigator_error", row["detail"]
+
+
+@pytest.mark.parametrize("where", ["reset", "step"])
+def test_a_navigator_that_gives_up_times_out(yard, where):
+    row = run_trial(yard_spec(yard), navigator=Raising(where, GiveUp("no path"))).row
+    assert (row["reason"], row["detail"]) == ("timeout", "navigator gave up: no path")
+    assert row["nav_time_s"] < 1.0  # at once, not after 90 s
+
+
+def test_every_reason_is_a_known_category():
+    assert set(REASONS) == {"success", "collision", "out_of_bounds", "timeout", "unstable",
+                            "loss_of_control", "navigator_error"}
+
+
+# --- the spec --------------------------------------------------------------------------------
+FULL = TrialSpec(algorithm="straight", platform=PLATFORM, family="maze", scenario_index=3,
+                 scenario_seed=1, trial=2, seed=7, algorithm_params={"speed_m_s": 3.0},
+                 limits=Limits(timeout_s=60.0), campaign="c", label="straight-3",
+                 platform_def=None, scenario_file=None, physics_hz=500)
+
+
+def test_spec_round_trips_through_dict_and_json():
+    d = FULL.to_dict()
+    assert set(d) == {f.name for f in dataclasses.fields(TrialSpec)}
+    back = TrialSpec.from_dict(json.loads(FULL.to_json()))
+    assert back == FULL and back.trial_id == FULL.trial_id
+    assert TrialSpec.from_dict({**d, "code_version": "9.9"}) == FULL  # ignored
+    assert back.limits == Limits(timeout_s=60.0)
+
+
+def test_trial_id_is_stable():
+    spec = TrialSpec("straight", PLATFORM, "maze", scenario_index=3, scenario_seed=1, trial=2,
+                     seed=7)
+    # the key of every stored result: a change here orphans existing result directories
+    assert spec.trial_id == "3f5892779a3fd6af"
+    assert spec.trial_id == hashlib.sha256(spec.to_json().encode()).hexdigest()[:16]
+    assert TrialSpec(**{f.name: getattr(spec, f.name)
+                        for f in dataclasses.fields(TrialSpec)}).trial_id == spec.trial_id
+
+
+CHANGES = {
+    "algorithm": "other", "platform": "0.60kg-EMAX", "family": "forest", "scenario_index": 4,
+    "scenario_seed": 2, "trial": 3, "seed": 8, "algorithm_params": {"speed_m_s": 2.0},
+    "limits": Limits(timeout_s=61.0), "campaign": "d", "label": "x",
+    "platform_def": {"name": PLATFORM}, "scenario_file": "/tmp/x.yaml", "physics_hz": 1000,
+}
+
+
+def test_trial_id_changes_with_every_field():
+    assert set(CHANGES) == {f.name for f in dataclasses.fields(TrialSpec)}
+    ids = {FULL.trial_id}
+    for name, value in CHANGES.items():
+        assert getattr(FULL, name) != value
+        ids.add(dataclasses.replace(FULL, **{name: value}).trial_id)
+    assert len(ids) == 1 + len(CHANGES)
+    for name in ("max_speed_m_s", "timeout_s", "goal_radius_m", "hold_s"):
+        limits = dataclasses.replace(FULL.limits, **{name: 1.5})
+        assert dataclasses.replace(FULL, limits=limits).trial_id not in ids
+
+
+@pytest.mark.parametrize("field, value", [
+    ("algorithm", ""), ("platform", None), ("family", 3), ("scenario_index", 0),
+    ("scenario_index", 1.0), ("scenario_seed", -1), ("trial", True), ("seed", "1"),
+    ("physics_hz", 0), ("algorithm_params", [1]), ("limits", {"timeout_s": 5.0}),
+])
+def test_bad_spec_fields_are_refused_by_name(field, value):
+    with pytest.raises(TrialSpecError, match=f"^{field}: "):
+        dataclasses.replace(FULL, **{field: value})
+
+
+@pytest.mark.parametrize("doc, message", [
+    ([], "a trial spec must be a table"),
+    ({**FULL.to_dict(), "limits": {"timeout_s": -1}}, "limits.timeout_s: must be a positive"),
+    ({**FULL.to_dict(), "limits": {"timeout": 5}}, "limits: "),
+    ({**FULL.to_dict(), "colour": "red"}, "trial spec: .*colour"),
+    ({"algorithm": "straight"}, "trial spec: .*missing"),
+])
+def test_bad_spec_documents_are_refused(doc, message):
+    with pytest.raises(TrialSpecError, match=message):
+        TrialSpec.from_dict(doc)
