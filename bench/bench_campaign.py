@@ -74,9 +74,14 @@ def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--campaign", default="quick", help="campaign file or preset (quick)")
     ap.add_argument("--workers", type=int, default=os.cpu_count() or 2)
+    ap.add_argument("--algorithms", nargs="+", default=["straight"],
+                    help="navigators to run (default: the baseline)")
     ap.add_argument("--json", action="store_true")
     args = ap.parse_args(argv)
     campaign = load_campaign(args.campaign)
+    from ft_sitl.missions.campaign import _algorithms
+
+    campaign.algorithms = _algorithms("--algorithms", list(args.algorithms))
     configs = len({(s.family, i) for s in campaign.scenarios for i in s.indices})
     serial = one_run(campaign, 1)
     parallel = one_run(campaign, args.workers)
