@@ -28,9 +28,10 @@ class NavigatorError(ValueError):
 
 def _builtin() -> dict[str, type[Navigator]]:
     from ft_sitl.navigation.ego import EgoPlanner
+    from ft_sitl.navigation.pgo import PgoPlanner
     from ft_sitl.navigation.straight import StraightLine
 
-    return {StraightLine.name: StraightLine, EgoPlanner.name: EgoPlanner}
+    return {c.name: c for c in (StraightLine, EgoPlanner, PgoPlanner)}
 
 
 def available() -> dict[str, type[Navigator] | str]:

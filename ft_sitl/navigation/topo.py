@@ -1,0 +1,805 @@
+"""Fast-Planner's topological roadmap: the path search of PGO (path-guided optimisation).
+
+Behaviours and defaults are those of Fast-Planner's ``TopologyPRM`` and the collision
+range of its planner manager (Zhou et al., ICRA 2020; HKUST-Aerial-Robotics/Fast-Planner,
+``topo_prm.cpp``; see /work/shared/docs/planner-facts.md); the code is our own.
+
+Distances come from an :class:`EsdfGrid`, a snapshot of the local map's signed ESDF
+(:meth:`~ft_sitl.navigation.mapping.LocalMap.update_esdf`): free voxels hold the distance to
+the nearest planning-occupied voxel centre (>= one voxel), occupied voxels ``<= 0``. Like
+the original, the search reads it two ways: per voxel (Fast-Planner's "coarse" distance,
+used for the sample clearance, the collision range and line of sight) and trilinearly with
+its gradient (the shortcut's push, the optimiser). Points outside the snapshot are clamped
+onto it per axis (as ``LocalMap.esdf``); points outside the flight volume (``bounds``) have
+distance -1, i.e. they are blocked.
+
+The search (:func:`find_topo_paths`), from ``start`` to ``end`` (the free points just before
+and after the colliding stretch of the local segment, :func:`collision_range`):
+
+1. **Samples.** Up to ``max_samples`` (2000) uniform draws in a box centred between start
+   and end, x along ``end - start`` (half extents ``(L/2 + 1, 3.5, 1.0)`` m, y horizontal,
+   z completing the frame); draws with distance ``<= clearance`` (0.3 m) are dropped. The
+   draws come from the caller's ``numpy.random.Generator``, so a search is reproducible.
+2. **Visibility roadmap** (guards and connectors). Start and end are guards. For each
+   sample in turn, the guards it sees (line of sight: every voxel the segment traverses,
+   3-D DDA, has distance ``> resolution``; at most 3 are looked for, in creation order):
+   none -> the sample becomes a new guard; exactly two -> it may connect them, unless a
+   connector between the same two guards is *equivalent* (the paths ``g1 -> c -> g2`` and
+   ``g1 -> sample -> g2`` deform into each other, see 5.); then the shorter of the two
+   stays (the connector moves to the sample if that is shorter). Nodes other than start and
+   end with fewer than two neighbours are pruned, repeatedly.
+3. **Paths.** Depth-first search start -> end over the roadmap (neighbours in creation
+   order), stopping at ``max_raw_paths`` (300); the ``keep_raw_paths`` (25) with the fewest
+   nodes are kept.
+4. **Shortcut.** Each path is discretised every voxel; walking along it, a point stays
+   hidden behind the last kept point while visible from it; at the first point that is not,
+   the blocking voxel (pushed one voxel away from the obstacle, perpendicular to the
+   sight line, along the ESDF gradient) becomes the next kept point.
+5. **Equivalence.** Two paths are topologically equivalent when the points at equal
+   fractions of their lengths (``ceil(max length / resolution)`` pairs) all see each other
+   (no traversed voxel with distance ``<= 0``); of each equivalence class the first path is
+   kept.
+6. **Selection.** The shortest path, then in order of length up to ``reserve_num`` (6) in
+   all, as long as they are shorter than ``ratio_to_short`` (5.5) times the shortest. Each
+   is joined to the segment's points before start and after end, shortcut again (up to
+   5 passes, stopping when a pass does not shorten it), and the equivalence pruning
+   repeats.
+
+Differences from the original, all deliberate:
+
+- Sampling stops at ``max_samples`` draws only; the original also stops after 5 ms of
+  sampling (a wall-clock cap, which would make the result depend on the host CPU).
+- Line of sight walks the voxels of the segment exactly (3-D DDA); the original steps a
+  voxel ray caster from the first point. Same voxels up to ties at voxel corners.
+- The shortcut keeps a path collision-free: a pass whose result has a segment through an
+  occupied voxel (the pushed point can still lie inside an inflated obstacle at a corner)
+  is replaced by the plain greedy shortcut (the last visible discretised point becomes the
+  next kept point), which cannot cross an occupied voxel if the input does not.
+- The depth-first search also stops after ``max_dfs_expansions`` node expansions (a guard
+  against exponential searches in dense roadmaps; the original has none).
+- Consecutive duplicate points (the joins between the segment's points and the path) are
+  merged; the original keeps zero-length pieces.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+
+import numpy as np
+from numba import njit
+
+__all__ = [
+    "EsdfGrid", "TopoParams", "TopoSearch", "collision_range", "discretize_path",
+    "find_topo_paths", "path_length", "prune_equivalent", "same_topo_path", "shortcut_path",
+]
+
+_BIG = 1e18  # "no bound" for the flight-volume box
+
+
+# ---------------------------------------------------------------------------------------
+# numba kernels on the ESDF snapshot: (field (nx, ny, nz), origin (3,) global voxel index of
+# field[0, 0, 0], resolution, bounds lo (3,), hi (3,))
+# ---------------------------------------------------------------------------------------
+@njit(cache=True)
+def _voxel(fld, origin, i, j, k):
+    """Field value of global voxel (i, j, k), clamped onto the field per axis."""
+    nx, ny, nz = fld.shape
+    x = i - origin[0]
+    y = j - origin[1]
+    z = k - origin[2]
+    x = 0 if x < 0 else (nx - 1 if x > nx - 1 else x)
+    y = 0 if y < 0 else (ny - 1 if y > ny - 1 else y)
+    z = 0 if z < 0 else (nz - 1 if z > nz - 1 else z)
+    return fld[x, y, z]
+
+
+@njit(cache=True)
+def _inside(p, lo, hi):
+    return (lo[0] <= p[0] <= hi[0]) and (lo[1] <= p[1] <= hi[1]) and (lo[2] <= p[2] <= hi[2])
+
+
+@njit(cache=True)
+def _coarse(fld, origin, res, lo, hi, p):
+    """Fast-Planner's coarse distance: the value of the voxel containing ``p``; -1 outside
+    the flight volume."""
+    if not _inside(p, lo, hi):
+        return -1.0
+    inv = 1.0 / res
+    return _voxel(fld, origin, int(math.floor(p[0] * inv)), int(math.floor(p[1] * inv)),
+                  int(math.floor(p[2] * inv)))
+
+
+@njit(cache=True)
+def _trilinear(fld, origin, res, p, grad):
+    """Trilinear distance between voxel centres and its gradient (into ``grad``), with the
+    clamping of ``LocalMap.esdf`` (zero gradient along a clamped axis)."""
+    inv = 1.0 / res
+    dims = fld.shape
+    i0 = np.empty(3, np.int64)
+    fr = np.empty(3)
+    clamped = np.zeros(3, np.bool_)
+    for a in range(3):
+        g = p[a] * inv - origin[a] - 0.5
+        n = dims[a]
+        if g < 0.0:
+            g = 0.0
+            clamped[a] = True
+        elif g > n - 1.0:
+            g = n - 1.0
+            clamped[a] = True
+        j = int(math.floor(g))
+        if j > n - 2:
+            j = n - 2
+        i0[a] = j
+        fr[a] = g - j
+    x, y, z = i0[0], i0[1], i0[2]
+    dx, dy, dz = fr[0], fr[1], fr[2]
+    v000 = fld[x, y, z]
+    v100 = fld[x + 1, y, z]
+    v010 = fld[x, y + 1, z]
+    v110 = fld[x + 1, y + 1, z]
+    v001 = fld[x, y, z + 1]
+    v101 = fld[x + 1, y, z + 1]
+    v011 = fld[x, y + 1, z + 1]
+    v111 = fld[x + 1, y + 1, z + 1]
+    v00 = (1.0 - dx) * v000 + dx * v100
+    v01 = (1.0 - dx) * v001 + dx * v101
+    v10 = (1.0 - dx) * v010 + dx * v110
+    v11 = (1.0 - dx) * v011 + dx * v111
+    v0 = (1.0 - dy) * v00 + dy * v10
+    v1 = (1.0 - dy) * v01 + dy * v11
+    gz = (v1 - v0) * inv
+    gy = ((1.0 - dz) * (v10 - v00) + dz * (v11 - v01)) * inv
+    gx = ((1.0 - dz) * (1.0 - dy) * (v100 - v000) + (1.0 - dz) * dy * (v110 - v010)
+          + dz * (1.0 - dy) * (v101 - v001) + dz * dy * (v111 - v011)) * inv
+    grad[0] = 0.0 if clamped[0] else gx
+    grad[1] = 0.0 if clamped[1] else gy
+    grad[2] = 0.0 if clamped[2] else gz
+    return (1.0 - dz) * v0 + dz * v1
+
+
+@njit(cache=True)
+def _dda_axis(a, b, inv):
+    """Start voxel, voxels to cross, step, first crossing and crossing spacing (in units
+    of the segment's parameter) along one axis."""
+    g0 = a * inv
+    g1 = b * inv
+    c = int(math.floor(g0))
+    n = abs(int(math.floor(g1)) - c)
+    d = g1 - g0
+    if d > 0.0:
+        return c, n, 1, (c + 1.0 - g0) / d, 1.0 / d
+    if d < 0.0:
+        return c, n, -1, (g0 - c) / (-d), -1.0 / d
+    return c, n, 0, np.inf, np.inf
+
+
+@njit(cache=True)
+def _blocked(fld, origin, res, lo, hi, a, b, thresh, pc):
+    """Whether the segment a -> b is blocked: an end outside the flight volume (``pc`` :=
+    that end) or a traversed voxel (3-D DDA, a's voxel first) with value ``<= thresh``
+    (``pc`` := its centre)."""
+    if not _inside(a, lo, hi):
+        pc[:] = a
+        return True
+    if not _inside(b, lo, hi):
+        pc[:] = b
+        return True
+    inv = 1.0 / res
+    cx, nx, sx, tx, dx = _dda_axis(a[0], b[0], inv)
+    cy, ny, sy, ty, dy = _dda_axis(a[1], b[1], inv)
+    cz, nz, sz, tz, dz = _dda_axis(a[2], b[2], inv)
+    n = nx + ny + nz
+    for s in range(n + 1):
+        if _voxel(fld, origin, cx, cy, cz) <= thresh:
+            pc[0] = (cx + 0.5) * res
+            pc[1] = (cy + 0.5) * res
+            pc[2] = (cz + 0.5) * res
+            return True
+        if s == n:
+            break
+        if tx <= ty and tx <= tz:
+            cx += sx
+            tx += dx
+        elif ty <= tz:
+            cy += sy
+            ty += dy
+        else:
+            cz += sz
+            tz += dz
+    return False
+
+
+@njit(cache=True)
+def _length(path):
+    s = 0.0
+    for i in range(path.shape[0] - 1):
+        s += math.sqrt((path[i + 1, 0] - path[i, 0]) ** 2 + (path[i + 1, 1] - path[i, 1]) ** 2
+                       + (path[i + 1, 2] - path[i, 2]) ** 2)
+    return s
+
+
+@njit(cache=True)
+def _discretize_n(path, n):
+    """``n`` points at equal arc-length steps along the polyline (ends included)."""
+    m = path.shape[0]
+    cum = np.zeros(m)
+    for i in range(m - 1):
+        cum[i + 1] = cum[i] + math.sqrt((path[i + 1, 0] - path[i, 0]) ** 2
+                                        + (path[i + 1, 1] - path[i, 1]) ** 2
+                                        + (path[i + 1, 2] - path[i, 2]) ** 2)
+    out = np.empty((n, 3))
+    total = cum[m - 1]
+    j = 0
+    for k in range(n):
+        s = total * k / (n - 1) if n > 1 else 0.0
+        while j < m - 2 and cum[j + 1] < s:
+            j += 1
+        seg = cum[j + 1] - cum[j] if m > 1 else 0.0
+        lam = (s - cum[j]) / seg if seg > 1e-12 else 0.0
+        lam = min(max(lam, 0.0), 1.0)
+        for d in range(3):
+            out[k, d] = path[j, d] + lam * (path[min(j + 1, m - 1), d] - path[j, d])
+    return out
+
+
+@njit(cache=True)
+def _discretize_res(path, res):
+    """Every piece cut into ``ceil(length / res)`` equal steps; joins not repeated, pieces of
+    zero length skipped."""
+    m = path.shape[0]
+    count = 1
+    for i in range(m - 1):
+        ln = math.sqrt((path[i + 1, 0] - path[i, 0]) ** 2 + (path[i + 1, 1] - path[i, 1]) ** 2
+                       + (path[i + 1, 2] - path[i, 2]) ** 2)
+        count += int(math.ceil(ln / res))
+    out = np.empty((count, 3))
+    out[0] = path[0]
+    k = 1
+    for i in range(m - 1):
+        ln = math.sqrt((path[i + 1, 0] - path[i, 0]) ** 2 + (path[i + 1, 1] - path[i, 1]) ** 2
+                       + (path[i + 1, 2] - path[i, 2]) ** 2)
+        ns = int(math.ceil(ln / res))
+        for j in range(1, ns + 1):
+            f = j / ns
+            for d in range(3):
+                out[k, d] = path[i, d] + f * (path[i + 1, d] - path[i, d])
+            k += 1
+    return out[:k]
+
+
+@njit(cache=True)
+def _same_topo(p1, p2, fld, origin, res, lo, hi, thresh):
+    """Fast-Planner's ``sameTopoPath``: points at equal length fractions see each other."""
+    n = int(math.ceil(max(_length(p1), _length(p2)) / res))
+    if n < 2:
+        n = 2
+    a = _discretize_n(p1, n)
+    b = _discretize_n(p2, n)
+    pc = np.empty(3)
+    for i in range(n):
+        if _blocked(fld, origin, res, lo, hi, a[i], b[i], thresh, pc):
+            return False
+    return True
+
+
+@njit(cache=True)
+def _path_free(path, fld, origin, res, lo, hi, thresh):
+    pc = np.empty(3)
+    for i in range(path.shape[0] - 1):
+        if _blocked(fld, origin, res, lo, hi, path[i], path[i + 1], thresh, pc):
+            return False
+    if path.shape[0] == 1:
+        return not _blocked(fld, origin, res, lo, hi, path[0], path[0], thresh, pc)
+    return True
+
+
+@njit(cache=True)
+def _shortcut_push(dis, fld, origin, res, lo, hi):
+    """One pass of Fast-Planner's visibility shortcut over the discretised path ``dis``."""
+    n = dis.shape[0]
+    out = np.empty((n + 1, 3))
+    out[0] = dis[0]
+    k = 1
+    pc = np.empty(3)
+    g = np.empty(3)
+    for i in range(1, n):
+        if not _blocked(fld, origin, res, lo, hi, out[k - 1], dis[i], res, pc):
+            continue
+        _trilinear(fld, origin, res, pc, g)
+        gn = math.sqrt(g[0] * g[0] + g[1] * g[1] + g[2] * g[2])
+        if gn > 1e-3:
+            dvec = dis[i] - out[k - 1]
+            dn = math.sqrt(dvec[0] ** 2 + dvec[1] ** 2 + dvec[2] ** 2)
+            if dn > 1e-12:
+                dvec /= dn
+            g /= gn
+            push = g - (g[0] * dvec[0] + g[1] * dvec[1] + g[2] * dvec[2]) * dvec
+            pn = math.sqrt(push[0] ** 2 + push[1] ** 2 + push[2] ** 2)
+            if pn > 1e-12:
+                for d in range(3):
+                    pc[d] += res * push[d] / pn
+        out[k] = pc
+        k += 1
+    out[k] = dis[n - 1]
+    return out[:k + 1]
+
+
+@njit(cache=True)
+def _shortcut_greedy(dis, fld, origin, res, lo, hi):
+    """The last visible discretised point becomes the next kept point (line of sight with
+    threshold 0). Returns an empty array if ``dis`` itself is blocked somewhere."""
+    n = dis.shape[0]
+    out = np.empty((n, 3))
+    out[0] = dis[0]
+    k = 1
+    anchor = 0
+    last_ok = 0
+    pc = np.empty(3)
+    i = 1
+    while i < n:
+        if not _blocked(fld, origin, res, lo, hi, dis[anchor], dis[i], 0.0, pc):
+            last_ok = i
+            i += 1
+            continue
+        if last_ok == anchor:
+            return np.empty((0, 3))
+        anchor = last_ok
+        out[k] = dis[anchor]
+        k += 1
+    if n > 1:
+        out[k] = dis[n - 1]
+        k += 1
+    return out[:k]
+
+
+@njit(cache=True)
+def _build_graph(samples, start, end, clearance, fld, origin, res, lo, hi):
+    """The guard/connector roadmap (module docstring, step 2). Returns positions (K, 3),
+    kind (K,) 0 guard / 1 connector, the two guards of each connector (K, 2; -1 for
+    guards), and the number of samples with enough clearance."""
+    m = samples.shape[0]
+    pos = np.empty((m + 2, 3))
+    kind = np.zeros(m + 2, np.int64)
+    link = -np.ones((m + 2, 2), np.int64)
+    pos[0] = start
+    pos[1] = end
+    n = 2
+    vis = np.empty(3, np.int64)
+    pc = np.empty(3)
+    p1 = np.empty((3, 3))
+    p2 = np.empty((3, 3))
+    valid = 0
+    for s in range(m):
+        p = samples[s]
+        if _coarse(fld, origin, res, lo, hi, p) <= clearance:
+            continue
+        valid += 1
+        nv = 0
+        for g in range(n):
+            if kind[g] != 0:
+                continue
+            if not _blocked(fld, origin, res, lo, hi, p, pos[g], res, pc):
+                vis[nv] = g
+                nv += 1
+                if nv > 2:
+                    break
+        if nv == 0:
+            pos[n] = p
+            n += 1
+        elif nv == 2:
+            g1, g2 = vis[0], vis[1]
+            need = True
+            for c in range(n):
+                if kind[c] != 1:
+                    continue
+                if not ((link[c, 0] == g1 and link[c, 1] == g2)
+                        or (link[c, 0] == g2 and link[c, 1] == g1)):
+                    continue
+                p1[0] = pos[g1]
+                p1[1] = p
+                p1[2] = pos[g2]
+                p2[0] = pos[g1]
+                p2[1] = pos[c]
+                p2[2] = pos[g2]
+                if _same_topo(p1, p2, fld, origin, res, lo, hi, 0.0):
+                    if _length(p1) < _length(p2):
+                        pos[c] = p
+                    need = False
+                    break
+            if need:
+                pos[n] = p
+                kind[n] = 1
+                link[n, 0] = g1
+                link[n, 1] = g2
+                n += 1
+    return pos[:n].copy(), kind[:n].copy(), link[:n].copy(), valid
+
+
+# ---------------------------------------------------------------------------------------
+# the ESDF snapshot
+# ---------------------------------------------------------------------------------------
+class EsdfGrid:
+    """A snapshot of a signed ESDF on the map's voxel lattice (see the module docstring).
+
+    ``field`` (nx, ny, nz) metres at voxel centres; ``origin_index`` the global voxel index
+    of ``field[0, 0, 0]`` (voxel ``i`` covers ``[i, i+1) * resolution``); ``bounds`` an
+    optional ``(lo, hi)`` flight volume outside which everything is blocked.
+    """
+
+    def __init__(self, esdf_field, origin_index, resolution: float, bounds=None):
+        f = np.ascontiguousarray(esdf_field, dtype=np.float64)
+        if f.ndim != 3 or min(f.shape) < 2:
+            raise ValueError(f"field must be 3-D with >= 2 voxels per axis, got {f.shape}")
+        if not (math.isfinite(resolution) and resolution > 0):
+            raise ValueError(f"resolution must be positive, got {resolution!r}")
+        self.field = f
+        self.origin = np.asarray(origin_index, dtype=np.int64).reshape(3).copy()
+        self.resolution = float(resolution)
+        if bounds is None:
+            self.lo = np.full(3, -_BIG)
+            self.hi = np.full(3, _BIG)
+        else:
+            self.lo = np.asarray(bounds[0], dtype=float).reshape(3).copy()
+            self.hi = np.asarray(bounds[1], dtype=float).reshape(3).copy()
+
+    @classmethod
+    def from_map(cls, local_map, bounds=None) -> EsdfGrid:
+        """Recompute the map's ESDF over its whole window and take it."""
+        fld = local_map.update_esdf()
+        return cls(fld, local_map.esdf_origin_index, local_map.resolution_m, bounds)
+
+    @classmethod
+    def from_occupancy(cls, occupied, origin_index, resolution: float,
+                       bounds=None) -> EsdfGrid:
+        """The signed field of a boolean voxel array, with the local map's conventions
+        (free: distance to the nearest occupied centre; occupied: resolution minus the
+        distance to the nearest free centre). For synthetic maps."""
+        from scipy.ndimage import distance_transform_edt
+
+        occ = np.asarray(occupied, dtype=bool)
+        res = float(resolution)
+        if not occ.any():
+            fld = np.full(occ.shape, 1e3)
+        elif occ.all():
+            fld = np.full(occ.shape, -1e3)
+        else:
+            fld = res * distance_transform_edt(~occ)
+            fld[occ] = res - res * distance_transform_edt(occ)[occ]
+        return cls(fld, origin_index, res, bounds)
+
+    def _args(self):
+        return self.field, self.origin, self.resolution, self.lo, self.hi
+
+    def distance(self, points) -> np.ndarray:
+        """Coarse (per-voxel) distance of points (N, 3); -1 outside the bounds."""
+        p = np.asarray(points, dtype=float).reshape(-1, 3)
+        return _coarse_many(p, *self._args())
+
+    def evaluate(self, points) -> tuple[np.ndarray, np.ndarray]:
+        """Trilinear distance (N,) and gradient (N, 3), as ``LocalMap.esdf``."""
+        p = np.asarray(points, dtype=float).reshape(-1, 3)
+        d = np.empty(len(p))
+        g = np.empty((len(p), 3))
+        _trilinear_many(p, self.field, self.origin, self.resolution, d, g)
+        return d, g
+
+    def in_bounds(self, points) -> np.ndarray:
+        """Whether points (N, 3) lie in the flight volume."""
+        p = np.asarray(points, dtype=float).reshape(-1, 3)
+        return np.all((p >= self.lo) & (p <= self.hi), axis=1)
+
+    def occupied(self, points) -> np.ndarray:
+        """Planning occupancy (distance <= 0, or outside the bounds) of points (N, 3)."""
+        return self.distance(points) <= 0.0
+
+    def visible(self, a, b, thresh: float = 0.0) -> bool:
+        """Line of sight a -> b: no traversed voxel with distance ``<= thresh``."""
+        pc = np.empty(3)
+        return not _blocked(*self._args(), np.asarray(a, dtype=float).reshape(3),
+                            np.asarray(b, dtype=float).reshape(3), float(thresh), pc)
+
+    def path_free(self, path, thresh: float = 0.0) -> bool:
+        """Every piece of the polyline has line of sight."""
+        return bool(_path_free(_as_path(path), *self._args(), float(thresh)))
+
+
+@njit(cache=True)
+def _coarse_many(p, fld, origin, res, lo, hi):
+    out = np.empty(p.shape[0])
+    for i in range(p.shape[0]):
+        out[i] = _coarse(fld, origin, res, lo, hi, p[i])
+    return out
+
+
+@njit(cache=True)
+def _trilinear_many(p, fld, origin, res, d, g):
+    for i in range(p.shape[0]):
+        d[i] = _trilinear(fld, origin, res, p[i], g[i])
+
+
+def _as_path(path) -> np.ndarray:
+    p = np.ascontiguousarray(path, dtype=float)
+    if p.ndim != 2 or p.shape[1] != 3 or p.shape[0] < 1:
+        raise ValueError(f"a path must have shape (K >= 1, 3), got {p.shape}")
+    return p
+
+
+# ---------------------------------------------------------------------------------------
+# path utilities
+# ---------------------------------------------------------------------------------------
+def path_length(path) -> float:
+    return float(_length(_as_path(path)))
+
+
+def discretize_path(path, n: int) -> np.ndarray:
+    """``n >= 2`` points at equal arc-length steps along the polyline (Fast-Planner's
+    ``discretizePath(path, pt_num)``)."""
+    if n < 2:
+        raise ValueError(f"n must be >= 2, got {n}")
+    return _discretize_n(_as_path(path), int(n))
+
+
+def _dedupe(path: np.ndarray) -> np.ndarray:
+    keep = np.ones(len(path), dtype=bool)
+    keep[1:] = np.linalg.norm(np.diff(path, axis=0), axis=1) > 1e-9
+    return path[keep]
+
+
+def same_topo_path(path1, path2, grid: EsdfGrid, thresh: float = 0.0) -> bool:
+    """Topological equivalence (module docstring, step 5)."""
+    return bool(_same_topo(_as_path(path1), _as_path(path2), *grid._args(), float(thresh)))
+
+
+def shortcut_path(path, grid: EsdfGrid, iterations: int = 1) -> np.ndarray:
+    """Fast-Planner's visibility shortcut, ``iterations`` passes, each kept only if it does
+    not lengthen the path; a pass that would cross an occupied voxel falls back to the
+    greedy shortcut (module docstring). A path that is itself blocked comes back as it is
+    when no pass can shorten it safely."""
+    short = _dedupe(_as_path(path))
+    args = grid._args()
+    for _ in range(int(iterations)):
+        if short.shape[0] < 2:
+            break
+        last = short
+        dis = _discretize_res(short, grid.resolution)
+        if dis.shape[0] < 2:
+            break
+        cand = _dedupe(_shortcut_push(dis, *args))
+        if not _path_free(cand, *args, 0.0):
+            cand = _shortcut_greedy(dis, *args)
+            if cand.shape[0] == 0:
+                short = last
+                break
+            cand = _dedupe(cand)
+        short = cand
+        if _length(short) > _length(last):
+            short = last
+            break
+    return short
+
+
+def prune_equivalent(paths: list[np.ndarray], grid: EsdfGrid) -> list[np.ndarray]:
+    """Keep the first path of each topological equivalence class (in the given order)."""
+    kept: list[np.ndarray] = []
+    args = grid._args()
+    for p in paths:
+        if not any(_same_topo(p, q, *args, 0.0) for q in kept):
+            kept.append(p)
+    return kept
+
+
+# ---------------------------------------------------------------------------------------
+# the search
+# ---------------------------------------------------------------------------------------
+@dataclass(frozen=True)
+class TopoParams:
+    """``TopologyPRM`` parameters (Fast-Planner's ``topo_replan`` launch values)."""
+
+    sample_inflate: tuple[float, float, float] = (1.0, 3.5, 1.0)  # m: box = (L/2, 0, 0) + this
+    clearance: float = 0.3  # m: samples need a larger distance; also the collision range's
+    max_samples: int = 2000
+    max_raw_paths: int = 300
+    keep_raw_paths: int = 25  # max_raw_path2: the raw paths with the fewest nodes kept
+    reserve_num: int = 6
+    ratio_to_short: float = 5.5
+    select_shortcut_passes: int = 5  # shortcut passes after joining the segment's points
+    max_dfs_expansions: int = 200_000
+
+    def __post_init__(self):
+        infl = tuple(float(v) for v in self.sample_inflate)
+        if len(infl) != 3 or not all(math.isfinite(v) and v >= 0 for v in infl):
+            raise ValueError(f"TopoParams.sample_inflate must be 3 numbers >= 0, got {infl}")
+        object.__setattr__(self, "sample_inflate", infl)
+        if not (math.isfinite(self.clearance) and self.clearance >= 0):
+            raise ValueError(f"TopoParams.clearance must be >= 0, got {self.clearance!r}")
+        if not self.ratio_to_short >= 1.0:
+            raise ValueError(f"TopoParams.ratio_to_short must be >= 1, got "
+                             f"{self.ratio_to_short!r}")
+        for name in ("max_samples", "max_raw_paths", "keep_raw_paths", "reserve_num",
+                     "select_shortcut_passes", "max_dfs_expansions"):
+            v = getattr(self, name)
+            if isinstance(v, bool) or not isinstance(v, int) or v < 1:
+                raise ValueError(f"TopoParams.{name} must be a positive integer, got {v!r}")
+
+
+@dataclass(eq=False)
+class TopoSearch:
+    """What :func:`find_topo_paths` found: the roadmap, the raw, shortcut, filtered and
+    selected paths (the selected ones joined to the segment's points)."""
+
+    nodes: np.ndarray  # (K, 3) positions; 0 = start, 1 = end
+    kinds: np.ndarray  # (K,) 0 guard, 1 connector
+    alive: np.ndarray  # (K,) bool: kept by the pruning
+    edges: list[tuple[int, int]]  # (guard, connector) pairs between kept nodes
+    valid_samples: int
+    raw_paths: list[np.ndarray] = field(default_factory=list)
+    short_paths: list[np.ndarray] = field(default_factory=list)
+    filtered_paths: list[np.ndarray] = field(default_factory=list)
+    paths: list[np.ndarray] = field(default_factory=list)
+    dfs_expansions: int = 0
+
+
+def _sample_frame(start: np.ndarray, end: np.ndarray) -> np.ndarray:
+    x = end - start
+    n = float(np.linalg.norm(x))
+    x = x / n if n > 1e-9 else np.array([1.0, 0.0, 0.0])
+    y = np.cross(x, np.array([0.0, 0.0, -1.0]))
+    if np.linalg.norm(y) < 1e-6:  # a vertical segment: any horizontal y
+        y = np.array([0.0, 1.0, 0.0])
+    y /= np.linalg.norm(y)
+    z = np.cross(x, y)
+    return np.column_stack([x, y, z])
+
+
+def _prune_graph(n: int, kinds: np.ndarray, link: np.ndarray) -> np.ndarray:
+    """Alive mask after repeatedly removing nodes (not start/end) with < 2 neighbours."""
+    alive = np.ones(n, dtype=bool)
+    while True:
+        deg = np.zeros(n, dtype=np.int64)
+        conn = np.flatnonzero(alive & (kinds == 1))
+        for c in conn:
+            for g in link[c]:
+                if alive[g]:
+                    deg[c] += 1
+                    deg[g] += 1
+        drop = alive & (deg <= 1)
+        drop[:2] = False
+        if not drop.any():
+            return alive
+        alive &= ~drop
+
+
+def _dfs(neighbours: list[list[int]], max_paths: int, max_expansions: int):
+    """Fast-Planner's depth-first enumeration of node sequences 0 -> ... -> 1."""
+    paths: list[list[int]] = []
+    expansions = 0
+    vis = [0]
+    on_path = {0}
+    stack = [0]  # next neighbour index to try, per node on the path
+    # entering the start: record a direct path if the end is a neighbour
+    if 1 in neighbours[0]:
+        paths.append([0, 1])
+    while stack and len(paths) < max_paths and expansions < max_expansions:
+        cur = vis[-1]
+        k = stack[-1]
+        nbs = neighbours[cur]
+        if k >= len(nbs):
+            stack.pop()
+            on_path.discard(vis.pop())
+            continue
+        stack[-1] = k + 1
+        nb = nbs[k]
+        if nb == 1 or nb in on_path:
+            continue
+        vis.append(nb)
+        on_path.add(nb)
+        stack.append(0)
+        expansions += 1
+        if 1 in neighbours[nb]:
+            paths.append(vis + [1])
+    return paths[:max_paths], expansions
+
+
+def find_topo_paths(start, end, start_pts, end_pts, grid: EsdfGrid,
+                    rng: np.random.Generator, params: TopoParams | None = None) -> TopoSearch:
+    """Fast-Planner's ``findTopoPaths`` (module docstring): distinct paths start -> end,
+    each joined to ``start_pts`` (before) and ``end_pts`` (after) in ``TopoSearch.paths``."""
+    p = params if params is not None else TopoParams()
+    s = np.asarray(start, dtype=float).reshape(3)
+    e = np.asarray(end, dtype=float).reshape(3)
+    sp = np.asarray(start_pts, dtype=float).reshape(-1, 3)
+    ep = np.asarray(end_pts, dtype=float).reshape(-1, 3)
+    args = grid._args()
+
+    # 1.-2. samples and roadmap
+    half = np.array([0.5 * float(np.linalg.norm(e - s)) + p.sample_inflate[0],
+                     p.sample_inflate[1], p.sample_inflate[2]])
+    rot = _sample_frame(s, e)
+    unit = rng.uniform(-1.0, 1.0, size=(p.max_samples, 3))
+    samples = np.ascontiguousarray((unit * half) @ rot.T + 0.5 * (s + e))
+    pos, kinds, link, valid = _build_graph(samples, s, e, float(p.clearance), *args)
+    n = pos.shape[0]
+    alive = _prune_graph(n, kinds, link)
+    neighbours: list[list[int]] = [[] for _ in range(n)]
+    edges = []
+    for c in range(n):
+        if kinds[c] == 1 and alive[c] and alive[link[c, 0]] and alive[link[c, 1]]:
+            g1, g2 = int(link[c, 0]), int(link[c, 1])
+            neighbours[g1].append(c)
+            neighbours[g2].append(c)
+            neighbours[c] = [g1, g2]
+            edges += [(g1, c), (g2, c)]
+    out = TopoSearch(nodes=pos, kinds=kinds, alive=alive, edges=edges, valid_samples=int(valid))
+
+    # 3. paths by DFS, the ones with the fewest nodes first
+    seqs, out.dfs_expansions = _dfs(neighbours, p.max_raw_paths, p.max_dfs_expansions)
+    seqs = sorted(seqs, key=len)[:p.keep_raw_paths]  # stable: DFS order within a count
+    out.raw_paths = [pos[np.array(q)] for q in seqs]
+    if not out.raw_paths:
+        return out
+
+    # 4.-5. shortcut, prune equivalent
+    out.short_paths = [shortcut_path(q, grid, 1) for q in out.raw_paths]
+    out.filtered_paths = prune_equivalent(out.short_paths, grid)
+
+    # 6. select short ones, join the segment, shortcut again, prune again
+    pool = list(out.filtered_paths)
+    lengths = [path_length(q) for q in pool]
+    chosen: list[np.ndarray] = []
+    min_len = None
+    while pool and len(chosen) < p.reserve_num:
+        k = int(np.argmin(lengths))
+        if min_len is None:
+            min_len = max(lengths[k], 1e-9)
+        elif lengths[k] / min_len >= p.ratio_to_short:
+            break
+        chosen.append(pool.pop(k))
+        lengths.pop(k)
+    joined = [shortcut_path(_dedupe(np.vstack([sp, q, ep])), grid, p.select_shortcut_passes)
+              for q in chosen]
+    out.paths = prune_equivalent(joined, grid)
+    return out
+
+
+# ---------------------------------------------------------------------------------------
+# the colliding stretch of a local segment
+# ---------------------------------------------------------------------------------------
+def collision_range(spline, grid: EsdfGrid, clearance: float = 0.3, step_s: float = 0.05):
+    """Fast-Planner's ``findCollisionRange`` on a B-spline segment: the curve sampled every
+    ``step_s`` seconds; a sample is unsafe when its coarse distance is ``< clearance``.
+
+    Returns ``(colli_start, colli_end, start_pts, end_pts)``: the last safe sample before
+    each unsafe run, the first safe sample after each (lists of points); the curve from its
+    start to the first run's start point, and from the last exit to its end, sampled at
+    most one knot span apart (arrays). When the curve never comes closer than
+    ``clearance``, ``colli_start`` is empty; when it ends in the unsafe region after a
+    single run, ``colli_end`` is empty (the original then replans nothing).
+    """
+    dur = spline.duration
+    ts = np.arange(0.0, dur + 1e-4, step_s)
+    pts = spline.position(ts)
+    safe = grid.distance(pts) >= clearance
+    colli_start: list[np.ndarray] = []
+    colli_end: list[np.ndarray] = []
+    t_s = t_e = None
+    last_safe = True
+    for k, tc in enumerate(ts):
+        if last_safe and not safe[k]:
+            tb = max(tc - step_s, 0.0)
+            colli_start.append(spline.position(tb))
+            if t_s is None:
+                t_s = tb
+        elif not last_safe and safe[k]:
+            colli_end.append(pts[k])
+            t_e = tc
+        last_safe = bool(safe[k])
+    if not colli_start or (len(colli_start) == 1 and not colli_end):
+        return colli_start, colli_end, np.zeros((0, 3)), np.zeros((0, 3))
+    dt = spline.dt
+    sn = max(int(math.ceil(t_s / dt - 1e-9)), 1)
+    start_pts = spline.position(np.linspace(0.0, t_s, sn + 1))
+    sn = max(int(math.ceil((dur - t_e) / dt - 1e-9)), 1)
+    end_pts = spline.position(np.linspace(t_e, dur, sn + 1))
+    return colli_start, colli_end, start_pts, end_pts
