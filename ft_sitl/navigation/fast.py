@@ -1,0 +1,401 @@
+"""Fast-Planner as a navigator: local map and ESDF from the depth camera, kinodynamic A*,
+ESDF-based B-spline optimisation, time re-allocation, yaw B-spline, replanning.
+
+Fast-Planner (Zhou et al., RA-L 2019) in its ``kino_replan`` configuration; behaviours and
+defaults from the facts (/work/shared/docs/planner-facts.md), the code is our own. The
+navigator's skeleton (perception, FSM, latency, retries, output) is the EGO navigator's
+(:mod:`ft_sitl.navigation.ego`), so the two differ only where the algorithms do.
+
+What it does each call (``rate_hz`` 100, the command rate of the original's
+``traj_server``), in simulated time:
+
+1. **Perception.** A depth frame (when the camera is due) is fused into the
+   :class:`~ft_sitl.navigation.mapping.LocalMap` (unknown space is free; the scenario
+   ceiling and the floor are virtual obstacles).
+2. **Replanning** (``kino_replan_fsm``):
+
+   * the first plan is made at once, from the observed position at rest (see below);
+   * a new plan when the current trajectory, at the present time, is more than
+     ``replan_threshold_m`` (1.5 m) from its start, unless it is within
+     ``no_replan_threshold_m`` (2 m) of the goal (both measured on the trajectory, as the
+     original; the vehicle's own position can lag it), and when it has ended short of the
+     goal;
+   * a safety check at 20 Hz walks the current trajectory from now, every 0.02 s, until
+     6 m (straight-line) from the current point: a sample in a planning-occupied voxel
+     (the original's coarse ESDF < 0.1 m; see below) triggers a replan at once. When the
+     collision is less than ``emergency_time_s`` (0.8 s) ahead and that replan fails, the
+     vehicle stops (hovers where it is, then plans from rest there);
+   * a plan (``kinodynamicReplan``): the ESDF over ``+-(planning_horizon_m + 1)`` m around
+     the start (clipped to the map's window); the kinodynamic A*
+     (:mod:`~ft_sitl.navigation.kino_astar`) from the current trajectory's state toward
+     the goal (speed cap: the benchmark's, per axis; ``max_acc_m_s2`` 2; horizon 7 m;
+     retried from hover with the full input set when the first search fails); its samples
+     every ``ts = 0.5 m / v_max`` (spans of ``max(8, floor(T / ts))``) fitted to a uniform
+     cubic B-spline with the start/end velocity and acceleration; the ESDF optimisation
+     (:class:`~ft_sitl.navigation.fast_optim.FastOptimizer`; free end when the search did
+     not reach the goal); the time re-allocation (up to 3 passes, the speed cap on the
+     velocity control points' norm, the start state kept); a collision check of the
+     result over the safety check's stretch (its first 6 m); the yaw B-spline.
+
+   A plan fails when the search finds no path, or when the result collides within the
+   checked stretch and does not improve on the current trajectory (a result colliding
+   later than the current trajectory, and not within ``emergency_time_s``, is taken: the
+   safety check replans it as the map grows, as the original, which takes every result).
+   A failed plan is retried after 0.05 s, doubling with each failure in a row up to 1 s;
+   after ``GIVE_UP_AFTER`` (8) failures in a row from the same state with the same map the
+   planner gives up ("no plan": the trial ends as a timeout, as it would after 90 s of
+   identical failures).
+
+3. **Latency.** A plan is computed from the trajectory's state ``latency_s`` ahead and
+   replaces the current trajectory ``latency_s`` later (simulated time); the default is a
+   fixed estimate of the original's compute time per replan (:data:`DEFAULT_LATENCY_S`),
+   ``measured_latency=True`` uses this process's measured compute time instead.
+4. **Output.** Position + velocity + acceleration from the (non-uniform) B-spline; yaw and
+   yaw rate from the yaw B-spline (headings toward the trajectory 2 s ahead), continuous
+   inside, wrapped to [-pi, pi) in the setpoint. Past the trajectory's end: its end point,
+   velocity and acceleration 0.
+
+The first plan starts at rest. The original's first plan uses the odometry velocity;
+the trial hands over a vehicle that may still be settling (up to 0.3 m/s). The search's
+coarse inputs (the smallest non-zero acceleration is a/2 = 1 m/s^2 for 0.6 s) make a slow
+vertical drift cheaper to keep than to cancel, and every later plan inherits it from the
+trajectory: a 0.15 m/s sink at hand-over took the vehicle from 1.5 m to 0.6 m over 25 m of
+Forest. (The same inheritance keeps a climb over an Urban wall going, as the original's.)
+
+The emergency stop. The original's kinodynamic FSM never stops: a colliding trajectory is
+replanned, a failed replan retried from the odometry at 100 Hz. The EGO navigator hovers
+when a collision is less than 0.8 s ahead; here that rule fires on nearly every tree on
+the path: an obstacle becomes occupied only within the 4.5 m ray length and after 6
+frames (0.4 s at 15 Hz), i.e. ~2.9 m ahead, 0.7 s at 4 m/s, and the hover from 4 m/s
+overshoots by ~2.5 m into it (Forest 2 collided that way). So the stop is the fallback
+when the replan for such a collision fails.
+
+The safety check. The original samples ``evaluateCoarseEDT`` (the ESDF at the voxel that
+holds the point, no interpolation) and replans below 0.1 m. Its ESDF is computed from the
+inflated occupancy, free voxels hold multiples of the 0.1 m resolution, so "below 0.1 m"
+is exactly "the point's voxel is planning-occupied": we ask the map's planning occupancy,
+which is always current (the ESDF is recomputed only when a plan is made).
+
+Camera: as the EGO navigator (:func:`~ft_sitl.navigation.ego.camera_config`): 160 x 120 @
+15 Hz by default, ``camera="d435"`` for the originals' 320 x 240 @ 30 Hz rays.
+"""
+
+from __future__ import annotations
+
+import math
+import time
+
+import numpy as np
+
+from ft_sitl.autopilot.setpoints import Setpoint
+from ft_sitl.navigation.base import GiveUp, Navigator, Observation, Task
+from ft_sitl.navigation.ego import camera_config
+
+#: estimated time from state to command of one Fast-Planner replan in the original C++ on
+#: a desktop CPU: kinodynamic search a few ms, B-spline optimisation <= 300 evaluations
+#: under a 5 ms cap, time adjustment and yaw < 1 ms (~10 ms), plus the ESDF the plan needs,
+#: which the original recomputes over its local box in the map's 20 Hz timer (~10 ms an
+#: update); twice EGO's 10 ms, which needs no ESDF
+DEFAULT_LATENCY_S = 0.02
+SAFETY_CHECK_HZ = 20.0
+#: the original's trajectory check: every 0.02 s of the trajectory up to 6 m ahead
+CHECK_STEP_S = 0.02
+CHECK_RADIUS_M = 6.0
+#: Fast-Planner's control-point spacing (manager/control_points_distance, m)
+CTRL_PT_DIST_M = 0.5
+#: no plan when the goal is this close to the start state (the original: "Close goal")
+CLOSE_GOAL_M = 0.2
+RETRY_S = 0.05
+RETRY_MAX_S = 1.0
+GIVE_UP_AFTER = 8
+
+
+def _wrap(a: float) -> float:
+    return (a + math.pi) % (2.0 * math.pi) - math.pi
+
+
+class _Traj:
+    """A position B-spline and its yaw B-spline started at ``t0`` (navigation time, s)."""
+
+    def __init__(self, pos, yaw, t0: float):
+        self.pos = pos
+        self.yaw = yaw
+        self.t0 = t0
+        self.start = pos.position(0.0)
+
+    @property
+    def duration(self) -> float:
+        return self.pos.duration
+
+    @property
+    def end_time(self) -> float:
+        return self.t0 + self.pos.duration
+
+    def state(self, t: float):
+        tau = min(max(t - self.t0, 0.0), self.pos.duration)
+        return self.pos.position(tau), self.pos.velocity(tau), self.pos.acceleration(tau)
+
+    def yaw_state(self, t: float) -> np.ndarray:
+        tau = min(max(t - self.t0, 0.0), self.yaw.duration)
+        return np.array([self.yaw.position(tau)[0], self.yaw.velocity(tau)[0],
+                         self.yaw.acceleration(tau)[0]])
+
+
+def first_collision(pos, tau0: float, occupied, step_s: float = CHECK_STEP_S,
+                    radius_m: float = CHECK_RADIUS_M) -> float | None:
+    """Fast-Planner's ``checkTrajCollision``: sample the trajectory ``pos`` at ``tau0 +
+    step_s k`` (k >= 1, before its end) until a sample is ``radius_m`` or farther from
+    ``pos(tau0)`` (that sample included); the time after ``tau0`` of the first sample
+    ``occupied`` says is occupied, or None."""
+    dur = pos.duration
+    if tau0 + step_s >= dur:
+        return None
+    k = np.arange(1, int(math.floor((dur - tau0) / step_s - 1e-9)) + 1)
+    t = tau0 + step_s * k
+    t = t[t < dur]
+    if t.size == 0:
+        return None
+    pts = pos.position(t)
+    far = np.flatnonzero(np.linalg.norm(pts - pos.position(tau0), axis=1) >= radius_m)
+    if far.size:
+        t, pts = t[:far[0] + 1], pts[:far[0] + 1]
+    hit = np.flatnonzero(np.asarray(occupied(pts), dtype=bool))
+    return float(t[hit[0]] - tau0) if hit.size else None
+
+
+class FastPlanner(Navigator):
+    """Fast-Planner (Zhou et al. 2019): kinodynamic A* + ESDF B-spline optimisation."""
+
+    name = "fast"
+    rate_hz = 100.0
+
+    def __init__(self, max_acc_m_s2: float = 2.0, planning_horizon_m: float = 7.0,
+                 replan_threshold_m: float = 1.5, no_replan_threshold_m: float = 2.0,
+                 emergency_time_s: float = 0.8, latency_s: float = DEFAULT_LATENCY_S,
+                 measured_latency: bool = False, camera: str = "benchmark",
+                 camera_width: int | None = None, camera_height: int | None = None,
+                 camera_rate_hz: float | None = None):
+        super().__init__()
+        for name, v, lo, hi in (("max_acc_m_s2", max_acc_m_s2, 0.5, 20.0),
+                                ("planning_horizon_m", planning_horizon_m, 2.0, 20.0),
+                                ("replan_threshold_m", replan_threshold_m, 0.2, 10.0),
+                                ("no_replan_threshold_m", no_replan_threshold_m, 0.0, 10.0),
+                                ("emergency_time_s", emergency_time_s, 0.0, 5.0),
+                                ("latency_s", latency_s, 0.0, 1.0)):
+            if isinstance(v, bool) or not isinstance(v, (int, float)) or not lo <= v <= hi:
+                raise ValueError(f"{name}: {v!r} must be a number within {lo}..{hi}")
+        self.max_acc = float(max_acc_m_s2)
+        self.horizon = float(planning_horizon_m)
+        self.replan_threshold = float(replan_threshold_m)
+        self.no_replan_threshold = float(no_replan_threshold_m)
+        self.emergency_time = float(emergency_time_s)
+        self.latency = float(latency_s)
+        self.measured_latency = bool(measured_latency)
+        self.camera = camera_config(camera, camera_width, camera_height, camera_rate_hz)
+
+    # --- set-up ---------------------------------------------------------------------------
+    def reset(self, task: Task) -> None:
+        from ft_sitl.navigation.fast_optim import FastOptimizer, FastParams
+        from ft_sitl.navigation.kino_astar import KinoAstarParams
+        from ft_sitl.navigation.mapping import LocalMap, MapConfig
+
+        super().reset(task)
+        self.vmax = task.limits.max_speed_m_s
+        self.map = LocalMap(MapConfig(skip_pixel=1), task.ceiling, float(task.bounds_min[2]),
+                            camera=self.camera, center_m=tuple(task.start[:2]))
+        self.bounds = (np.array(task.bounds_min, dtype=float),
+                       np.array(task.bounds_max, dtype=float))
+        self.kino_params = KinoAstarParams(max_vel=self.vmax, max_acc=self.max_acc,
+                                           horizon=self.horizon)
+        self.optimizer = FastOptimizer(FastParams(max_vel=self.vmax, max_acc=self.max_acc))
+        self.traj: _Traj | None = None
+        self.pending: _Traj | None = None
+        self.pending_at = math.inf
+        self.plan_now = True
+        self.from_rest = True
+        self.stop_at: np.ndarray | None = None
+        self.next_check = 0.0
+        self.yaw = float(task.start_yaw)  # continuous (unwrapped)
+        self.failures = 0
+        self.retry_at = 0.0
+        self.fail_sig = None
+        self.same_failures = 0
+        self.emergency = False
+        self.stops = 0
+        self.compute_s: list[float] = []
+        self.plan_log: list[dict] = []
+
+    # --- planning ---------------------------------------------------------------------------
+    def _occupied(self, pts: np.ndarray) -> np.ndarray:
+        return self.map.occupied_inflated(pts)
+
+    def _plan(self, obs: Observation) -> None:
+        from ft_sitl.navigation.bspline import UniformBSpline
+        from ft_sitl.navigation.fast_optim import EsdfField, KnotBSpline, plan_yaw
+        from ft_sitl.navigation.kino_astar import KinodynamicAstar, KinoStatus, VoxelOccupancy
+
+        t_start = time.perf_counter()
+        t_eff = obs.time_s + self.latency
+        if self.traj is None or self.from_rest:
+            p0 = np.array(obs.position if self.stop_at is None else self.stop_at, dtype=float)
+            v0 = np.zeros(3)
+            a0 = np.zeros(3)
+            yaw0 = np.array([self.yaw, 0.0, 0.0])
+        else:
+            p0, v0, a0 = self.traj.state(t_eff)
+            yaw0 = self.traj.yaw_state(t_eff)
+        goal = np.asarray(self.task.goal, dtype=float)
+        self.replans += 1
+        if float(np.linalg.norm(goal - p0)) < CLOSE_GOAL_M:  # there already: hold it
+            self._adopt(None, obs, t_start)
+            return
+        log: dict = {"t": obs.time_s}
+        # perception for this plan: the ESDF box and the search's voxel grid
+        t0 = time.perf_counter()
+        esdf = EsdfField.from_map(self.map, p0[:2], self.horizon + 1.0)
+        res_m = self.map.resolution_m
+        grid = VoxelOccupancy(self.map.planning_grid(), self.map.origin_index * res_m, res_m)
+        log["map_s"] = time.perf_counter() - t0
+        # front end
+        t0 = time.perf_counter()
+        search = KinodynamicAstar(grid, res_m, bounds=self.bounds, params=self.kino_params)
+        found = search.search(p0, v0, a0, goal, np.zeros(3), keep_start_acc=True)
+        log["search_s"] = time.perf_counter() - t0
+        log["status"] = found.status.value
+        if not found.found:
+            self._fail(obs, p0, "no path", log, t_start)
+            return
+        # back end
+        t0 = time.perf_counter()
+        ts, pts, sv, ev, sa, ea = found.bspline_samples(CTRL_PT_DIST_M / self.vmax)
+        spline = UniformBSpline.fit(pts, ts, sv, ev, sa, ea)
+        opt = self.optimizer.optimize(spline, esdf,
+                                      free_end=found.status is not KinoStatus.REACHED_GOAL)
+        pos, passes = KnotBSpline.from_uniform(opt.spline).retimed(
+            self.vmax, self.max_acc, self.optimizer.params.limit_ratio,
+            self.optimizer.params.realloc_passes, vel_norm=True)
+        log.update(opt_s=time.perf_counter() - t0, evaluations=opt.evaluations,
+                   realloc_passes=passes)
+        if not np.all(np.isfinite(pos.control_points)):
+            self._fail(obs, p0, "non-finite trajectory", log, t_start)
+            return
+        hit = first_collision(pos, 0.0, self._occupied)
+        if hit is not None:
+            # a plan colliding within the checked stretch is still taken when it improves
+            # on the current trajectory (collides later, and not within emergency_time_s):
+            # the safety check replans it as the map grows, as the original's would
+            cur = None
+            if self.traj is not None and not self.from_rest:
+                tau = min(max(t_eff - self.traj.t0, 0.0), self.traj.duration)
+                cur = first_collision(self.traj.pos, tau, self._occupied)
+            if cur is None or hit <= cur or hit < self.emergency_time:
+                self._fail(obs, p0, f"collision {hit:.2f} s ahead", log, t_start)
+                return
+            log["collides_s"] = hit
+        yaw = plan_yaw(pos, yaw0)
+        self.failures = self.same_failures = 0
+        self._adopt(_Traj(pos, yaw, 0.0), obs, t_start, log)
+
+    def _fail(self, obs: Observation, p0: np.ndarray, why: str, log: dict,
+              t_start: float) -> None:
+        if self.emergency and self.traj is not None:
+            # no way around a collision less than emergency_time_s ahead: hover where it
+            # is, then plan from rest there
+            self.stop_at = np.array(obs.position, dtype=float)
+            self.from_rest = True
+            self.traj = None
+            self.stops += 1
+        self.emergency = False
+        self.failures += 1
+        sig = (self.map.occupied_count, tuple(np.round(p0 / 0.05).astype(int)))
+        self.same_failures = self.same_failures + 1 if sig == self.fail_sig else 1
+        self.fail_sig = sig
+        dt = time.perf_counter() - t_start
+        self.compute_s.append(dt)
+        log.update(total_s=dt, failed=why)
+        self.plan_log.append(log)
+        if self.same_failures >= GIVE_UP_AFTER:
+            # the same map, the same start state: the deterministic planner would fail the
+            # same way until the trial times out
+            raise GiveUp(f"no plan: {GIVE_UP_AFTER} attempts in a row failed ({why}) with an "
+                         f"unchanged map")
+        self.plan_now = True
+        self.retry_at = obs.time_s + min(RETRY_S * 2.0 ** (self.failures - 1), RETRY_MAX_S)
+
+    def _adopt(self, traj: _Traj | None, obs: Observation, t_start: float,
+               log: dict | None = None) -> None:
+        dt = time.perf_counter() - t_start
+        self.compute_s.append(dt)
+        if log is not None:
+            log["total_s"] = dt
+            self.plan_log.append(log)
+        self.plan_now = False
+        self.emergency = False
+        if traj is None:
+            return
+        lat = dt if self.measured_latency else self.latency
+        traj.t0 = obs.time_s + lat
+        self.pending = traj
+        self.pending_at = obs.time_s + lat
+        self.from_rest = False
+        self.stop_at = None
+
+    def _collision_ahead(self, t: float) -> float | None:
+        """Seconds until the current trajectory (checked as the original: 6 m ahead) meets
+        a planning-occupied voxel."""
+        tr = self.traj
+        if tr is None:
+            return None
+        tau = min(max(t - tr.t0, 0.0), tr.duration)
+        return first_collision(tr.pos, tau, self._occupied)
+
+    # --- the step ---------------------------------------------------------------------------
+    def step(self, obs: Observation) -> Setpoint:
+        t = obs.time_s
+        if obs.depth is not None:
+            self.map.fuse(obs.depth)
+        if self.pending is not None and t >= self.pending_at:
+            self.traj, self.pending, self.pending_at = self.pending, None, math.inf
+        if self.traj is not None and self.pending is None and self.stop_at is None:
+            # the original measures along the trajectory, not at the vehicle
+            p_traj = self.traj.state(t)[0]
+            moved = float(np.linalg.norm(p_traj - self.traj.start))
+            to_goal = float(np.linalg.norm(self.task.goal - p_traj))
+            if to_goal > self.no_replan_threshold and (
+                    moved > self.replan_threshold or t >= self.traj.end_time):
+                self.plan_now = True
+            if t >= self.next_check:
+                self.next_check = t + 1.0 / SAFETY_CHECK_HZ
+                ahead = self._collision_ahead(t)
+                if ahead is not None:
+                    self.plan_now = True
+                    if ahead < self.emergency_time:
+                        # replan now (whatever the retry back-off); stop if that fails
+                        self.emergency = True
+                        self.retry_at = t
+        if self.plan_now and self.pending is None and t >= self.retry_at:
+            self._plan(obs)
+        return self._setpoint(obs)
+
+    def _setpoint(self, obs: Observation) -> Setpoint:
+        t = obs.time_s
+        if self.traj is None:
+            hold = self.stop_at if self.stop_at is not None else obs.position
+            if not math.isfinite(self.yaw):
+                raise FloatingPointError(f"non-finite yaw at t = {t:.2f} s")
+            return Setpoint.position(hold, yaw=_wrap(self.yaw))
+        p, v, a = self.traj.state(t)
+        y = self.traj.yaw_state(t)
+        yaw, yaw_rate = float(y[0]), float(y[1])
+        if t > self.traj.end_time:
+            v = np.zeros(3)
+            a = np.zeros(3)
+            yaw_rate = 0.0
+        if not (np.all(np.isfinite(p)) and np.all(np.isfinite(v)) and np.all(np.isfinite(a))
+                and math.isfinite(yaw) and math.isfinite(yaw_rate)):
+            # never command NaN: the trial fails as a navigator error instead
+            raise FloatingPointError(f"non-finite setpoint at t = {t:.2f} s: p {p}, v {v}, "
+                                     f"a {a}, yaw {yaw}, yaw rate {yaw_rate}")
+        self.yaw = yaw
+        return Setpoint.position(p, velocity=v, acceleration=a, yaw=_wrap(yaw),
+                                 yaw_rate=yaw_rate)

@@ -1,0 +1,756 @@
+"""Fast-Planner's back end: ESDF-based B-spline optimisation, time re-allocation, yaw.
+
+Behaviours and defaults are Fast-Planner's (Zhou et al., RA-L 2019;
+HKUST-Aerial-Robotics/Fast-Planner: ``bspline_optimizer``, ``non_uniform_bspline``,
+``planner_manager``; see /work/shared/docs/planner-facts.md); the code is our own.
+
+Optimisation (:class:`FastOptimizer`). The trajectory is a uniform cubic B-spline with knot
+span ``ts`` and control points ``Q[0..N-1]`` (the least-squares fit of the kinodynamic
+search's samples). The first three control points are fixed (they pin the start state);
+the last three are fixed too when the search reached the goal, and free when it stopped at
+its horizon (then an endpoint term keeps the curve's end near where the search ended). The
+cost, with analytic gradients w.r.t. the whole ``(N, 3)`` array:
+
+- smoothness ``sum_i ||Q[i+3] - 3 Q[i+2] + 3 Q[i+1] - Q[i]||^2`` (jerk form, unscaled),
+  weight ``w_smooth`` = 10 (``lambda1``);
+- distance ``sum_i (d_i - d0)^2`` over the control points with ``d_i < d0``, where ``d_i`` is
+  the map's ESDF at ``Q[i]`` (trilinear interpolation, :meth:`LocalMap.esdf`), ``d0`` = 0.4 m
+  (``dist0``), over the free points ``Q[3] .. Q[N-4]`` (``Q[N-1]`` with a free end), weight
+  ``w_distance`` = 5 (``lambda2``);
+- feasibility per axis on the velocity control points ``V = (Q[i+1] - Q[i]) / ts`` and the
+  acceleration control points ``A = (Q[i+2] - 2 Q[i+1] + Q[i]) / ts^2``:
+  ``(V^2 - vmax^2)^2`` where ``|V| > vmax``, ``(A^2 - amax^2)^2`` where ``|A| > amax``, weight
+  ``w_feasibility`` = 1e-5 (``lambda3``: nearly nothing; time re-allocation does the work);
+- endpoint (free end only) ``||(Q[N-3] + 4 Q[N-2] + Q[N-1]) / 6 - p_end||^2`` with ``p_end``
+  the initial curve's end, weight ``w_endpoint`` = 0.01 (``lambda4``).
+
+The solver is our own L-BFGS in numba (memory ``lbfgs_memory``, a Lewis-Overton weak-Wolfe
+line search), stopped after ``max_evaluations`` (300, ``max_iteration_num2``) cost
+evaluations or when a step changes the variables by less than ``xtol_rel`` (1e-5) of their
+norm, as Fast-Planner's NLopt L-BFGS (``set_maxeval``, ``set_xtol_rel``). Like the
+original it returns the best point evaluated (``best_variable_``), not the last.
+
+Differences from the original, on purpose:
+
+- the distance gradient is the exact gradient of the interpolated ESDF; the original
+  normalises the ESDF gradient to unit length (an ESDF's gradient has norm ~1 almost
+  everywhere, so the directions agree), which makes the reported gradient inconsistent with
+  the cost and confuses the line search;
+- no wall-clock cap (the original also stops after 5 ms): deterministic; the evaluation cap
+  binds first at our problem sizes (a solve takes a few ms in numba).
+
+Time re-allocation (:meth:`KnotBSpline.reallocate_time`, the original's ``reallocateTime``):
+the optimised curve becomes a non-uniform B-spline (:class:`KnotBSpline`); every velocity
+control point ``p (Q[i+1] - Q[i]) / (u[i+4] - u[i+1])`` beyond ``vmax`` on an axis lengthens
+the three knot intervals it spans, together by ``min(max|V| / vmax + 1e-4, 1.1)``; every
+acceleration control point beyond ``amax`` its two intervals by ``min(sqrt(max|A| / amax) +
+1e-4, 1.1)`` (the original's special case for ``i = 1, 2`` included: it lengthens the first
+four intervals); later knots shift. One interval belongs to up to three control points, so
+one pass can lengthen it by more than 1.1. The navigator runs up to three passes, as the
+planner manager, and flies the result even if still infeasible (the original does).
+Options, both on in the navigator: ``vel_norm`` bounds the velocity control points' norm
+(the benchmark's speed cap is a speed, and per-axis limits allow 4 sqrt 2 m/s on a
+diagonal, which the autopilot's cap turns into a growing tracking lag); ``keep_start``
+leaves alone the first five knot intervals, which shape the curve's position, velocity and
+acceleration at its start: the original stretches them too, so a re-timed plan starts
+slower than the state it was planned from (3.8 -> 2.9 m/s in Perlin 2, a jump the
+autopilot must absorb).
+
+Yaw (:func:`plan_yaw`, the planner manager's ``planYaw``): a 1-D uniform cubic B-spline with
+knot span ~0.3 s over the position trajectory's duration; waypoint ``k`` (at ``t_k = k dt``)
+is the heading from ``p(t_k)`` to ``p(min(t_k + 2 s, T))``, unwrapped to the previous one;
+the first three control points pin the start (yaw, rate, acceleration), the last three the
+heading of the velocity 0.1 s before the end (rate and acceleration 0); the interior points
+minimise ``10 smoothness + 100 sum_k ((y[k] + 4 y[k+1] + y[k+2]) / 6 - w_k)^2``. The cost is
+quadratic, so instead of the original's NLopt solve we solve it exactly (linear least
+squares).
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from dataclasses import dataclass
+
+import numpy as np
+from numba import njit
+
+from ft_sitl.navigation.bspline import UniformBSpline
+from ft_sitl.navigation.mapping import _esdf_eval
+
+__all__ = [
+    "EsdfField", "FastOptimizer", "FastParams", "FastResult", "KnotBSpline", "cost_terms",
+    "distance_cost", "endpoint_cost", "feasibility_cost", "plan_yaw", "smoothness_cost",
+    "total_cost",
+]
+
+ORDER = 3
+#: knot intervals 0 .. 4 of a cubic B-spline shape its state (position, velocity,
+#: acceleration) at the start of its domain, u[3]
+START_INTERVALS = 5
+
+
+@dataclass(frozen=True)
+class FastParams:
+    """Fast-Planner's optimiser parameters (``kino_algorithm.xml``)."""
+
+    max_vel: float = 4.0  # m/s, per axis; the benchmark's cap (Fast-Planner default 3)
+    max_acc: float = 2.0  # m/s^2, per axis (Fast-Planner default)
+    w_smooth: float = 10.0  # lambda1
+    w_distance: float = 5.0  # lambda2
+    w_feasibility: float = 1e-5  # lambda3
+    w_endpoint: float = 0.01  # lambda4
+    dist0: float = 0.4  # m, ESDF distance below which control points are pushed
+    max_evaluations: int = 300  # max_iteration_num2
+    xtol_rel: float = 1e-5
+    lbfgs_memory: int = 10
+    limit_ratio: float = 1.1  # bspline/limit_ratio, per re-allocation of one control point
+    realloc_passes: int = 3
+
+    def __post_init__(self):
+        for name in ("max_vel", "max_acc", "dist0", "xtol_rel"):
+            v = getattr(self, name)
+            if isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v) \
+                    or v <= 0:
+                raise ValueError(f"FastParams.{name} must be a positive number, got {v!r}")
+        for name in ("w_smooth", "w_distance", "w_feasibility", "w_endpoint"):
+            v = getattr(self, name)
+            if isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v) \
+                    or v < 0:
+                raise ValueError(f"FastParams.{name} must be a number >= 0, got {v!r}")
+        if not (isinstance(self.limit_ratio, (int, float)) and self.limit_ratio > 1.0):
+            raise ValueError(f"FastParams.limit_ratio must be > 1, got {self.limit_ratio!r}")
+        for name in ("max_evaluations", "lbfgs_memory", "realloc_passes"):
+            v = getattr(self, name)
+            if isinstance(v, bool) or not isinstance(v, int) or v < 1:
+                raise ValueError(f"FastParams.{name} must be a positive integer, got {v!r}")
+
+
+@dataclass(frozen=True, eq=False)
+class EsdfField:
+    """An ESDF sampled at voxel centres: ``field[i, j, k]`` is the distance at the centre of
+    global voxel ``origin + (i, j, k)``, i.e. at ``(origin + (i, j, k) + 0.5) * resolution``;
+    queried by trilinear interpolation exactly as :meth:`LocalMap.esdf` (points beyond the
+    field are clamped onto it)."""
+
+    field: np.ndarray
+    origin: np.ndarray
+    resolution: float
+
+    def __post_init__(self):
+        f = np.ascontiguousarray(self.field, dtype=np.float64)
+        if f.ndim != 3 or min(f.shape) < 2:
+            raise ValueError(f"field: need a 3-D array with >= 2 voxels per axis, got {f.shape}")
+        o = np.asarray(self.origin, dtype=np.int64).reshape(-1)
+        if o.shape != (3,):
+            raise ValueError(f"origin: need 3 integers, got {self.origin!r}")
+        r = float(self.resolution)
+        if not (math.isfinite(r) and r > 0):
+            raise ValueError(f"resolution: must be positive, got {self.resolution!r}")
+        object.__setattr__(self, "field", f)
+        object.__setattr__(self, "origin", o)
+        object.__setattr__(self, "resolution", r)
+
+    @classmethod
+    def from_map(cls, local_map, center_m=None, half_extent_m: float | None = None) -> EsdfField:
+        """Recompute ``local_map``'s ESDF (over the box ``center_m +- half_extent_m``, see
+        :meth:`LocalMap.update_esdf`) and wrap it."""
+        field = local_map.update_esdf(center_m, half_extent_m)
+        return cls(field, local_map.esdf_origin_index, local_map.resolution_m)
+
+    def __call__(self, points) -> tuple[np.ndarray, np.ndarray]:
+        """(distance (M,), gradient (M, 3)) at points (M, 3)."""
+        p = np.ascontiguousarray(np.asarray(points, dtype=np.float64).reshape(-1, 3))
+        d = np.empty(len(p))
+        g = np.empty((len(p), 3))
+        _esdf_eval(self.field, self.origin, 1.0 / self.resolution, p, d, g)
+        return d, g
+
+
+# ---------------------------------------------------------------------------------------
+# cost terms (numba). Each ``_*_acc`` returns its unweighted cost and adds ``w`` times its
+# gradient to ``grad``.
+# ---------------------------------------------------------------------------------------
+@njit(cache=True)
+def _smooth_acc(q, w, grad):
+    f = 0.0
+    for i in range(q.shape[0] - 3):
+        for a in range(3):
+            j = q[i + 3, a] - 3.0 * q[i + 2, a] + 3.0 * q[i + 1, a] - q[i, a]
+            f += j * j
+            gj = 2.0 * w * j
+            grad[i, a] -= gj
+            grad[i + 1, a] += 3.0 * gj
+            grad[i + 2, a] -= 3.0 * gj
+            grad[i + 3, a] += gj
+    return f
+
+
+@njit(cache=True)
+def _distance_acc(q, first, last, field, origin, inv_res, d0, w, grad, dist, dgrad):
+    """ESDF term over control points ``first .. last - 1``."""
+    _esdf_eval(field, origin, inv_res, q, dist, dgrad)
+    f = 0.0
+    for i in range(first, last):
+        e = dist[i] - d0
+        if e < 0.0:
+            f += e * e
+            for a in range(3):
+                grad[i, a] += w * 2.0 * e * dgrad[i, a]
+    return f
+
+
+@njit(cache=True)
+def _feasibility_acc(q, ts, vmax, amax, w, grad):
+    f = 0.0
+    n = q.shape[0]
+    inv2 = 1.0 / (ts * ts)
+    inv4 = inv2 * inv2
+    vm2 = vmax * vmax
+    am2 = amax * amax
+    for i in range(n - 1):
+        for a in range(3):
+            dv = q[i + 1, a] - q[i, a]
+            ex = dv * dv * inv2 - vm2
+            if ex > 0.0:
+                f += ex * ex
+                g = w * 4.0 * ex * inv2 * dv
+                grad[i + 1, a] += g
+                grad[i, a] -= g
+    for i in range(n - 2):
+        for a in range(3):
+            da = q[i + 2, a] - 2.0 * q[i + 1, a] + q[i, a]
+            ex = da * da * inv4 - am2
+            if ex > 0.0:
+                f += ex * ex
+                g = w * 4.0 * ex * inv4 * da
+                grad[i, a] += g
+                grad[i + 1, a] -= 2.0 * g
+                grad[i + 2, a] += g
+    return f
+
+
+@njit(cache=True)
+def _endpoint_acc(q, end_pt, w, grad):
+    n = q.shape[0]
+    f = 0.0
+    for a in range(3):
+        e = (q[n - 3, a] + 4.0 * q[n - 2, a] + q[n - 1, a]) / 6.0 - end_pt[a]
+        f += e * e
+        g = w * 2.0 * e / 6.0
+        grad[n - 3, a] += g
+        grad[n - 2, a] += 4.0 * g
+        grad[n - 1, a] += g
+    return f
+
+
+@njit(cache=True)
+def _total(q, grad, w, ts, vmax, amax, d0, free_end, end_pt, field, origin, inv_res, dist,
+           dgrad, terms):
+    """``w`` = [smooth, distance, feasibility, endpoint]; ``terms`` receives the unweighted
+    terms. The distance term covers ``Q[3] .. Q[N-4]`` (``.. Q[N-1]`` with a free end)."""
+    n = q.shape[0]
+    grad[:, :] = 0.0
+    terms[0] = _smooth_acc(q, w[0], grad)
+    last = n if free_end else n - ORDER
+    terms[1] = _distance_acc(q, ORDER, last, field, origin, inv_res, d0, w[1], grad, dist,
+                             dgrad)
+    terms[2] = _feasibility_acc(q, ts, vmax, amax, w[2], grad)
+    terms[3] = _endpoint_acc(q, end_pt, w[3], grad) if free_end else 0.0
+    return w[0] * terms[0] + w[1] * terms[1] + w[2] * terms[2] + w[3] * terms[3]
+
+
+# ---------------------------------------------------------------------------------------
+# L-BFGS over rows lo:hi of q (numba)
+# ---------------------------------------------------------------------------------------
+_LS_TRIALS = 40
+_C1, _C2 = 1e-4, 0.9
+
+
+@njit(cache=True)
+def _dot(a, b, lo, hi):
+    s = 0.0
+    for i in range(lo, hi):
+        for k in range(3):
+            s += a[i, k] * b[i, k]
+    return s
+
+
+@njit(cache=True)
+def _lbfgs(q, lo, hi, memory, max_evals, xtol, w, ts, vmax, amax, d0, free_end, end_pt,
+           field, origin, inv_res, out):
+    """Minimise over rows ``lo:hi`` of ``q`` (in place; ``q`` ends at the best point
+    evaluated). ``out`` = [evaluations, iterations, final cost, stop code] with stop code
+    0: evaluation cap, 1: small step (xtol), 2: zero gradient, 3: line search failed."""
+    n = q.shape[0]
+    g = np.zeros((n, 3))
+    d = np.zeros((n, 3))
+    q0 = q.copy()
+    g0 = np.zeros((n, 3))
+    best = q.copy()
+    S = np.zeros((memory, n, 3))
+    Y = np.zeros((memory, n, 3))
+    rho = np.zeros(memory)
+    alpha = np.zeros(memory)
+    dist = np.empty(n)
+    dgrad = np.empty((n, 3))
+    terms = np.zeros(4)
+    f = _total(q, g, w, ts, vmax, amax, d0, free_end, end_pt, field, origin, inv_res, dist,
+               dgrad, terms)
+    evals = 1
+    f_best = f
+    iters = 0
+    count = 0
+    head = 0
+    code = 0
+    while evals < max_evals:
+        gg = _dot(g, g, lo, hi)
+        if gg <= 1e-24:
+            code = 2
+            break
+        # two-loop recursion: d = -H g
+        for i in range(lo, hi):
+            for k in range(3):
+                d[i, k] = -g[i, k]
+        for c in range(count):
+            j = (head - 1 - c) % memory
+            alpha[j] = rho[j] * _dot(S[j], d, lo, hi)
+            for i in range(lo, hi):
+                for k in range(3):
+                    d[i, k] -= alpha[j] * Y[j, i, k]
+        if count > 0:
+            j = (head - 1) % memory
+            gamma = 1.0 / (rho[j] * _dot(Y[j], Y[j], lo, hi))
+            for i in range(lo, hi):
+                for k in range(3):
+                    d[i, k] *= gamma
+        for c in range(count - 1, -1, -1):
+            j = (head - 1 - c) % memory
+            b = rho[j] * _dot(Y[j], d, lo, hi)
+            for i in range(lo, hi):
+                for k in range(3):
+                    d[i, k] += S[j, i, k] * (alpha[j] - b)
+        dg = _dot(d, g, lo, hi)
+        if not dg < 0.0:  # not a descent direction: drop the memory
+            count = 0
+            for i in range(lo, hi):
+                for k in range(3):
+                    d[i, k] = -g[i, k]
+            dg = -gg
+        step = 1.0 if count > 0 else min(1.0, 1.0 / math.sqrt(gg))
+        f0 = f
+        for i in range(lo, hi):
+            for k in range(3):
+                q0[i, k] = q[i, k]
+                g0[i, k] = g[i, k]
+        # weak-Wolfe bracketing line search
+        s_lo = 0.0
+        s_hi = math.inf
+        ok = False
+        for _ in range(_LS_TRIALS):
+            if evals >= max_evals:
+                break
+            for i in range(lo, hi):
+                for k in range(3):
+                    q[i, k] = q0[i, k] + step * d[i, k]
+            f = _total(q, g, w, ts, vmax, amax, d0, free_end, end_pt, field, origin, inv_res,
+                       dist, dgrad, terms)
+            evals += 1
+            if f < f_best:
+                f_best = f
+                for i in range(lo, hi):
+                    for k in range(3):
+                        best[i, k] = q[i, k]
+            if not (f <= f0 + _C1 * step * dg):
+                s_hi = step
+            elif _dot(d, g, lo, hi) < _C2 * dg:
+                s_lo = step
+            else:
+                ok = True
+                break
+            step = 0.5 * (s_lo + s_hi) if s_hi < math.inf else 2.0 * step
+            if step < 1e-16 or step > 1e16:
+                break
+        if not ok:
+            code = 0 if evals >= max_evals else 3
+            break
+        iters += 1
+        # memory update
+        j = head
+        ys = 0.0
+        ss = 0.0
+        for i in range(lo, hi):
+            for k in range(3):
+                S[j, i, k] = q[i, k] - q0[i, k]
+                Y[j, i, k] = g[i, k] - g0[i, k]
+                ys += S[j, i, k] * Y[j, i, k]
+                ss += S[j, i, k] * S[j, i, k]
+        if ys > 1e-16:
+            rho[j] = 1.0 / ys
+            head = (head + 1) % memory
+            count = min(count + 1, memory)
+        if math.sqrt(ss) <= xtol * math.sqrt(_dot(q, q, lo, hi)):
+            code = 1
+            break
+    for i in range(lo, hi):
+        for k in range(3):
+            q[i, k] = best[i, k]
+    out[0] = evals
+    out[1] = iters
+    out[2] = f_best
+    out[3] = code
+
+
+# ---------------------------------------------------------------------------------------
+# Python wrappers (tests, diagnostics)
+# ---------------------------------------------------------------------------------------
+def _as_points(q) -> np.ndarray:
+    q = np.ascontiguousarray(q, dtype=np.float64)
+    if q.ndim != 2 or q.shape[1] != 3:
+        raise ValueError(f"control points must have shape (N, 3), got {q.shape}")
+    return q
+
+
+def smoothness_cost(q) -> tuple[float, np.ndarray]:
+    """``sum ||Q[i+3] - 3 Q[i+2] + 3 Q[i+1] - Q[i]||^2`` and its gradient (N, 3)."""
+    q = _as_points(q)
+    g = np.zeros_like(q)
+    return float(_smooth_acc(q, 1.0, g)), g
+
+
+def distance_cost(q, esdf: EsdfField, dist0: float = 0.4, first: int = ORDER,
+                  last: int | None = None) -> tuple[float, np.ndarray]:
+    """``sum (d - dist0)^2`` over control points ``first .. last - 1`` (default: ``N - 3``)
+    whose ESDF distance ``d`` is below ``dist0``, and its gradient (N, 3)."""
+    q = _as_points(q)
+    n = q.shape[0]
+    last = n - ORDER if last is None else int(last)
+    g = np.zeros_like(q)
+    f = _distance_acc(q, int(first), last, esdf.field, esdf.origin, 1.0 / esdf.resolution,
+                      float(dist0), 1.0, g, np.empty(n), np.empty((n, 3)))
+    return float(f), g
+
+
+def feasibility_cost(q, ts: float, vmax: float, amax: float) -> tuple[float, np.ndarray]:
+    """Per-axis ``(V^2 - vmax^2)^2`` and ``(A^2 - amax^2)^2`` beyond the limits."""
+    q = _as_points(q)
+    g = np.zeros_like(q)
+    return float(_feasibility_acc(q, float(ts), float(vmax), float(amax), 1.0, g)), g
+
+
+def endpoint_cost(q, end_pt) -> tuple[float, np.ndarray]:
+    """``||(Q[N-3] + 4 Q[N-2] + Q[N-1]) / 6 - end_pt||^2``."""
+    q = _as_points(q)
+    g = np.zeros_like(q)
+    e = np.asarray(end_pt, dtype=np.float64).reshape(3)
+    return float(_endpoint_acc(q, e, 1.0, g)), g
+
+
+def _weights(p: FastParams) -> np.ndarray:
+    return np.array([p.w_smooth, p.w_distance, p.w_feasibility, p.w_endpoint])
+
+
+def total_cost(q, ts: float, esdf: EsdfField, params: FastParams | None = None,
+               free_end: bool = False, end_pt=None) -> tuple[float, np.ndarray]:
+    """The weighted sum the optimiser minimises and its gradient (N, 3) (gradients of the
+    fixed rows included)."""
+    p = params or FastParams()
+    q = _as_points(q)
+    n = q.shape[0]
+    g = np.zeros_like(q)
+    e = _curve_end(q) if end_pt is None else np.asarray(end_pt, dtype=np.float64).reshape(3)
+    f = _total(q, g, _weights(p), float(ts), p.max_vel, p.max_acc, p.dist0, bool(free_end), e,
+               esdf.field, esdf.origin, 1.0 / esdf.resolution, np.empty(n), np.empty((n, 3)),
+               np.zeros(4))
+    return float(f), g
+
+
+def cost_terms(q, ts: float, esdf: EsdfField, params: FastParams | None = None,
+               free_end: bool = False, end_pt=None) -> dict:
+    """The unweighted terms {smooth, distance, feasibility, endpoint} and the total."""
+    p = params or FastParams()
+    q = _as_points(q)
+    n = q.shape[0]
+    e = _curve_end(q) if end_pt is None else np.asarray(end_pt, dtype=np.float64).reshape(3)
+    terms = np.zeros(4)
+    f = _total(q, np.zeros_like(q), _weights(p), float(ts), p.max_vel, p.max_acc, p.dist0,
+               bool(free_end), e, esdf.field, esdf.origin, 1.0 / esdf.resolution,
+               np.empty(n), np.empty((n, 3)), terms)
+    return {"smooth": float(terms[0]), "distance": float(terms[1]),
+            "feasibility": float(terms[2]), "endpoint": float(terms[3]), "total": float(f)}
+
+
+def _curve_end(q: np.ndarray) -> np.ndarray:
+    return (q[-3] + 4.0 * q[-2] + q[-1]) / 6.0
+
+
+# ---------------------------------------------------------------------------------------
+# the optimiser
+# ---------------------------------------------------------------------------------------
+_STOP = {0: "evaluation_cap", 1: "xtol", 2: "zero_gradient", 3: "line_search"}
+
+
+@dataclass(frozen=True, eq=False)
+class FastResult:
+    """An optimised uniform B-spline with the solver's counters."""
+
+    spline: UniformBSpline
+    evaluations: int
+    iterations: int
+    cost: float
+    initial_cost: float
+    stop: str
+    free_end: bool
+    time_s: float
+
+
+class FastOptimizer:
+    """Fast-Planner's ``BsplineOptimizer`` in its ``NORMAL_PHASE`` (+ ``ENDPOINT``)."""
+
+    def __init__(self, params: FastParams | None = None):
+        self.params = params if params is not None else FastParams()
+        if not isinstance(self.params, FastParams):
+            raise TypeError(f"params must be a FastParams, got {type(params).__name__}")
+
+    def optimize(self, spline: UniformBSpline, esdf: EsdfField,
+                 free_end: bool = False) -> FastResult:
+        """Optimise the interior control points of ``spline`` (and its last three with
+        ``free_end``) against ``esdf``; the knot span is kept."""
+        t0 = time.perf_counter()
+        if spline.degree != ORDER:
+            raise ValueError(f"Fast-Planner optimises cubic B-splines, got {spline.degree}")
+        n = spline.num_control_points
+        if n < 2 * ORDER + 1:
+            raise ValueError(f"need at least {2 * ORDER + 1} control points, got {n}")
+        p = self.params
+        q = np.array(spline.control_points, dtype=np.float64)
+        end_pt = _curve_end(q)
+        f_init, _ = total_cost(q, spline.dt, esdf, p, free_end, end_pt)
+        out = np.zeros(4)
+        hi = n if free_end else n - ORDER
+        _lbfgs(q, ORDER, hi, p.lbfgs_memory, p.max_evaluations, p.xtol_rel, _weights(p),
+               spline.dt, p.max_vel, p.max_acc, p.dist0, bool(free_end), end_pt, esdf.field,
+               esdf.origin, 1.0 / esdf.resolution, out)
+        return FastResult(spline=spline.with_control_points(q), evaluations=int(out[0]),
+                          iterations=int(out[1]), cost=float(out[2]), initial_cost=f_init,
+                          stop=_STOP[int(out[3])], free_end=bool(free_end),
+                          time_s=time.perf_counter() - t0)
+
+
+# ---------------------------------------------------------------------------------------
+# non-uniform B-splines and time re-allocation
+# ---------------------------------------------------------------------------------------
+class KnotBSpline:
+    """A cubic B-spline with an arbitrary (non-decreasing) knot vector ``u`` of ``N + 4``
+    knots over control points ``(N, d)``; time ``t`` runs from 0 at ``u[3]`` to
+    ``duration = u[N] - u[3]`` (Fast-Planner's ``evaluateDeBoorT``), evaluation clamps to
+    that domain. Immutable."""
+
+    __slots__ = ("_c", "_u", "_b")
+
+    def __init__(self, control_points, knots):
+        from scipy.interpolate import BSpline
+
+        c = np.array(control_points, dtype=np.float64)
+        if c.ndim == 1:
+            c = c[:, None]
+        u = np.array(knots, dtype=np.float64).reshape(-1)
+        if c.ndim != 2 or c.shape[0] < ORDER + 1:
+            raise ValueError(f"control_points: need (N >= 4, d), got {c.shape}")
+        if u.shape != (c.shape[0] + ORDER + 1,):
+            raise ValueError(f"knots: need {c.shape[0] + ORDER + 1}, got {u.shape}")
+        if not (np.all(np.isfinite(c)) and np.all(np.isfinite(u))):
+            raise ValueError("control points and knots must be finite")
+        if np.any(np.diff(u) <= 0.0):
+            raise ValueError("knots must be strictly increasing")
+        c.setflags(write=False)
+        u.setflags(write=False)
+        self._c, self._u = c, u
+        b0 = BSpline(u, c, ORDER, extrapolate=False)
+        self._b = (b0, b0.derivative(1), b0.derivative(2), b0.derivative(3))
+
+    @classmethod
+    def uniform(cls, control_points, dt: float) -> KnotBSpline:
+        """The uniform B-spline with knot span ``dt`` (knots ``(i - 3) dt``)."""
+        c = np.asarray(control_points, dtype=np.float64)
+        return cls(c, (np.arange(c.shape[0] + ORDER + 1) - ORDER) * float(dt))
+
+    @classmethod
+    def from_uniform(cls, spline: UniformBSpline) -> KnotBSpline:
+        return cls.uniform(spline.control_points, spline.dt)
+
+    @property
+    def control_points(self) -> np.ndarray:
+        return self._c
+
+    @property
+    def knots(self) -> np.ndarray:
+        return self._u
+
+    @property
+    def duration(self) -> float:
+        n = self._c.shape[0]
+        return float(self._u[n] - self._u[ORDER])
+
+    def evaluate(self, t, order: int = 0) -> np.ndarray:
+        """The ``order``-th derivative at ``t`` (clamped to [0, duration]); ``(d,)`` for a
+        scalar, ``(M, d)`` for an array."""
+        x = np.clip(np.asarray(t, dtype=np.float64), 0.0, self.duration) + self._u[ORDER]
+        n = self._c.shape[0]
+        x = np.minimum(x, self._u[n])
+        return self._b[order](x)
+
+    def position(self, t) -> np.ndarray:
+        return self.evaluate(t, 0)
+
+    def velocity(self, t) -> np.ndarray:
+        return self.evaluate(t, 1)
+
+    def acceleration(self, t) -> np.ndarray:
+        return self.evaluate(t, 2)
+
+    def velocity_control_points(self) -> np.ndarray:
+        c, u = self._c, self._u
+        n = c.shape[0]
+        return ORDER * np.diff(c, axis=0) / (u[ORDER + 1:n + ORDER] - u[1:n])[:, None]
+
+    def acceleration_control_points(self) -> np.ndarray:
+        c, u = self._c, self._u
+        n = c.shape[0]
+        v = self.velocity_control_points()
+        span = (u[ORDER + 1:n + ORDER - 1] - u[2:n])[:, None]
+        return (ORDER - 1) * np.diff(v, axis=0) / span
+
+    def feasible(self, vmax: float, amax: float, vel_norm: bool = False) -> bool:
+        """Fast-Planner's ``checkFeasibility``: every velocity / acceleration control point
+        within ``vmax`` / ``amax`` (+ 1e-4) on every axis (``vel_norm``: the velocity
+        control points' Euclidean norm within ``vmax``)."""
+        v = self.velocity_control_points()
+        vm = np.linalg.norm(v, axis=1) if vel_norm else np.abs(v)
+        return bool(np.all(vm <= vmax + 1e-4)
+                    and np.all(np.abs(self.acceleration_control_points()) <= amax + 1e-4))
+
+    def reallocate_time(self, vmax: float, amax: float, limit_ratio: float = 1.1,
+                        vel_norm: bool = False,
+                        keep_start: bool = True) -> tuple[KnotBSpline, bool]:
+        """One pass of Fast-Planner's ``reallocateTime`` (module docstring): returns the
+        re-timed spline and whether this pass found everything feasible (nothing changed).
+        ``vel_norm`` bounds the velocity control points' norm instead of each axis;
+        ``keep_start`` leaves the knot intervals that shape the start state (the first
+        ``START_INTERVALS``) as they are, so the re-timed curve starts in the same position,
+        velocity and acceleration (the original stretches them too)."""
+        c = self._c
+        h = np.diff(self._u)  # knot intervals; interval k is [u[k], u[k+1]]
+        n = c.shape[0]
+        p = ORDER
+        frozen = START_INTERVALS if keep_start else 0
+
+        def grow(k: int, dt: float) -> None:
+            if k >= frozen:
+                h[k] += dt
+
+        feasible = True
+        for i in range(n - 1):  # velocity control point i spans intervals i+1 .. i+3
+            span = h[i + 1] + h[i + 2] + h[i + 3]
+            v = p * (c[i + 1] - c[i]) / span
+            vm = float(np.linalg.norm(v)) if vel_norm else float(np.max(np.abs(v)))
+            if vm > vmax + 1e-4:
+                feasible = False
+                ratio = min(vm / vmax + 1e-4, limit_ratio)
+                for k in range(i + 1, i + p + 1):
+                    grow(k, (ratio - 1.0) * span / p)
+        for i in range(n - 2):  # acceleration control point i spans intervals i+2, i+3
+            v0 = (c[i + 1] - c[i]) / (h[i + 1] + h[i + 2] + h[i + 3])
+            v1 = (c[i + 2] - c[i + 1]) / (h[i + 2] + h[i + 3] + h[i + 4])
+            span = h[i + 2] + h[i + 3]
+            a = p * (p - 1) * (v1 - v0) / span
+            am = float(np.max(np.abs(a)))
+            if am > amax + 1e-4:
+                feasible = False
+                ratio = min(math.sqrt(am / amax) + 1e-4, limit_ratio)
+                inc = (ratio - 1.0) * span / (p - 1)
+                # the original's special case for i = 1, 2: the first four intervals
+                for k in (range(1, 5) if i in (1, 2) else range(i + 2, i + p)):
+                    grow(k, inc)
+        u = np.concatenate([[self._u[0]], self._u[0] + np.cumsum(h)])
+        return KnotBSpline(c, u), feasible
+
+    def retimed(self, vmax: float, amax: float, limit_ratio: float = 1.1, passes: int = 3,
+                vel_norm: bool = False, keep_start: bool = True) -> tuple[KnotBSpline, int]:
+        """The planner manager's loop: re-allocate while infeasible, at most ``passes``
+        times. Returns the spline and the number of passes made."""
+        out = self
+        if out.feasible(vmax, amax, vel_norm):
+            return out, 0
+        k = 0
+        while k < passes:
+            out, ok = out.reallocate_time(vmax, amax, limit_ratio, vel_norm, keep_start)
+            k += 1
+            if ok:
+                break
+        return out, k
+
+
+# ---------------------------------------------------------------------------------------
+# yaw
+# ---------------------------------------------------------------------------------------
+def _next_yaw(last: float, yaw: float) -> float:
+    """``yaw`` moved by a multiple of 2 pi to within pi of ``last`` (unwrapping)."""
+    return last + (yaw - last + math.pi) % (2.0 * math.pi) - math.pi
+
+
+def _states_to_points(state, dt: float) -> np.ndarray:
+    """Three control points of a uniform cubic B-spline whose value, first and second
+    derivative at their middle knot are ``state``."""
+    y, yd, ydd = (float(s) for s in state)
+    return np.array([y - dt * yd + dt * dt / 3.0 * ydd,
+                     y - dt * dt / 6.0 * ydd,
+                     y + dt * yd + dt * dt / 3.0 * ydd])
+
+
+def plan_yaw(pos: KnotBSpline, start_state, dt_yaw: float = 0.3, forward_t: float = 2.0,
+             w_smooth: float = 10.0, w_waypoint: float = 100.0) -> KnotBSpline:
+    """Fast-Planner's ``planYaw`` (module docstring): a 1-D uniform B-spline over
+    ``pos.duration`` starting in ``start_state`` (yaw, rate, acceleration); the yaw is
+    continuous (not wrapped)."""
+    duration = pos.duration
+    seg = max(int(math.ceil(duration / dt_yaw - 1e-9)), ORDER)
+    dt = duration / seg
+    last = float(start_state[0])
+    tc = np.arange(seg) * dt
+    pc = pos.position(tc)
+    pf = pos.position(np.minimum(tc + forward_t, duration))
+    way = np.empty(seg)
+    for k in range(seg):
+        d = pf[k] - pc[k]
+        if math.hypot(d[0], d[1]) > 1e-3:
+            last = _next_yaw(last, math.atan2(d[1], d[0]))
+        way[k] = last
+    ve = pos.velocity(max(duration - 0.1, 0.0))
+    end_yaw = _next_yaw(last, math.atan2(ve[1], ve[0])) if math.hypot(ve[0], ve[1]) > 1e-3 \
+        else last
+    n = seg + ORDER
+    y = np.zeros(n)
+    y[:3] = _states_to_points(start_state, dt)
+    y[seg:] = _states_to_points((end_yaw, 0.0, 0.0), dt)
+    free = np.arange(ORDER, seg)
+    if free.size:
+        rows, rhs = [], []
+        ws, ww = math.sqrt(w_smooth), math.sqrt(w_waypoint)
+        for i in range(n - 3):
+            r = np.zeros(n)
+            r[i:i + 4] = ws * np.array([-1.0, 3.0, -3.0, 1.0])
+            rows.append(r)
+            rhs.append(0.0)
+        for k in range(seg):
+            r = np.zeros(n)
+            r[k:k + 3] = ww * np.array([1.0, 4.0, 1.0]) / 6.0
+            rows.append(r)
+            rhs.append(ww * way[k])
+        a = np.array(rows)
+        b = np.array(rhs)
+        fixed = np.setdiff1d(np.arange(n), free)
+        b = b - a[:, fixed] @ y[fixed]
+        sol, *_ = np.linalg.lstsq(a[:, free], b, rcond=None)
+        y[free] = sol
+    return KnotBSpline.uniform(y[:, None], dt)
