@@ -97,6 +97,8 @@ from ft_sitl.navigation.ego import camera_config
 #: which the original recomputes over its local box in the map's 20 Hz timer (~10 ms an
 #: update); twice EGO's 10 ms, which needs no ESDF
 DEFAULT_LATENCY_S = 0.02
+#: half width (m) of the ESDF box around a plan's start: the originals' local update range
+ESDF_HALF_EXTENT_M = 5.5
 SAFETY_CHECK_HZ = 20.0
 #: the original's trajectory check: every 0.02 s of the trajectory up to 6 m ahead
 CHECK_STEP_S = 0.02
@@ -252,7 +254,8 @@ class FastPlanner(Navigator):
         log: dict = {"t": obs.time_s}
         # perception for this plan: the ESDF box and the search's voxel grid
         t0 = time.perf_counter()
-        esdf = EsdfField.from_map(self.map, p0[:2], self.horizon + 1.0)
+        # the originals' local update box: +-5.5 m around the start, +-4.5 m in height
+        esdf = EsdfField.from_map(self.map, p0, ESDF_HALF_EXTENT_M)
         res_m = self.map.resolution_m
         grid = VoxelOccupancy(self.map.planning_grid(), self.map.origin_index * res_m, res_m)
         log["map_s"] = time.perf_counter() - t0

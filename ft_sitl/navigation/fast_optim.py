@@ -126,6 +126,11 @@ class FastParams:
                 raise ValueError(f"FastParams.{name} must be a positive integer, got {v!r}")
 
 
+#: half height (m) of the ESDF box around the planning start: the originals' local update
+#: range in z (4.5 m), so a high ceiling (Urban's 10 m) does not double the cost
+ESDF_HALF_HEIGHT_M = 4.5
+
+
 @dataclass(frozen=True, eq=False)
 class EsdfField:
     """An ESDF sampled at voxel centres: ``field[i, j, k]`` is the distance at the centre of
@@ -155,7 +160,7 @@ class EsdfField:
     def from_map(cls, local_map, center_m=None, half_extent_m: float | None = None) -> EsdfField:
         """Recompute ``local_map``'s ESDF (over the box ``center_m +- half_extent_m``, see
         :meth:`LocalMap.update_esdf`) and wrap it."""
-        field = local_map.update_esdf(center_m, half_extent_m)
+        field = local_map.update_esdf(center_m, half_extent_m, ESDF_HALF_HEIGHT_M)
         return cls(field, local_map.esdf_origin_index, local_map.resolution_m)
 
     def __call__(self, points) -> tuple[np.ndarray, np.ndarray]:

@@ -1100,7 +1100,8 @@ class LocalMap:
         return out
 
     # -- ESDF ----------------------------------------------------------------------------------
-    def update_esdf(self, center_m=None, half_extent_m: float | None = None) -> np.ndarray:
+    def update_esdf(self, center_m=None, half_extent_m: float | None = None,
+                    half_extent_z_m: float | None = None) -> np.ndarray:
         """Recompute the signed ESDF from the planning occupancy; returns the field
         (float64, metres, at voxel centres; global index of its first voxel in
         ``esdf_origin_index``).
@@ -1110,10 +1111,30 @@ class LocalMap:
         voxel of ``center_m (x, y)`` (clipped to the window; default centre: the last camera
         position), full height: faster, and exact only with respect
         to what lies inside the box (as Fast-Planner's local ESDF box); queries outside it
-        are clamped onto it.
+        are clamped onto it. ``half_extent_z_m`` limits the height the same way around the
+        centre's z (``center_m`` given as (x, y, z), else the last camera position): the
+        originals' local update box is +-4.5 m high; a 10 m ceiling otherwise doubles the
+        cost.
         """
-        nx, ny, _ = self.shape
+        nx, ny, nz = self.shape
         x0, x1, y0, y1 = 0, nx, 0, ny
+        z0, z1 = 0, nz
+        if half_extent_z_m is not None:
+            hz = float(half_extent_z_m)
+            if not (math.isfinite(hz) and hz > 0):
+                raise ValueError(f"half_extent_z_m must be a positive number, got "
+                                 f"{half_extent_z_m!r}")
+            cz = None
+            if center_m is not None and np.asarray(center_m).reshape(-1).shape == (3,):
+                cz = float(np.asarray(center_m, dtype=np.float64).reshape(-1)[2])
+            elif self.last_camera_m is not None:
+                cz = float(self.last_camera_m[2])
+            if cz is not None and math.isfinite(cz):
+                ck = math.floor(cz * self._inv_res) - int(self._origin[2])
+                nhz = int(round(hz * self._inv_res))
+                z0, z1 = max(0, ck - nhz), min(nz, ck + nhz + 1)
+                if z1 - z0 < 2:
+                    z0, z1 = 0, nz
         if half_extent_m is not None:
             h = float(half_extent_m)
             if not (math.isfinite(h) and h > 0):
@@ -1132,12 +1153,12 @@ class LocalMap:
             x1, y1 = (int(v) for v in np.clip(hi, 0, [nx, ny]))
             if x1 - x0 < 2 or y1 - y0 < 2:
                 raise ValueError("the ESDF box does not overlap the window (by >= 2 voxels)")
-        plan = np.ascontiguousarray(self.planning_grid()[x0:x1, y0:y1])
+        plan = np.ascontiguousarray(self.planning_grid()[x0:x1, y0:y1, z0:z1])
         pos = np.empty(plan.shape)
         neg = np.empty(plan.shape)
         _signed_esdf(plan, self.resolution_m, pos, neg)
         self._esdf = pos
-        self._esdf_origin = self._origin + np.array([x0, y0, 0])
+        self._esdf_origin = self._origin + np.array([x0, y0, z0])
         self._esdf_frame = self._frames
         return pos
 

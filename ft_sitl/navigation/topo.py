@@ -446,8 +446,9 @@ class EsdfGrid:
 
     @classmethod
     def from_map(cls, local_map, bounds=None) -> EsdfGrid:
-        """Recompute the map's ESDF over its whole window and take it."""
-        fld = local_map.update_esdf()
+        """Recompute the map's ESDF over its whole window (+-4.5 m in height around the
+        camera, the originals' local update range) and take it."""
+        fld = local_map.update_esdf(half_extent_z_m=4.5)
         return cls(fld, local_map.esdf_origin_index, local_map.resolution_m, bounds)
 
     @classmethod

@@ -563,3 +563,19 @@ def test_bad_map_arguments_raise():
     frame = DepthCamera(SMALL, nothing()).capture(0, P0, IDENTITY)
     with pytest.raises(ValueError, match="480 x 640"):
         m.fuse(frame)
+
+
+def test_esdf_box_limited_in_height_matches_the_full_field_inside_it():
+    m = LocalMap(MapConfig(), ceiling_m=10.0, floor_m=0.0, center_m=(0.0, 0.0))
+    pts = np.array([[0.3, 0.2, 0.95], [1.0, -2.0, 2.05], [-1.5, 1.5, 3.55]])
+    full = m.update_esdf(center_m=(0.0, 0.0, 2.0), half_extent_m=3.0)
+    d_full, g_full = m.esdf(pts)
+    low = m.update_esdf(center_m=(0.0, 0.0, 2.0), half_extent_m=3.0, half_extent_z_m=4.5)
+    assert low.shape[2] < full.shape[2]  # cheaper: fewer layers
+    d_low, g_low = m.esdf(pts)
+    # the floor is inside the box: the distances to it agree (the ceiling is far above)
+    assert d_low == pytest.approx(d_full, abs=1e-9)
+    assert g_low == pytest.approx(g_full, abs=1e-9)
+    assert d_full == pytest.approx(pts[:, 2], abs=0.11)  # the floor, to within a voxel
+    with pytest.raises(ValueError, match="half_extent_z_m"):
+        m.update_esdf(half_extent_z_m=-1.0)
