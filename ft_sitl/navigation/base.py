@@ -117,3 +117,20 @@ class Navigator:
 
     def step(self, obs: Observation) -> Setpoint:  # pragma: no cover - abstract
         raise NotImplementedError
+
+
+def check_ranges(*items: tuple[str, object, float, float]) -> None:
+    """Validate navigator parameters: each ``(name, value, lo, hi)`` must be a number within
+    ``lo..hi``; the error names the parameter."""
+    for name, v, lo, hi in items:
+        if isinstance(v, bool) or not isinstance(v, (int, float)) or not lo <= v <= hi:
+            raise ValueError(f"{name}: {v!r} must be a number within {lo}..{hi}")
+
+
+def local_map_for(task: Task, camera):
+    """The planners' local map for a task: the scenario ceiling and floor, frames of
+    ``camera`` taken at full resolution (the benchmark camera is already subsampled)."""
+    from ft_sitl.navigation.mapping import LocalMap, MapConfig
+
+    return LocalMap(MapConfig(skip_pixel=1), task.ceiling, float(task.bounds_min[2]),
+                    camera=camera, center_m=tuple(task.start[:2]))

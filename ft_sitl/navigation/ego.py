@@ -50,7 +50,14 @@ import time
 import numpy as np
 
 from ft_sitl.autopilot.setpoints import Setpoint
-from ft_sitl.navigation.base import GiveUp, Navigator, Observation, Task
+from ft_sitl.navigation.base import (
+    GiveUp,
+    Navigator,
+    Observation,
+    Task,
+    check_ranges,
+    local_map_for,
+)
 
 #: estimated compute time of one EGO replan in the original C++ (optimisation ~1 ms, plus
 #: A* and map work; the paper's authors report a few ms on a desktop CPU)
@@ -148,14 +155,12 @@ class EgoPlanner(Navigator):
                  camera_width: int | None = None, camera_height: int | None = None,
                  camera_rate_hz: float | None = None):
         super().__init__()
-        for name, v, lo, hi in (("max_acc_m_s2", max_acc_m_s2, 0.5, 20.0),
-                                ("planning_horizon_m", planning_horizon_m, 2.0, 20.0),
-                                ("replan_threshold_m", replan_threshold_m, 0.2, 10.0),
-                                ("no_replan_threshold_m", no_replan_threshold_m, 0.0, 10.0),
-                                ("emergency_time_s", emergency_time_s, 0.0, 5.0),
-                                ("latency_s", latency_s, 0.0, 1.0)):
-            if isinstance(v, bool) or not isinstance(v, (int, float)) or not lo <= v <= hi:
-                raise ValueError(f"{name}: {v!r} must be a number within {lo}..{hi}")
+        check_ranges(("max_acc_m_s2", max_acc_m_s2, 0.5, 20.0),
+                     ("planning_horizon_m", planning_horizon_m, 2.0, 20.0),
+                     ("replan_threshold_m", replan_threshold_m, 0.2, 10.0),
+                     ("no_replan_threshold_m", no_replan_threshold_m, 0.0, 10.0),
+                     ("emergency_time_s", emergency_time_s, 0.0, 5.0),
+                     ("latency_s", latency_s, 0.0, 1.0))
         self.max_acc = float(max_acc_m_s2)
         self.horizon = float(planning_horizon_m)
         self.replan_threshold = float(replan_threshold_m)
@@ -169,13 +174,11 @@ class EgoPlanner(Navigator):
     def reset(self, task: Task) -> None:
         from ft_sitl.navigation.astar import OccupancyView
         from ft_sitl.navigation.ego_optim import EgoOptimizer, EgoParams
-        from ft_sitl.navigation.mapping import LocalMap, MapConfig
         from ft_sitl.navigation.minsnap import global_reference
 
         super().reset(task)
         self.vmax = task.limits.max_speed_m_s
-        self.map = LocalMap(MapConfig(skip_pixel=1), task.ceiling, float(task.bounds_min[2]),
-                            camera=self.camera, center_m=tuple(task.start[:2]))
+        self.map = local_map_for(task, self.camera)
         lo = np.array(task.bounds_min, dtype=float)
         hi = np.array(task.bounds_max, dtype=float)
         self.grid = OccupancyView.from_map(self.map, bounds=(lo, hi))

@@ -88,7 +88,14 @@ import time
 import numpy as np
 
 from ft_sitl.autopilot.setpoints import Setpoint
-from ft_sitl.navigation.base import GiveUp, Navigator, Observation, Task
+from ft_sitl.navigation.base import (
+    GiveUp,
+    Navigator,
+    Observation,
+    Task,
+    check_ranges,
+    local_map_for,
+)
 from ft_sitl.navigation.ego import camera_config
 
 #: estimated time from state to command of one Fast-Planner replan in the original C++ on
@@ -178,14 +185,12 @@ class FastPlanner(Navigator):
                  camera_width: int | None = None, camera_height: int | None = None,
                  camera_rate_hz: float | None = None):
         super().__init__()
-        for name, v, lo, hi in (("max_acc_m_s2", max_acc_m_s2, 0.5, 20.0),
-                                ("planning_horizon_m", planning_horizon_m, 2.0, 20.0),
-                                ("replan_threshold_m", replan_threshold_m, 0.2, 10.0),
-                                ("no_replan_threshold_m", no_replan_threshold_m, 0.0, 10.0),
-                                ("emergency_time_s", emergency_time_s, 0.0, 5.0),
-                                ("latency_s", latency_s, 0.0, 1.0)):
-            if isinstance(v, bool) or not isinstance(v, (int, float)) or not lo <= v <= hi:
-                raise ValueError(f"{name}: {v!r} must be a number within {lo}..{hi}")
+        check_ranges(("max_acc_m_s2", max_acc_m_s2, 0.5, 20.0),
+                     ("planning_horizon_m", planning_horizon_m, 2.0, 20.0),
+                     ("replan_threshold_m", replan_threshold_m, 0.2, 10.0),
+                     ("no_replan_threshold_m", no_replan_threshold_m, 0.0, 10.0),
+                     ("emergency_time_s", emergency_time_s, 0.0, 5.0),
+                     ("latency_s", latency_s, 0.0, 1.0))
         self.max_acc = float(max_acc_m_s2)
         self.horizon = float(planning_horizon_m)
         self.replan_threshold = float(replan_threshold_m)
@@ -199,12 +204,10 @@ class FastPlanner(Navigator):
     def reset(self, task: Task) -> None:
         from ft_sitl.navigation.fast_optim import FastOptimizer, FastParams
         from ft_sitl.navigation.kino_astar import KinoAstarParams
-        from ft_sitl.navigation.mapping import LocalMap, MapConfig
 
         super().reset(task)
         self.vmax = task.limits.max_speed_m_s
-        self.map = LocalMap(MapConfig(skip_pixel=1), task.ceiling, float(task.bounds_min[2]),
-                            camera=self.camera, center_m=tuple(task.start[:2]))
+        self.map = local_map_for(task, self.camera)
         self.bounds = (np.array(task.bounds_min, dtype=float),
                        np.array(task.bounds_max, dtype=float))
         self.kino_params = KinoAstarParams(max_vel=self.vmax, max_acc=self.max_acc,

@@ -61,7 +61,14 @@ import numpy as np
 from numba import njit
 
 from ft_sitl.autopilot.setpoints import Setpoint
-from ft_sitl.navigation.base import GiveUp, Navigator, Observation, Task
+from ft_sitl.navigation.base import (
+    GiveUp,
+    Navigator,
+    Observation,
+    Task,
+    check_ranges,
+    local_map_for,
+)
 from ft_sitl.navigation.bspline import UniformBSpline
 from ft_sitl.navigation.ego import RETRY_MAX_S, RETRY_S, camera_config
 from ft_sitl.navigation.topo import (
@@ -635,15 +642,13 @@ class PgoPlanner(Navigator):
                  camera: str = "benchmark", camera_width: int | None = None,
                  camera_height: int | None = None, camera_rate_hz: float | None = None):
         super().__init__()
-        for name, v, lo, hi in (("max_acc_m_s2", max_acc_m_s2, 0.5, 20.0),
-                                ("local_segment_m", local_segment_m, 2.0, 20.0),
-                                ("replan_period_s", replan_period_s, 0.05, 5.0),
-                                ("no_replan_threshold_m", no_replan_threshold_m, 0.0, 10.0),
-                                ("stop_distance_m", stop_distance_m, 0.0, 5.0),
-                                ("ctrl_pt_dist_m", ctrl_pt_dist_m, 0.1, 2.0),
-                                ("latency_s", latency_s, 0.0, 1.0)):
-            if isinstance(v, bool) or not isinstance(v, (int, float)) or not lo <= v <= hi:
-                raise ValueError(f"{name}: {v!r} must be a number within {lo}..{hi}")
+        check_ranges(("max_acc_m_s2", max_acc_m_s2, 0.5, 20.0),
+                     ("local_segment_m", local_segment_m, 2.0, 20.0),
+                     ("replan_period_s", replan_period_s, 0.05, 5.0),
+                     ("no_replan_threshold_m", no_replan_threshold_m, 0.0, 10.0),
+                     ("stop_distance_m", stop_distance_m, 0.0, 5.0),
+                     ("ctrl_pt_dist_m", ctrl_pt_dist_m, 0.1, 2.0),
+                     ("latency_s", latency_s, 0.0, 1.0))
         self.max_acc = float(max_acc_m_s2)
         self.segment_len = float(local_segment_m)
         self.replan_period = float(replan_period_s)
@@ -657,15 +662,13 @@ class PgoPlanner(Navigator):
     # --- set-up ---------------------------------------------------------------------------
     def reset(self, task: Task) -> None:
         from ft_sitl.navigation.astar import OccupancyView
-        from ft_sitl.navigation.mapping import LocalMap, MapConfig
 
         super().reset(task)
         self.vmax = task.limits.max_speed_m_s
         self.params = PgoParams(max_vel=self.vmax, max_acc=self.max_acc,
                                 ctrl_pt_dist=self.ctrl_pt_dist)
         self.topo_params = TopoParams()
-        self.map = LocalMap(MapConfig(skip_pixel=1), task.ceiling, float(task.bounds_min[2]),
-                            camera=self.camera, center_m=tuple(task.start[:2]))
+        self.map = local_map_for(task, self.camera)
         self.bounds = (np.array(task.bounds_min, dtype=float),
                        np.array(task.bounds_max, dtype=float))
         self.view = OccupancyView.from_map(self.map, bounds=self.bounds)
