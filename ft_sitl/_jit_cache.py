@@ -3,7 +3,7 @@
 numba invalidates a cached function only when its own file changes, not when a kernel it
 calls from another module does: run_steps (lockstep.py) inlines the controller
 (cascade.py) and the plant (dynamics.py), and would keep stale machine code after an
-edit of either. So every kernel caches into one directory named after a hash of all
+edit of either (likewise fast_optim.py calling mapping.py's ESDF kernel). So every kernel caches into one directory named after a hash of all
 kernel sources; any edit starts a fresh cache. Set NUMBA_CACHE_DIR to move the root.
 """
 
@@ -19,6 +19,14 @@ _KERNEL_MODULES = (
     "physics/dynamics.py",
     "autopilot/cascade.py",
     "lockstep.py",
+    # the planners' kernels: fast_optim calls mapping's ESDF kernel across modules
+    "navigation/mapping.py",
+    "navigation/astar.py",
+    "navigation/ego_optim.py",
+    "navigation/fast_optim.py",
+    "navigation/kino_astar.py",
+    "navigation/topo.py",
+    "navigation/pgo.py",
 )
 
 
