@@ -3,8 +3,9 @@
 numba invalidates a cached function only when its own file changes, not when a kernel it
 calls from another module does: run_steps (lockstep.py) inlines the controller
 (cascade.py) and the plant (dynamics.py), and would keep stale machine code after an
-edit of either (likewise fast_optim.py calling mapping.py's ESDF kernel). So every kernel caches into one directory named after a hash of all
-kernel sources; any edit starts a fresh cache. Set NUMBA_CACHE_DIR to move the root.
+edit of either (likewise fast_optim.py calling mapping.py's ESDF kernel). So every
+kernel caches into one directory named after a hash of all kernel sources; any edit
+starts a fresh cache. Set NUMBA_CACHE_DIR to move the root.
 """
 
 from __future__ import annotations
