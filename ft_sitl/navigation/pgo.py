@@ -717,7 +717,10 @@ class PgoPlanner(Navigator):
         points, dt, duration = seg
         derivs = ref.derivs(t_eff, t_eff + duration)
         init = UniformBSpline.fit(points, dt, *derivs)
-        grid = EsdfGrid.from_map(self.map, self.bounds)
+        # the ESDF over a box around the segment's middle that holds the segment and the
+        # topological sampling box around any stretch of it (+-(L/2 + 1) along, 3.5 across)
+        grid = EsdfGrid.from_map(self.map, self.bounds, points[len(points) // 2],
+                                 0.5 * self.segment_len + 2.0)
         plan = plan_segment(init, lambda n: ref.by_duration(t_eff, duration, n), derivs, grid,
                             self.rng, self.params, self.topo_params)
         self.last_plan = plan

@@ -445,10 +445,11 @@ class EsdfGrid:
             self.hi = np.asarray(bounds[1], dtype=float).reshape(3).copy()
 
     @classmethod
-    def from_map(cls, local_map, bounds=None) -> EsdfGrid:
-        """Recompute the map's ESDF over its whole window (+-4.5 m in height around the
-        camera, the originals' local update range) and take it."""
-        fld = local_map.update_esdf(half_extent_z_m=4.5)
+    def from_map(cls, local_map, bounds=None, center_m=None,
+                 half_extent_m: float | None = None) -> EsdfGrid:
+        """Recompute the map's ESDF (over the window, or the box ``center_m +-
+        half_extent_m``; +-4.5 m in height, the originals' local update range) and take it."""
+        fld = local_map.update_esdf(center_m, half_extent_m, 4.5)
         return cls(fld, local_map.esdf_origin_index, local_map.resolution_m, bounds)
 
     @classmethod
