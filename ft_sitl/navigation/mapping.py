@@ -731,67 +731,71 @@ def _query_log_odds(points, inv_res, origin, logodds3, l_unknown, out):
 
 
 @njit(cache=True)
+def _trilinear_axis(g, n):
+    """Lower voxel index, fraction and whether g (in voxel-centre units) was clamped onto
+    the field's 0 .. n-1 range."""
+    clamped = False
+    if g < 0.0:
+        g = 0.0
+        clamped = True
+    elif g > n - 1.0:
+        g = n - 1.0
+        clamped = True
+    j = int(math.floor(g))
+    if j > n - 2:
+        j = n - 2
+    return j, g - j, clamped
+
+
+@njit(cache=True)
+def trilinear_point(esdf3, origin, inv_res, px, py, pz, grad):
+    """Trilinear distance at (px, py, pz) between the voxel centres of ``esdf3`` (global
+    index of its first voxel: ``origin``) and its analytic gradient, written into
+    ``grad``; a point outside is clamped onto the field and the gradient along a clamped
+    axis is 0. Shared by :meth:`LocalMap.esdf` and the planners' kernels."""
+    nx, ny, nz = esdf3.shape
+    x, dx, cx = _trilinear_axis(px * inv_res - origin[0] - 0.5, nx)
+    y, dy, cy = _trilinear_axis(py * inv_res - origin[1] - 0.5, ny)
+    z, dz, cz = _trilinear_axis(pz * inv_res - origin[2] - 0.5, nz)
+    v000 = esdf3[x, y, z]
+    v100 = esdf3[x + 1, y, z]
+    v010 = esdf3[x, y + 1, z]
+    v110 = esdf3[x + 1, y + 1, z]
+    v001 = esdf3[x, y, z + 1]
+    v101 = esdf3[x + 1, y, z + 1]
+    v011 = esdf3[x, y + 1, z + 1]
+    v111 = esdf3[x + 1, y + 1, z + 1]
+    v00 = (1.0 - dx) * v000 + dx * v100
+    v01 = (1.0 - dx) * v001 + dx * v101
+    v10 = (1.0 - dx) * v010 + dx * v110
+    v11 = (1.0 - dx) * v011 + dx * v111
+    v0 = (1.0 - dy) * v00 + dy * v10
+    v1 = (1.0 - dy) * v01 + dy * v11
+    gz = (v1 - v0) * inv_res
+    gy = ((1.0 - dz) * (v10 - v00) + dz * (v11 - v01)) * inv_res
+    gx = ((1.0 - dz) * (1.0 - dy) * (v100 - v000) + (1.0 - dz) * dy * (v110 - v010)
+          + dz * (1.0 - dy) * (v101 - v001) + dz * dy * (v111 - v011)) * inv_res
+    grad[0] = 0.0 if cx else gx
+    grad[1] = 0.0 if cy else gy
+    grad[2] = 0.0 if cz else gz
+    return (1.0 - dz) * v0 + dz * v1
+
+
+@njit(cache=True)
 def _esdf_eval(esdf3, origin, inv_res, points, dist, grad):
     """Trilinear ESDF value and its analytic gradient; returns the number of non-finite
     points (NaN results)."""
-    nx, ny, nz = esdf3.shape
-    dims = (nx, ny, nz)
-    i0 = np.empty(3, np.int64)
-    fr = np.empty(3)
-    clamped = np.empty(3, np.bool_)
     bad = 0
     for i in range(points.shape[0]):
-        ok = True
-        for a in range(3):
-            pa = points[i, a]
-            if not np.isfinite(pa):
-                ok = False
-                break
-            g = pa * inv_res - origin[a] - 0.5
-            n = dims[a]
-            clamped[a] = False
-            if g < 0.0:
-                g = 0.0
-                clamped[a] = True
-            elif g > n - 1.0:
-                g = n - 1.0
-                clamped[a] = True
-            j = int(math.floor(g))
-            if j > n - 2:
-                j = n - 2
-            i0[a] = j
-            fr[a] = g - j
-        if not ok:
+        px, py, pz = points[i, 0], points[i, 1], points[i, 2]
+        if not (np.isfinite(px) and np.isfinite(py) and np.isfinite(pz)):
             bad += 1
             dist[i] = np.nan
             grad[i, 0] = np.nan
             grad[i, 1] = np.nan
             grad[i, 2] = np.nan
             continue
-        x, y, z = i0[0], i0[1], i0[2]
-        dx, dy, dz = fr[0], fr[1], fr[2]
-        v000 = esdf3[x, y, z]
-        v100 = esdf3[x + 1, y, z]
-        v010 = esdf3[x, y + 1, z]
-        v110 = esdf3[x + 1, y + 1, z]
-        v001 = esdf3[x, y, z + 1]
-        v101 = esdf3[x + 1, y, z + 1]
-        v011 = esdf3[x, y + 1, z + 1]
-        v111 = esdf3[x + 1, y + 1, z + 1]
-        v00 = (1.0 - dx) * v000 + dx * v100
-        v01 = (1.0 - dx) * v001 + dx * v101
-        v10 = (1.0 - dx) * v010 + dx * v110
-        v11 = (1.0 - dx) * v011 + dx * v111
-        v0 = (1.0 - dy) * v00 + dy * v10
-        v1 = (1.0 - dy) * v01 + dy * v11
-        dist[i] = (1.0 - dz) * v0 + dz * v1
-        gz = (v1 - v0) * inv_res
-        gy = ((1.0 - dz) * (v10 - v00) + dz * (v11 - v01)) * inv_res
-        gx = ((1.0 - dz) * (1.0 - dy) * (v100 - v000) + (1.0 - dz) * dy * (v110 - v010)
-              + dz * (1.0 - dy) * (v101 - v001) + dz * dy * (v111 - v011)) * inv_res
-        grad[i, 0] = 0.0 if clamped[0] else gx
-        grad[i, 1] = 0.0 if clamped[1] else gy
-        grad[i, 2] = 0.0 if clamped[2] else gz
+        dist[i] = trilinear_point(esdf3, origin, inv_res, px, py, pz, grad[i])
     return bad
 
 

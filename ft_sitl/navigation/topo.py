@@ -69,6 +69,8 @@ from dataclasses import dataclass, field
 import numpy as np
 from numba import njit
 
+from ft_sitl.navigation.mapping import trilinear_point
+
 __all__ = [
     "EsdfGrid", "TopoParams", "TopoSearch", "collision_range", "discretize_path",
     "find_topo_paths", "path_length", "prune_equivalent", "same_topo_path", "shortcut_path",
@@ -113,50 +115,8 @@ def _coarse(fld, origin, res, lo, hi, p):
 @njit(cache=True)
 def _trilinear(fld, origin, res, p, grad):
     """Trilinear distance between voxel centres and its gradient (into ``grad``), with the
-    clamping of ``LocalMap.esdf`` (zero gradient along a clamped axis)."""
-    inv = 1.0 / res
-    dims = fld.shape
-    i0 = np.empty(3, np.int64)
-    fr = np.empty(3)
-    clamped = np.zeros(3, np.bool_)
-    for a in range(3):
-        g = p[a] * inv - origin[a] - 0.5
-        n = dims[a]
-        if g < 0.0:
-            g = 0.0
-            clamped[a] = True
-        elif g > n - 1.0:
-            g = n - 1.0
-            clamped[a] = True
-        j = int(math.floor(g))
-        if j > n - 2:
-            j = n - 2
-        i0[a] = j
-        fr[a] = g - j
-    x, y, z = i0[0], i0[1], i0[2]
-    dx, dy, dz = fr[0], fr[1], fr[2]
-    v000 = fld[x, y, z]
-    v100 = fld[x + 1, y, z]
-    v010 = fld[x, y + 1, z]
-    v110 = fld[x + 1, y + 1, z]
-    v001 = fld[x, y, z + 1]
-    v101 = fld[x + 1, y, z + 1]
-    v011 = fld[x, y + 1, z + 1]
-    v111 = fld[x + 1, y + 1, z + 1]
-    v00 = (1.0 - dx) * v000 + dx * v100
-    v01 = (1.0 - dx) * v001 + dx * v101
-    v10 = (1.0 - dx) * v010 + dx * v110
-    v11 = (1.0 - dx) * v011 + dx * v111
-    v0 = (1.0 - dy) * v00 + dy * v10
-    v1 = (1.0 - dy) * v01 + dy * v11
-    gz = (v1 - v0) * inv
-    gy = ((1.0 - dz) * (v10 - v00) + dz * (v11 - v01)) * inv
-    gx = ((1.0 - dz) * (1.0 - dy) * (v100 - v000) + (1.0 - dz) * dy * (v110 - v010)
-          + dz * (1.0 - dy) * (v101 - v001) + dz * dy * (v111 - v011)) * inv
-    grad[0] = 0.0 if clamped[0] else gx
-    grad[1] = 0.0 if clamped[1] else gy
-    grad[2] = 0.0 if clamped[2] else gz
-    return (1.0 - dz) * v0 + dz * v1
+    clamping of ``LocalMap.esdf`` (the map's own kernel)."""
+    return trilinear_point(fld, origin, 1.0 / res, p[0], p[1], p[2], grad)
 
 
 @njit(cache=True)
