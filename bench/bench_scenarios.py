@@ -4,7 +4,8 @@ For each of the seven families, every configuration 1..10 is built (seed 0) a fe
 reported per family: the median build time of configuration 1 and 10 and of the whole ten,
 the triangle count of configuration 10, and the one-off costs a simulation adds on top of a
 build when it flies in the scenario: the python-fcl collision world (BVH) and the distance
-grid of the collision guard. One process pinned to one CPU. Timings are never asserted.
+grid of the collision guard, and the time to render configuration 10 to a figure
+(``ft-sitl scenarios render``). One process pinned to one CPU. Timings are never asserted.
 
     .venv/bin/python bench/bench_scenarios.py            # ~1 min
     .venv/bin/python bench/bench_scenarios.py --quick    # smoke run
@@ -22,13 +23,16 @@ import argparse  # noqa: E402
 import json  # noqa: E402
 import statistics  # noqa: E402
 import sys  # noqa: E402
+import tempfile  # noqa: E402
 import time  # noqa: E402
+from pathlib import Path  # noqa: E402
 
 from benchutil import machine_info, pin_to_one_cpu  # noqa: E402
 
 from ft_sitl.scenarios.collision import CollisionWorld  # noqa: E402
 from ft_sitl.scenarios.families import FAMILIES, build_scenario  # noqa: E402
 from ft_sitl.scenarios.guard import DistanceGrid  # noqa: E402
+from ft_sitl.scenarios.render import render_scenario  # noqa: E402
 
 
 def _median_time(fn, repeats: int) -> tuple[float, object]:
@@ -50,6 +54,8 @@ def bench_family(family: str, indices, repeats: int) -> dict:
         lambda: CollisionWorld(last.mesh, last.bounds_min, last.bounds_max), repeats)
     grid_s, grid = _median_time(
         lambda: DistanceGrid.build(last.mesh, last.bounds_min, last.bounds_max), 1)
+    with tempfile.TemporaryDirectory() as d:  # drawing happens when the PNG is written
+        render_s, _ = _median_time(lambda: render_scenario(last, Path(d) / "r.png"), 1)
     return {
         "family": family,
         "build_s": {str(k): round(v, 4) for k, v in per_index.items()},
@@ -59,6 +65,7 @@ def bench_family(family: str, indices, repeats: int) -> dict:
         "fcl_world_s": round(world_s, 4),
         "grid_s": round(grid_s, 3),
         "grid_cells": int(grid.data.size),
+        "render_s": round(render_s, 3),
     }
 
 
@@ -77,14 +84,14 @@ def main(argv=None) -> int:
     results = []
     if not args.json:
         print(f"{'family':22s} {'#1 s':>7s} {'#10 s':>7s} {'all s':>7s} {'tris #10':>9s} "
-              f"{'fcl s':>7s} {'grid s':>7s}")
+              f"{'fcl s':>7s} {'grid s':>7s} {'render s':>8s}")
     for fam in FAMILIES:
         r = bench_family(fam, indices, repeats)
         results.append(r)
         if not args.json:
             print(f"{fam:22s} {r['build_s']['1']:7.3f} {r['build_s']['10']:7.3f} "
                   f"{r['build_all_s']:7.2f} {r['triangles_last']:9d} {r['fcl_world_s']:7.3f} "
-                  f"{r['grid_s']:7.2f}", flush=True)
+                  f"{r['grid_s']:7.2f} {r['render_s']:8.2f}", flush=True)
     out = {"machine": machine_info(cpu), "results": results}
     if args.json:
         json.dump(out, sys.stdout, indent=2)

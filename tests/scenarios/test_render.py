@@ -1,7 +1,6 @@
 """Scenario pictures: real PNGs, checked pixel by pixel where the markers must be."""
 
 import math
-import time
 
 import numpy as np
 import pytest
@@ -119,13 +118,12 @@ def test_top_view_fills_obstacle_footprints(tmp_path):
     assert v.min() > 245  # open floor stays white
 
 
-def test_largest_family_renders_in_seconds(tmp_path):
+def test_largest_family_renders(tmp_path):
+    # (how long it takes is measured in bench/bench_scenarios.py, not asserted here)
     sc = build_scenario("perlin", 1, 0)
     assert len(sc.mesh.faces) > 30_000
     path = tmp_path / "perlin.png"
-    t0 = time.perf_counter()
     fig = render_scenario(sc, path, title="my title")
-    assert time.perf_counter() - t0 < 10.0
     assert fig._suptitle.get_text() == "my title"
     img = _load(path)
     for ax in fig.axes:  # the obstacles cover a good share of both views in grey
