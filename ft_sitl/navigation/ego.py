@@ -58,6 +58,14 @@ from ft_sitl.navigation.base import (
     check_ranges,
     local_map_for,
 )
+from ft_sitl.navigation.common import (  # noqa: F401 - camera_config, RETRY_* re-exported
+    RETRY_MAX_S,
+    RETRY_S,
+    SplineTrajectory,
+    camera_config,
+    checked_setpoint,
+    pursue_yaw,
+)
 
 #: estimated compute time of one EGO replan in the original C++ (optimisation ~1 ms, plus
 #: A* and map work; the paper's authors report a few ms on a desktop CPU)
@@ -65,10 +73,6 @@ DEFAULT_LATENCY_S = 0.01
 SAFETY_CHECK_HZ = 20.0
 #: EGO's control-point spacing of the initial path (m)
 CTRL_PT_DIST_M = 0.4
-#: after a failed plan, the next attempt waits this long (simulated s), doubling with each
-#: further failure in a row up to RETRY_MAX_S
-RETRY_S = 0.05
-RETRY_MAX_S = 1.0
 #: failed plans in a row from the same state with the same map before giving up ("no
 #: plan": the trial ends as a timeout, as it would after 90 s of the same failures)
 GIVE_UP_AFTER = 8
@@ -89,57 +93,6 @@ def _resample(path: np.ndarray, spacing: float, min_points: int = 7) -> np.ndarr
         spacing /= 1.5
     s = np.append(s[s < total - 1e-6], total)
     return np.column_stack([np.interp(s, cum, path[:, k]) for k in range(3)])
-
-
-def _wrap(a: float) -> float:
-    return (a + math.pi) % (2.0 * math.pi) - math.pi
-
-
-def camera_config(camera: str, width: int | None, height: int | None, rate_hz: float | None):
-    """The planners' depth camera: "benchmark" (160 x 120 @ 15 Hz) or "d435" (the originals'
-    stream with every second pixel: 320 x 240 @ 30 Hz), optionally resized."""
-    from dataclasses import replace
-
-    from ft_sitl.scenarios.camera import CameraConfig
-
-    base = CameraConfig(max_range_m=10.0)
-    if camera == "benchmark":
-        cfg = replace(base.subsampled(4), rate_hz=15.0)
-    elif camera == "d435":
-        cfg = replace(base.subsampled(2), rate_hz=30.0)
-    else:
-        raise ValueError(f"camera: {camera!r} is not 'benchmark' or 'd435'")
-    if width is not None or height is not None:
-        w = int(width or cfg.width)
-        h = int(height or cfg.height)
-        if not (16 <= w <= 1280 and 12 <= h <= 960):
-            raise ValueError(f"camera_width/height: {w} x {h} outside 16..1280 x 12..960")
-        step_x = base.width / w
-        cfg = replace(base, width=w, height=h, fx=base.fx / step_x, fy=base.fy / step_x,
-                      cx=(w - 1) / 2.0, cy=(h - 1) / 2.0, rate_hz=cfg.rate_hz)
-    if rate_hz is not None:
-        if not (isinstance(rate_hz, (int, float)) and 1.0 <= rate_hz <= 60.0):
-            raise ValueError(f"camera_rate_hz: {rate_hz!r} must be within 1..60")
-        cfg = replace(cfg, rate_hz=float(rate_hz))
-    return cfg
-
-
-class _Traj:
-    """A B-spline trajectory started at ``t0`` (navigation time, s)."""
-
-    def __init__(self, spline, t0: float):
-        self.spline = spline
-        self.t0 = t0
-        self.start = spline.position(0.0)
-
-    def state(self, t: float):
-        tau = min(max(t - self.t0, 0.0), self.spline.duration)
-        return (self.spline.position(tau), self.spline.velocity(tau),
-                self.spline.acceleration(tau))
-
-    @property
-    def end_time(self) -> float:
-        return self.t0 + self.spline.duration
 
 
 class EgoPlanner(Navigator):
@@ -186,8 +139,8 @@ class EgoPlanner(Navigator):
                                                            max_acc=self.max_acc))
         self.reference = global_reference(task.start, task.goal, self.vmax)
         self.progress_t = 0.0
-        self.traj: _Traj | None = None
-        self.pending: _Traj | None = None
+        self.traj: SplineTrajectory | None = None
+        self.pending: SplineTrajectory | None = None
         self.pending_at = math.inf
         self.plan_now = True
         self.from_rest = True
@@ -264,9 +217,9 @@ class EgoPlanner(Navigator):
                                              RETRY_MAX_S)
             return
         self.failures = self.same_failures = 0
-        self._adopt(_Traj(res.spline, 0.0), obs, t_start)
+        self._adopt(SplineTrajectory(res.spline, 0.0), obs, t_start)
 
-    def _adopt(self, traj: _Traj | None, obs: Observation, t_start: float) -> None:
+    def _adopt(self, traj: SplineTrajectory | None, obs: Observation, t_start: float) -> None:
         dt = time.perf_counter() - t_start
         self.compute_s.append(dt)
         lat = dt if self.measured_latency else self.latency
@@ -323,20 +276,8 @@ class EgoPlanner(Navigator):
             hold = self.stop_at if self.stop_at is not None else obs.position
             return Setpoint.position(hold, yaw=self.yaw)
         p, v, a = self.traj.state(t)
-        ahead = self.traj.state(t + 1.0)[0]
-        d = ahead - p
-        if float(np.hypot(d[0], d[1])) > 0.1:
-            want = math.atan2(d[1], d[0])
-            step = _wrap(want - self.yaw)
-            limit = math.pi / self.rate_hz
-            step = max(-limit, min(limit, step))
-            self.yaw = _wrap(self.yaw + 0.5 * step)
+        self.yaw = pursue_yaw(self.yaw, self.traj.state(t + 1.0)[0] - p, self.rate_hz)
         if t > self.traj.end_time:
             v = np.zeros(3)
             a = np.zeros(3)
-        if not (np.all(np.isfinite(p)) and np.all(np.isfinite(v)) and np.all(np.isfinite(a))
-                and math.isfinite(self.yaw)):
-            # never command NaN: the trial fails as a navigator error instead
-            raise FloatingPointError(f"non-finite setpoint at t = {t:.2f} s: p {p}, v {v}, "
-                                     f"a {a}, yaw {self.yaw}")
-        return Setpoint.position(p, velocity=v, acceleration=a, yaw=self.yaw)
+        return checked_setpoint(t, p, v, a, self.yaw)

@@ -76,7 +76,7 @@ inflated occupancy, free voxels hold multiples of the 0.1 m resolution, so "belo
 is exactly "the point's voxel is planning-occupied": we ask the map's planning occupancy,
 which is always current (the ESDF is recomputed only when a plan is made).
 
-Camera: as the EGO navigator (:func:`~ft_sitl.navigation.ego.camera_config`): 160 x 120 @
+Camera: as the EGO navigator (:func:`~ft_sitl.navigation.common.camera_config`): 160 x 120 @
 15 Hz by default, ``camera="d435"`` for the originals' 320 x 240 @ 30 Hz rays.
 """
 
@@ -96,7 +96,13 @@ from ft_sitl.navigation.base import (
     check_ranges,
     local_map_for,
 )
-from ft_sitl.navigation.ego import camera_config
+from ft_sitl.navigation.common import (
+    RETRY_MAX_S,
+    RETRY_S,
+    camera_config,
+    checked_setpoint,
+    wrap_angle,
+)
 
 #: estimated time from state to command of one Fast-Planner replan in the original C++ on
 #: a desktop CPU: kinodynamic search a few ms, B-spline optimisation <= 300 evaluations
@@ -114,13 +120,7 @@ CHECK_RADIUS_M = 6.0
 CTRL_PT_DIST_M = 0.5
 #: no plan when the goal is this close to the start state (the original: "Close goal")
 CLOSE_GOAL_M = 0.2
-RETRY_S = 0.05
-RETRY_MAX_S = 1.0
 GIVE_UP_AFTER = 8
-
-
-def _wrap(a: float) -> float:
-    return (a + math.pi) % (2.0 * math.pi) - math.pi
 
 
 class _Traj:
@@ -389,7 +389,7 @@ class FastPlanner(Navigator):
             hold = self.stop_at if self.stop_at is not None else obs.position
             if not math.isfinite(self.yaw):
                 raise FloatingPointError(f"non-finite yaw at t = {t:.2f} s")
-            return Setpoint.position(hold, yaw=_wrap(self.yaw))
+            return Setpoint.position(hold, yaw=wrap_angle(self.yaw))
         p, v, a = self.traj.state(t)
         y = self.traj.yaw_state(t)
         yaw, yaw_rate = float(y[0]), float(y[1])
@@ -397,11 +397,6 @@ class FastPlanner(Navigator):
             v = np.zeros(3)
             a = np.zeros(3)
             yaw_rate = 0.0
-        if not (np.all(np.isfinite(p)) and np.all(np.isfinite(v)) and np.all(np.isfinite(a))
-                and math.isfinite(yaw) and math.isfinite(yaw_rate)):
-            # never command NaN: the trial fails as a navigator error instead
-            raise FloatingPointError(f"non-finite setpoint at t = {t:.2f} s: p {p}, v {v}, "
-                                     f"a {a}, yaw {yaw}, yaw rate {yaw_rate}")
+        sp = checked_setpoint(t, p, v, a, wrap_angle(yaw), yaw_rate)
         self.yaw = yaw
-        return Setpoint.position(p, velocity=v, acceleration=a, yaw=_wrap(yaw),
-                                 yaw_rate=yaw_rate)
+        return sp

@@ -70,7 +70,14 @@ from ft_sitl.navigation.base import (
     local_map_for,
 )
 from ft_sitl.navigation.bspline import UniformBSpline
-from ft_sitl.navigation.ego import RETRY_MAX_S, RETRY_S, camera_config
+from ft_sitl.navigation.common import (
+    RETRY_MAX_S,
+    RETRY_S,
+    SplineTrajectory,
+    camera_config,
+    checked_setpoint,
+    pursue_yaw,
+)
 from ft_sitl.navigation.topo import (
     EsdfGrid,
     TopoParams,
@@ -608,27 +615,6 @@ class _Reference:
 # ---------------------------------------------------------------------------------------
 # the navigator
 # ---------------------------------------------------------------------------------------
-def _wrap(a: float) -> float:
-    return (a + math.pi) % (2.0 * math.pi) - math.pi
-
-
-class _Traj:
-    """A B-spline trajectory started at navigation time ``t0``."""
-
-    def __init__(self, spline: UniformBSpline, t0: float):
-        self.spline = spline
-        self.t0 = t0
-
-    def state(self, t: float):
-        tau = min(max(t - self.t0, 0.0), self.spline.duration)
-        return (self.spline.position(tau), self.spline.velocity(tau),
-                self.spline.acceleration(tau))
-
-    @property
-    def end_time(self) -> float:
-        return self.t0 + self.spline.duration
-
-
 class PgoPlanner(Navigator):
     """Fast-Planner's topological replanning (Zhou et al. 2020): path-guided optimisation."""
 
@@ -674,8 +660,8 @@ class PgoPlanner(Navigator):
         self.view = OccupancyView.from_map(self.map, bounds=self.bounds)
         self.rng = task.rng
         self.ref: _Reference | None = None
-        self.traj: _Traj | None = None
-        self.pending: _Traj | None = None
+        self.traj: SplineTrajectory | None = None
+        self.pending: SplineTrajectory | None = None
         self.pending_at = math.inf
         self.plan_now = True
         self.from_rest = True
@@ -752,7 +738,7 @@ class PgoPlanner(Navigator):
             return
         t0 = obs.time_s + lat
         self.ref.set_local(spline, t0, spline.duration - seg_duration)
-        self.pending = _Traj(spline, t0)
+        self.pending = SplineTrajectory(spline, t0)
         self.pending_at = t0
         self.from_rest = False
 
@@ -818,18 +804,9 @@ class PgoPlanner(Navigator):
             hold = self.stop_at if self.stop_at is not None else obs.position
             return Setpoint.position(hold, yaw=self.yaw)
         p, v, a = self.traj.state(t)
-        d = self.traj.state(t + YAW_LOOKAHEAD_S)[0] - p
-        if float(np.hypot(d[0], d[1])) > 0.1:
-            step = _wrap(math.atan2(d[1], d[0]) - self.yaw)
-            limit = math.pi / self.rate_hz
-            step = max(-limit, min(limit, step))
-            self.yaw = _wrap(self.yaw + 0.5 * step)
+        self.yaw = pursue_yaw(self.yaw, self.traj.state(t + YAW_LOOKAHEAD_S)[0] - p,
+                              self.rate_hz)
         if t > self.traj.end_time:
             v = np.zeros(3)
             a = np.zeros(3)
-        if not (np.all(np.isfinite(p)) and np.all(np.isfinite(v)) and np.all(np.isfinite(a))
-                and math.isfinite(self.yaw)):
-            # never command NaN: the trial fails as a navigator error instead
-            raise FloatingPointError(f"non-finite setpoint at t = {t:.2f} s: p {p}, v {v}, "
-                                     f"a {a}, yaw {self.yaw}")
-        return Setpoint.position(p, velocity=v, acceleration=a, yaw=self.yaw)
+        return checked_setpoint(t, p, v, a, self.yaw)
