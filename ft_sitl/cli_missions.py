@@ -36,7 +36,8 @@ def cmd_campaign_check(args) -> int:
             "platforms": [p.name for p in c.platforms],
             "scenarios": [{"family": s.family, "indices": list(s.indices)}
                           for s in c.scenarios],
-            "trials_per_combination": c.trials, "limits": c.limits.as_dict()}
+            "trials_per_combination": c.trials, "limits": c.limits.as_dict(),
+            "notes": list(c.notes)}
     if args.json:
         print(json.dumps(info, indent=2))
         return 0
@@ -50,6 +51,8 @@ def cmd_campaign_check(args) -> int:
     lim = c.limits
     print(f"  limits: {lim.max_speed_m_s:g} m/s, {lim.timeout_s:g} s, goal sphere "
           f"{lim.goal_radius_m:g} m held {lim.hold_s:g} s")
+    for note in c.notes:
+        print(f"  note: {note}")
     return 0
 
 
@@ -63,6 +66,8 @@ def cmd_campaign_run(args) -> int:
     if args.limit is not None and args.limit < 1:
         raise _cli_error()(f"--limit: {args.limit} must be at least 1")
     out = Path(args.out)
+    for note in c.notes:
+        print(f"note: {note}", file=sys.stderr)
     try:
         summary = run_campaign(c, out, workers=args.workers, progress=not args.quiet,
                                limit=args.limit)
@@ -233,6 +238,7 @@ def cmd_navigators_list(args) -> int:
         doc = (cls.__doc__ or sys.modules[cls.__module__].__doc__ or "").strip()
         rows.append({"name": name, "class": f"{cls.__module__}.{cls.__qualname__}",
                      "rate_hz": cls.rate_hz, "depth_camera": cls.camera is not None,
+                     "unavailable": cls.unavailable(),
                      "parameters": {k: v for k, v in parameters(cls).items()},
                      "summary": doc.splitlines()[0] if doc else ""})
     if args.json:
@@ -246,6 +252,33 @@ def cmd_navigators_list(args) -> int:
         print(f"{r['name']:14s} {r['rate_hz']:g} Hz  params: {params}")
         if r["summary"]:
             print(f"{'':14s} {r['summary']}")
+        if r["unavailable"]:
+            print(f"{'':14s} not runnable here: {r['unavailable']}")
+    return 0
+
+
+def cmd_navigators_install(args) -> int:
+    """Check a NavRL checkpoint and copy it where the navrl navigator looks."""
+    import shutil
+
+    from ft_sitl.navigation.navrl import CHECKPOINT_NAME, data_dir
+    from ft_sitl.navigation.navrl_policy import CheckpointError, NavRLPolicy
+
+    if args.name != "navrl":
+        raise _cli_error()(f"install: {args.name!r} has no files to install (only navrl "
+                           "needs model weights)")
+    try:
+        NavRLPolicy.from_checkpoint(args.path)
+    except CheckpointError as exc:
+        raise _cli_error()(f"install navrl: {exc}") from None
+    except OSError as exc:
+        raise _cli_error()(f"install navrl: {args.path}: {exc}") from None
+    dest = data_dir() / CHECKPOINT_NAME
+    dest.parent.mkdir(parents=True, exist_ok=True)
+    tmp = dest.with_suffix(".tmp")
+    shutil.copyfile(args.path, tmp)
+    tmp.replace(dest)
+    print(f"navrl: checkpoint installed at {dest}")
     return 0
 
 
@@ -292,4 +325,11 @@ def add_parsers(sub) -> None:
     nl = nsub.add_parser("list", help="list navigators and their parameters")
     nl.add_argument("--json", action="store_true", help="machine-readable output")
     nl.set_defaults(func=cmd_navigators_list)
+    ni = nsub.add_parser("install", help="install a navigator's model weights (navrl)",
+                         description="Check a NavRL policy checkpoint (the authors' released "
+                                     "navrl_checkpoint.pt) and copy it to the data directory "
+                                     "where the navrl navigator finds it.")
+    ni.add_argument("name", help="navigator (navrl)")
+    ni.add_argument("path", help="checkpoint file")
+    ni.set_defaults(func=cmd_navigators_install)
 

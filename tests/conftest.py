@@ -15,3 +15,15 @@ def table1_rows():
         pytest.fail(f"{TABLE1} is missing: the tests check the catalog against the paper's table")
     with open(TABLE1, newline="", encoding="utf-8") as fh:
         return list(csv.DictReader(fh))
+
+
+NAVRL_CHECKPOINT = SHARED / "data" / "navrl" / "navrl_checkpoint.pt"
+
+
+@pytest.fixture(scope="session")
+def navrl_checkpoint() -> Path:
+    """The NavRL authors' released checkpoint, as test data (ft-sitl does not ship it)."""
+    if not NAVRL_CHECKPOINT.is_file():
+        pytest.fail(f"{NAVRL_CHECKPOINT} is missing: the NavRL tests read the released "
+                    "checkpoint from the team's shared data")
+    return NAVRL_CHECKPOINT

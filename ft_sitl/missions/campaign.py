@@ -167,6 +167,8 @@ class Campaign:
     physics_hz: int = 1000
     source: str = ""
     doc: dict = field(default_factory=dict)
+    #: what "all" left out and why (e.g. a navigator without its model weights)
+    notes: list[str] = field(default_factory=list)
 
     def spec_dict(self) -> dict:
         """The campaign as data: what resuming compares, what reports print."""
@@ -236,11 +238,12 @@ def parse_campaign(doc: dict, path: Path | None = None) -> Campaign:
     scenarios = _scenarios(where, doc.get("scenarios", "all"), doc.get("indices", "all"), base)
     weights = _weights(where, doc.get("weights", {}))
     _check_weights(where, weights, platforms, scenarios)
+    notes: list[str] = []
     return Campaign(
-        name=name, algorithms=_algorithms(where, doc["algorithms"]), platforms=platforms,
+        name=name, algorithms=_algorithms(where, doc["algorithms"], notes), platforms=platforms,
         scenarios=scenarios, trials=trials, seed=seed, scenario_seed=scenario_seed,
         limits=limits, weights=weights, physics_hz=physics_hz,
-        source=str(path) if path is not None else "", doc=doc)
+        source=str(path) if path is not None else "", doc=doc, notes=notes)
 
 
 def _check_weights(where: str, weights: dict, platforms, scenarios) -> None:
@@ -259,11 +262,17 @@ def _check_weights(where: str, weights: dict, platforms, scenarios) -> None:
         raise CampaignError(f"{where}: {exc}") from None
 
 
-def _algorithms(where: str, v) -> list[AlgorithmEntry]:
+def _algorithms(where: str, v, notes: list[str] | None = None) -> list[AlgorithmEntry]:
     from ft_sitl.navigation.registry import NavigatorError, available, create
 
     if v == "all":
-        v = sorted(n for n, c in available().items() if not isinstance(c, str))
+        v = []
+        for n, c in sorted(available().items()):
+            why = c if isinstance(c, str) else c.unavailable()
+            if why is None:
+                v.append(n)
+            elif notes is not None:
+                notes.append(f"algorithms = \"all\" leaves out {n!r}: {why}")
     out, labels = [], set()
     for k, item in enumerate(_list(f"{where}: algorithms", v)):
         w = f"{where}: algorithms[{k}]"

@@ -110,6 +110,12 @@ class Navigator:
                             f"{', '.join(sorted(params))}")
         self.replans = 0
 
+    @classmethod
+    def unavailable(cls) -> str | None:
+        """Why this navigator cannot run on this machine (e.g. model weights the user has
+        not supplied), or None. ``algorithms = "all"`` leaves such navigators out."""
+        return None
+
     def reset(self, task: Task) -> None:
         """Called once before the first step of a navigation phase."""
         self.task = task

@@ -29,10 +29,11 @@ class NavigatorError(ValueError):
 def _builtin() -> dict[str, type[Navigator]]:
     from ft_sitl.navigation.ego import EgoPlanner
     from ft_sitl.navigation.fast import FastPlanner
+    from ft_sitl.navigation.navrl import NavRL
     from ft_sitl.navigation.pgo import PgoPlanner
     from ft_sitl.navigation.straight import StraightLine
 
-    return {c.name: c for c in (StraightLine, EgoPlanner, FastPlanner, PgoPlanner)}
+    return {c.name: c for c in (StraightLine, EgoPlanner, FastPlanner, PgoPlanner, NavRL)}
 
 
 def available() -> dict[str, type[Navigator] | str]:

@@ -160,13 +160,15 @@ def test_the_paper_preset_is_the_papers_matrix():
     assert all(sorted(v) == list(range(1, 11)) for v in combos.values())
 
 
-def test_the_quick_preset():
+def test_the_quick_preset(navrl_checkpoint, monkeypatch):
+    monkeypatch.setenv("FT_SITL_NAVRL_CHECKPOINT", str(navrl_checkpoint))
     c = load_campaign("quick")
     assert collections.Counter(p.category for p in c.platforms) == {"real": 3, "virtual": 3}
     assert all(s.indices == (1, 2) for s in c.scenarios)
     specs = c.trial_specs()
     assert len(specs) == 6 * 7 * 2 * len(c.algorithms)
-    assert {a.name for a in c.algorithms} == {"straight", "ego", "fast", "pgo"}
+    assert {a.name for a in c.algorithms} == {"straight", "ego", "fast", "pgo", "navrl"}
+    assert c.notes == []
     assert len({s.trial_id for s in specs}) == len(specs)
 
 
@@ -325,7 +327,8 @@ def test_a_campaign_flies_an_entry_point_navigator(plugins, yard, tmp_path):
         timeout_s = 1.0
         """
     c = load_campaign(campaign_file(tmp_path, "c.toml", body))
-    loadable = sorted(n for n, cls in available().items() if not isinstance(cls, str))
+    loadable = sorted(n for n, cls in available().items()
+                      if not isinstance(cls, str) and cls.unavailable() is None)
     assert [a.label for a in c.algorithms] == loadable
     assert {"straight", "t_hover", "t_killer"} <= set(loadable)
     assert not {"t_broken", "t_notnav"} & set(loadable)

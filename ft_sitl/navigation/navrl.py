@@ -1,0 +1,435 @@
+"""NavRL as a navigator: the authors' released PPO policy with its velocity-obstacle shield.
+
+NavRL (Xu et al. 2025) is the learned method of the FLYINGTRUST comparison. The paper flew
+the authors' pre-trained model without fine tuning; so does this navigator. The weights are
+NOT part of ft-sitl: the user supplies the released checkpoint (``navrl_checkpoint.pt``, MIT
+licence, from the authors' repository), found in this order:
+
+1. the ``checkpoint`` parameter (a path),
+2. the environment variable ``FT_SITL_NAVRL_CHECKPOINT``,
+3. ``$XDG_DATA_HOME/ft-sitl/navrl/navrl_checkpoint.pt`` (``~/.local/share/...``), where
+   ``ft-sitl navigators install navrl PATH`` copies a checkpoint after checking it.
+
+Without one, naming ``navrl`` in a campaign is an error that says this, and ``algorithms =
+"all"`` leaves it out with a note. The checkpoint is read without PyTorch
+(:mod:`ft_sitl.navigation.navrl_policy`).
+
+What it does, as the authors' ROS deployment does (control at 20 Hz, simulated time):
+
+1. **Perception.** Depth frames are fused into the same
+   :class:`~ft_sitl.navigation.mapping.LocalMap` the planners use (0.1 m voxels, one-voxel
+   inflation, unknown = free). Each control step casts the 36 x 4 "lidar" into the inflated
+   map from the vehicle: 10 deg horizontal steps counter-clockwise from the start -> goal
+   direction, elevations -10, 0, 10, 20 deg, 4 m range; the policy sees 4 m minus the hit
+   distance.
+2. **Heading.** It first yaws in place toward the goal direction (until within 0.1 rad),
+   waits 10 control periods, then holds that yaw.
+3. **Policy.** If anything is within ~3.8 m in the half-space toward the goal (the original's
+   check of the first and last quarter of the beams, ignoring the -10 deg row), the policy
+   runs: state = unit vector to the goal and velocity in the goal frame, horizontal and
+   vertical distance; dynamic obstacles are zeros (the scenarios are static); the action is
+   ``(2 mean - 1) L`` per goal-frame axis with the Beta mean, rotated to the world.
+   Otherwise it flies straight at the goal at ``L``. ``L`` = ``action_limit_m_s`` = 1.0 m/s,
+   the released deployment's value (why the paper saw NavRL capped near 1 m/s).
+4. **Safety shield.** The ray end points are clustered (DBSCAN, eps 0.2 m, 2 points); each
+   cluster becomes a sphere (1.5 x its largest horizontal extent, pushed that extent away
+   from the vehicle); ORCA half-spaces with a 2 s horizon (0.05 s inside an obstacle) are
+   built around the command, and only if the command lies in a velocity obstacle the
+   closest velocity satisfying all of them (speed <= sqrt(3) L) replaces it; when none
+   does, the one violating them least.
+5. **Goal approach.** Within 3 m of the goal the command is rescaled to 0.5 m/s.
+6. **Output.** PX4 offboard: horizontal velocity, the start altitude as a position, yaw
+   toward the goal (altitude is held: the deployment's ``height_control`` is off).
+
+A command takes effect ``latency_s`` (default 10 ms: ray casting and inference through the
+ROS services) after the observation it was computed from. Simplified: the shield's
+linear programs are solved as a small quadratic program (scipy SLSQP) instead of RVO2's
+incremental LP; its fixed 0.7-1.3 m height band is left out (altitude is held anyway); a
+ray inside an obstacle sphere counts as "in the velocity obstacle" (the original reads an
+uninitialised flag there).
+"""
+
+from __future__ import annotations
+
+import functools
+import math
+import os
+import time
+from pathlib import Path
+
+import numpy as np
+
+from ft_sitl.autopilot.setpoints import Setpoint
+from ft_sitl.navigation.base import Navigator, Observation, Task, check_ranges, local_map_for
+from ft_sitl.navigation.common import camera_config, wrap_angle
+
+ENV_VAR = "FT_SITL_NAVRL_CHECKPOINT"
+CHECKPOINT_NAME = "navrl_checkpoint.pt"
+CONTROL_HZ = 20.0
+LIDAR_RANGE_M = 4.0
+LIDAR_HRES_DEG = 10.0
+LIDAR_ELEVATIONS_DEG = (-10.0, 0.0, 10.0, 20.0)
+RAY_STEP_M = 0.05
+DEFAULT_LATENCY_S = 0.01
+ROBOT_RADIUS_M = 0.3
+SHIELD_HORIZON_S = 2.0
+SHIELD_STEP_S = 0.05
+DBSCAN_EPS_M = 0.2
+DBSCAN_MIN_POINTS = 2
+YAW_TOLERANCE_RAD = 0.1
+SETTLE_PERIODS = 10
+APPROACH_RADIUS_M = 3.0
+APPROACH_SPEED_M_S = 0.5
+
+
+def data_dir() -> Path:
+    base = os.environ.get("XDG_DATA_HOME") or str(Path.home() / ".local" / "share")
+    return Path(base) / "ft-sitl" / "navrl"
+
+
+def find_checkpoint(explicit: str | None = None) -> Path | None:
+    """The checkpoint to use (see the module docstring), or None when there is none.
+    An explicit path or the environment variable that names a missing file is an error."""
+    if explicit is not None:
+        p = Path(explicit).expanduser()
+        if not p.is_file():
+            raise FileNotFoundError(f"checkpoint: {p}: no such file")
+        return p
+    env = os.environ.get(ENV_VAR)
+    if env:
+        p = Path(env).expanduser()
+        if not p.is_file():
+            raise FileNotFoundError(f"{ENV_VAR}={env}: no such file")
+        return p
+    p = data_dir() / CHECKPOINT_NAME
+    return p if p.is_file() else None
+
+
+NO_CHECKPOINT = (f"NavRL needs the authors' released policy checkpoint, which ft-sitl does "
+                 f"not ship: give params.checkpoint, set {ENV_VAR}, or run `ft-sitl "
+                 f"navigators install navrl PATH`")
+
+
+@functools.lru_cache(maxsize=4)
+def _policy(path: str, mtime_ns: int):
+    from ft_sitl.navigation.navrl_policy import NavRLPolicy
+
+    return NavRLPolicy.from_checkpoint(path)
+
+
+def load_policy(path: Path):
+    """The policy in ``path``, loaded once per process (and again if the file changes)."""
+    return _policy(str(path.resolve()), path.stat().st_mtime_ns)
+
+
+# --- geometry of the goal frame -----------------------------------------------------------
+
+def goal_frame(direction) -> np.ndarray:
+    """Rows x, y, z of NavRL's goal frame: x = the horizontal direction, z up."""
+    d = np.array([direction[0], direction[1], 0.0], dtype=float)
+    n = float(np.linalg.norm(d))
+    x = d / n if n > 1e-9 else np.array([1.0, 0.0, 0.0])
+    z = np.array([0.0, 0.0, 1.0])
+    y = np.cross(z, x)
+    return np.array([x, y, np.cross(x, y)])
+
+
+def lidar_directions(start_angle: float) -> np.ndarray:
+    """(36, 4, 3) unit ray directions: horizontal beams counter-clockwise from
+    ``start_angle``, elevations -10..20 deg (a direction (cos h, sin h, tan v), normalised)."""
+    h = start_angle + np.deg2rad(LIDAR_HRES_DEG) * np.arange(int(360 / LIDAR_HRES_DEG))
+    v = np.deg2rad(np.array(LIDAR_ELEVATIONS_DEG))
+    d = np.empty((len(h), len(v), 3))
+    d[..., 0] = np.cos(h)[:, None]
+    d[..., 1] = np.sin(h)[:, None]
+    d[..., 2] = np.tan(v)[None, :]
+    return d / np.linalg.norm(d, axis=-1, keepdims=True)
+
+
+def cast_lidar(occupied, position, directions, max_range=LIDAR_RANGE_M, step=RAY_STEP_M):
+    """Hit distance of each ray (clamped to ``max_range``): the first sample along the ray,
+    every ``step`` metres, that ``occupied`` (points (..., 3) -> bool) reports."""
+    d = np.arange(step, max_range + 1e-9, step)
+    pts = position[None, None, None, :] + directions[:, :, None, :] * d[None, None, :, None]
+    hit = occupied(pts)
+    first = np.argmax(hit, axis=-1)
+    any_hit = hit.any(axis=-1)
+    return np.where(any_hit, d[first], max_range)
+
+
+def obstacle_in_range(lidar_deficit: np.ndarray) -> bool:
+    """The original's test: something is within ~3.8 m in the first or last quarter of the
+    beams (the half toward the goal), elevations 0..20 deg."""
+    q = lidar_deficit.shape[0] // 4
+    return bool(np.any(lidar_deficit[:q, 1:] >= 0.2) or np.any(lidar_deficit[-q:, 1:] >= 0.2))
+
+
+# --- the safety shield ---------------------------------------------------------------------
+
+def dbscan(points: np.ndarray, eps: float = DBSCAN_EPS_M,
+           min_points: int = DBSCAN_MIN_POINTS) -> list[np.ndarray]:
+    """Clusters of ``points`` (N, 3) as index arrays; noise is left out. A point's
+    neighbourhood includes itself."""
+    n = len(points)
+    if n == 0:
+        return []
+    dist = np.linalg.norm(points[:, None, :] - points[None, :, :], axis=-1)
+    near = dist <= eps
+    core = near.sum(axis=1) >= min_points
+    label = np.full(n, -1)
+    clusters = []
+    for i in range(n):
+        if label[i] != -1 or not core[i]:
+            continue
+        cid = len(clusters)
+        label[i] = cid
+        stack, members = [i], [i]
+        while stack:
+            j = stack.pop()
+            if not core[j]:
+                continue
+            for k in np.flatnonzero(near[j]):
+                if label[k] == -1:
+                    label[k] = cid
+                    members.append(int(k))
+                    stack.append(int(k))
+        clusters.append(np.array(sorted(members)))
+    return clusters
+
+
+def cluster_spheres(points: np.ndarray, position: np.ndarray) -> list[tuple[np.ndarray, float]]:
+    """NavRL's static obstacles: per cluster of ray end points a sphere of radius 1.5 x the
+    largest horizontal distance from the cluster's box centre, centred that distance
+    beyond the box centre (seen from the vehicle)."""
+    out = []
+    for idx in dbscan(points):
+        c = points[idx]
+        centre = 0.5 * (c.min(axis=0) + c.max(axis=0))
+        extent = float(np.max(np.linalg.norm((c - centre)[:, :2], axis=1)))
+        away = centre - position
+        n = float(np.linalg.norm(away))
+        if n > 1e-9:
+            centre = centre + away / n * extent
+        out.append((centre, 1.5 * extent))
+    return out
+
+
+def _perpendicular(v: np.ndarray) -> np.ndarray:
+    """A unit vector perpendicular to v, horizontal (to its left) when v is not vertical."""
+    n = np.cross([0.0, 0.0, 1.0], v)
+    if float(np.linalg.norm(n)) < 1e-9:
+        n = np.cross([1.0, 0.0, 0.0], v)
+    return n / float(np.linalg.norm(n))
+
+
+def orca_plane(agent_pos, agent_vel, agent_radius, obs_pos, obs_vel, obs_radius,
+               horizon=SHIELD_HORIZON_S, step=SHIELD_STEP_S):
+    """ORCA half-space (point, normal, in_vo) for one obstacle with the cut-off circle, the
+    agent taking full responsibility; None when it is degenerate (zero relative velocity
+    inside the obstacle). A relative velocity exactly on the cone's axis, where RVO2's
+    projection divides zero by zero, passes on the left. Velocities v with
+    (v - point) . normal >= 0 are safe for ``horizon`` seconds."""
+    rp = np.asarray(obs_pos, float) - agent_pos
+    rv = np.asarray(agent_vel, float) - obs_vel
+    dist_sq = float(rp @ rp)
+    r = agent_radius + obs_radius
+    if dist_sq > r * r:
+        w = rv - rp / horizon
+        w_sq = float(w @ w)
+        dot = float(w @ rp)
+        if dot < 0.0 and dot * dot > r * r * w_sq:  # the cut-off circle is closest
+            in_vo = float(np.linalg.norm(rv * horizon - rp)) < r
+            wl = math.sqrt(w_sq)
+            n = w / wl if wl > 1e-12 else -rp / math.sqrt(dist_sq)
+            u = (r / horizon - wl) * n
+        else:  # the cone's side
+            rv_n = float(np.linalg.norm(rv))
+            ang_vo = math.asin(min(1.0, r / math.sqrt(dist_sq)))
+            in_vo = rv_n > 1e-12 and math.acos(max(-1.0, min(1.0, float(rp @ rv) / (
+                math.sqrt(dist_sq) * rv_n)))) < ang_vo
+            b = float(rp @ rv)
+            c = float(rv @ rv) - float(np.sum(np.cross(rp, rv) ** 2)) / (dist_sq - r * r)
+            disc = b * b - dist_sq * c
+            if disc < 0.0:
+                return None
+            t = (b + math.sqrt(disc)) / dist_sq
+            w = rv - t * rp
+            wl = float(np.linalg.norm(w))
+            if wl > 1e-12:
+                n = w / wl
+                u = (r * t - wl) * n
+            else:  # on the cone's axis (head-on): the nearest side is the left one
+                axis = rp / math.sqrt(dist_sq)
+                sin_a = min(1.0, r / math.sqrt(dist_sq))
+                n = math.sqrt(1.0 - sin_a * sin_a) * _perpendicular(rp) - sin_a * axis
+                u = float(np.linalg.norm(rv)) * sin_a * n
+    else:  # inside: leave within one time step
+        w = rv - rp / step
+        wl = float(np.linalg.norm(w))
+        if wl < 1e-12:
+            return None
+        n = w / wl
+        u = (r / step - wl) * n
+        in_vo = True
+    return np.asarray(agent_vel, float) + u, n, in_vo
+
+
+def safe_velocity(preferred: np.ndarray, planes, max_speed: float) -> np.ndarray:
+    """The velocity closest to ``preferred`` in every half-space (v - p) . n >= 0 with
+    |v| <= max_speed; when there is none, the one whose worst violation is smallest."""
+    from scipy.optimize import minimize
+
+    if not planes:
+        return preferred
+    P = np.array([p for p, _, _ in planes])
+    N = np.array([n for _, n, _ in planes])
+    off = np.einsum("ij,ij->i", P, N)
+    x0 = preferred * min(1.0, max_speed / max(float(np.linalg.norm(preferred)), 1e-12))
+    cons = [{"type": "ineq", "fun": lambda v: N @ v - off, "jac": lambda v: N},
+            {"type": "ineq", "fun": lambda v: max_speed ** 2 - v @ v,
+             "jac": lambda v: -2.0 * v}]
+    res = minimize(lambda v: float((v - preferred) @ (v - preferred)), x0,
+                   jac=lambda v: 2.0 * (v - preferred), constraints=cons, method="SLSQP",
+                   options={"maxiter": 100, "ftol": 1e-10})
+    v = res.x
+    if res.success and np.all(N @ v - off >= -1e-6) and v @ v <= max_speed ** 2 + 1e-6:
+        return v
+    # infeasible: minimise the largest violation t (variables v, t)
+    cons = [{"type": "ineq", "fun": lambda z: N @ z[:3] - off + z[3],
+             "jac": lambda z: np.hstack([N, np.ones((len(N), 1))])},
+            {"type": "ineq", "fun": lambda z: max_speed ** 2 - z[:3] @ z[:3],
+             "jac": lambda z: np.hstack([-2.0 * z[:3], [0.0]])}]
+    z0 = np.append(np.zeros(3), float(np.max(off)) + 1.0)
+    res = minimize(lambda z: z[3], z0, jac=lambda z: np.array([0.0, 0.0, 0.0, 1.0]),
+                   constraints=cons, method="SLSQP", options={"maxiter": 100})
+    v = res.x[:3]
+    return v if np.all(np.isfinite(v)) else np.zeros(3)
+
+
+def shield(position, preferred, ray_points, max_speed):
+    """NavRL's safe action for the static ray hits; returns (velocity, whether it solved)."""
+    planes = []
+    need = False
+    for centre, radius in cluster_spheres(ray_points, position):
+        pl = orca_plane(position, preferred, 0.0, centre, np.zeros(3), radius)
+        if pl is None:
+            continue
+        planes.append(pl)
+        need = need or pl[2]
+    if not need:
+        return preferred, False
+    return safe_velocity(preferred, planes, max_speed), True
+
+
+class NavRL(Navigator):
+    """NavRL (Xu et al. 2025): learned velocity policy + ORCA safety shield."""
+
+    name = "navrl"
+    rate_hz = 100.0
+
+    def __init__(self, checkpoint: str | None = None, action_limit_m_s: float = 1.0,
+                 latency_s: float = DEFAULT_LATENCY_S, measured_latency: bool = False,
+                 use_shield: bool = True, camera: str = "benchmark",
+                 camera_width: int | None = None, camera_height: int | None = None,
+                 camera_rate_hz: float | None = None):
+        super().__init__()
+        check_ranges(("action_limit_m_s", action_limit_m_s, 0.1, 10.0),
+                     ("latency_s", latency_s, 0.0, 1.0))
+        if checkpoint is not None and not isinstance(checkpoint, str):
+            raise ValueError(f"checkpoint: {checkpoint!r} must be a file path")
+        path = find_checkpoint(checkpoint)
+        if path is None:
+            raise FileNotFoundError(NO_CHECKPOINT)
+        self.policy = load_policy(path)
+        self.checkpoint_path = path
+        self.limit = float(action_limit_m_s)
+        self.latency = float(latency_s)
+        self.measured_latency = bool(measured_latency)
+        self.use_shield = bool(use_shield)
+        self.camera = camera_config(camera, camera_width, camera_height, camera_rate_hz)
+
+    @classmethod
+    def unavailable(cls) -> str | None:
+        try:
+            found = find_checkpoint()
+        except FileNotFoundError as exc:
+            return str(exc)
+        return None if found is not None else NO_CHECKPOINT
+
+    def reset(self, task: Task) -> None:
+        super().reset(task)
+        self.map = local_map_for(task, self.camera)
+        self.hold_z = float(task.start[2])
+        self.goal = np.array([task.goal[0], task.goal[1], self.hold_z])
+        direction = self.goal - task.start
+        self.frame = goal_frame(direction)
+        self.goal_yaw = math.atan2(direction[1], direction[0])
+        self.rays = lidar_directions(self.goal_yaw)
+        self.dynamic = np.zeros((5, 10))
+        self.next_control = 0.0
+        self.settled = 0
+        self.current: Setpoint | None = None
+        self.pending: tuple[float, Setpoint] | None = None
+        self.compute_s: list[float] = []
+        self.policy_calls = 0
+        self.shield_solves = 0
+
+    def state_vector(self, position, velocity) -> np.ndarray:
+        rpos = self.goal - position
+        dist = max(float(np.linalg.norm(rpos)), 1e-6)
+        return np.concatenate([self.frame @ (rpos / dist), [np.hypot(rpos[0], rpos[1])],
+                               [rpos[2]], self.frame @ velocity])
+
+    def command(self, obs: Observation) -> Setpoint | None:
+        """One control period; None keeps the previous command (the settling wait)."""
+        pos = np.asarray(obs.position, dtype=float)
+        if abs(wrap_angle(self.goal_yaw - obs.yaw)) >= YAW_TOLERANCE_RAD:
+            return Setpoint.position(pos, yaw=self.goal_yaw)
+        self.settled += 1
+        if self.settled <= SETTLE_PERIODS:
+            return None
+        dist = cast_lidar(self.map.occupied_inflated, pos, self.rays)
+        deficit = LIDAR_RANGE_M - dist
+        vel = np.asarray(obs.velocity, dtype=float)
+        if obstacle_in_range(deficit):
+            mean = self.policy.mean_action(self.state_vector(pos, vel), deficit, self.dynamic)
+            cmd = self.frame.T @ ((2.0 * mean - 1.0) * self.limit)
+            self.policy_calls += 1
+        else:
+            to_goal = self.goal - pos
+            n = float(np.linalg.norm(to_goal))
+            cmd = to_goal / n * self.limit if n > 1e-9 else np.zeros(3)
+        if self.use_shield:
+            ends = pos + self.rays * dist[..., None]
+            cmd, solved = shield(pos, cmd, ends.reshape(-1, 3), math.sqrt(3.0) * self.limit)
+            self.shield_solves += int(solved)
+        goal_dist = float(np.linalg.norm(pos - self.goal))
+        speed = float(np.linalg.norm(cmd))
+        if 0.3 < goal_dist <= APPROACH_RADIUS_M and speed > 0.0:
+            cmd = cmd / speed * APPROACH_SPEED_M_S
+        if not np.all(np.isfinite(cmd)):
+            raise FloatingPointError(f"non-finite NavRL command {cmd} at t = {obs.time_s:.2f}")
+        return Setpoint.trajectory(position=[math.nan, math.nan, self.hold_z],
+                                   velocity=[cmd[0], cmd[1], math.nan], yaw=self.goal_yaw)
+
+    def step(self, obs: Observation) -> Setpoint:
+        t = obs.time_s
+        if obs.depth is not None:
+            self.map.fuse(obs.depth)
+        if self.pending is not None and t >= self.pending[0] - 1e-9:
+            self.current, self.pending = self.pending[1], None
+        if t >= self.next_control - 1e-9:
+            self.next_control = t + 1.0 / CONTROL_HZ
+            t0 = time.perf_counter()
+            sp = self.command(obs)
+            dt = time.perf_counter() - t0
+            self.compute_s.append(dt)
+            if sp is not None:
+                lat = dt if self.measured_latency else self.latency
+                if lat <= 0.0:
+                    self.current = sp
+                else:
+                    self.pending = (t + lat, sp)
+        if self.current is None:  # before the first command: hold the start
+            return Setpoint.position(self.task.start, yaw=obs.yaw)
+        return self.current

@@ -1,0 +1,325 @@
+"""NavRL: the checkpoint reader, the numpy policy, the lidar, the ORCA shield, the navigator's
+deployment logic and real trials with the authors' released weights."""
+
+import math
+import os
+import pickle
+import subprocess
+import sys
+import zipfile
+from pathlib import Path
+
+import numpy as np
+import pytest
+from scipy.signal import correlate
+
+from ft_sitl.autopilot.cascade import SP_POS, SP_VEL, SP_YAW
+from ft_sitl.missions.campaign import load_campaign
+from ft_sitl.missions.trial import TrialSpec, run_trial
+from ft_sitl.navigation.base import Limits, Observation, Task
+from ft_sitl.navigation.navrl import (
+    ENV_VAR,
+    NavRL,
+    cast_lidar,
+    cluster_spheres,
+    dbscan,
+    goal_frame,
+    lidar_directions,
+    obstacle_in_range,
+    orca_plane,
+    safe_velocity,
+    shield,
+)
+from ft_sitl.navigation.navrl_policy import (
+    EXPECTED_SHAPES,
+    CheckpointError,
+    NavRLPolicy,
+    _conv2d,
+    load_checkpoint,
+)
+from ft_sitl.navigation.registry import NavigatorError, create
+
+AGILE = "0.98kg-EGO Planner DIY"
+REPO = Path(__file__).resolve().parents[2]
+
+
+@pytest.fixture(scope="module")
+def weights(navrl_checkpoint):
+    return load_checkpoint(navrl_checkpoint)
+
+
+@pytest.fixture(scope="module")
+def policy(weights):
+    return NavRLPolicy(weights)
+
+
+@pytest.fixture
+def with_checkpoint(navrl_checkpoint, monkeypatch, tmp_path):
+    monkeypatch.setenv(ENV_VAR, str(navrl_checkpoint))
+    monkeypatch.setenv("XDG_DATA_HOME", str(tmp_path / "data"))
+    return navrl_checkpoint
+
+
+@pytest.fixture
+def without_checkpoint(monkeypatch, tmp_path):
+    monkeypatch.delenv(ENV_VAR, raising=False)
+    monkeypatch.setenv("XDG_DATA_HOME", str(tmp_path / "empty"))
+
+
+# --- the checkpoint reader -------------------------------------------------------------------
+
+def test_released_checkpoint_loads_with_the_architecture_shapes(weights):
+    for name, shape in EXPECTED_SHAPES.items():
+        assert weights[name].shape == shape, name
+        assert weights[name].dtype == np.float32
+        assert np.all(np.isfinite(weights[name]))
+    # the critic and value normaliser are in the file too (not used for acting)
+    assert weights["critic.module.weight"].shape == (1, 256)
+    # trained weights, not an initialisation: the conv kernels are not all equal
+    assert np.std(weights["feature_extractor.module.0.module.0.weight"]) > 1e-3
+
+
+def _rewrite(src: Path, dst: Path, change) -> Path:
+    with zipfile.ZipFile(src) as zin, zipfile.ZipFile(dst, "w") as zout:
+        for info in zin.infolist():
+            data = change(info.filename, zin.read(info.filename))
+            if data is not None:
+                zout.writestr(info.filename, data)
+    return dst
+
+
+def test_checkpoint_errors_name_the_problem(navrl_checkpoint, tmp_path):
+    with pytest.raises(CheckpointError, match="no such file"):
+        load_checkpoint(tmp_path / "missing.pt")
+    junk = tmp_path / "junk.pt"
+    junk.write_bytes(b"not a zip at all")
+    with pytest.raises(CheckpointError, match="not a PyTorch zip checkpoint"):
+        load_checkpoint(junk)
+    gone = _rewrite(navrl_checkpoint, tmp_path / "gone.pt",
+                    lambda n, d: None if n.endswith("/data/6") else d)
+    with pytest.raises(CheckpointError, match="data/6 is missing"):
+        load_checkpoint(gone)
+    short = _rewrite(navrl_checkpoint, tmp_path / "short.pt",
+                     lambda n, d: d[:-4] if n.endswith("/data/7") else d)
+    with pytest.raises(CheckpointError, match=r"data/7: 508 bytes, expected 128 x 4"):
+        load_checkpoint(short)
+
+
+def test_checkpoint_with_code_is_refused_without_running_it(navrl_checkpoint, tmp_path):
+    marker = tmp_path / "ran"
+    evil = pickle.dumps(_Evil(str(marker)), protocol=2)
+    bad = _rewrite(navrl_checkpoint, tmp_path / "evil.pt",
+                   lambda n, d: evil if n.endswith("data.pkl") else d)
+    with pytest.raises(CheckpointError, match=r"refers to (posix|os)\.system"):
+        load_checkpoint(bad)
+    assert not marker.exists()
+
+
+class _Evil:
+    def __init__(self, path):
+        self.path = path
+
+    def __reduce__(self):
+        return (os.system, (f"touch {self.path}",))
+
+
+def test_policy_refuses_other_architectures(weights):
+    w = dict(weights)
+    w["actor.module.0.module.alpha_layer.weight"] = np.zeros((2, 256), np.float32)
+    with pytest.raises(CheckpointError, match=r"alpha_layer.weight has shape \(2, 256\)"):
+        NavRLPolicy(w, source="x.pt")
+    w = {k: v for k, v in weights.items() if "module.3.module.3" not in k}
+    with pytest.raises(CheckpointError, match="not a NavRL policy: missing"):
+        NavRLPolicy(w)
+    w = dict(weights)
+    w["feature_extractor.module.0.module.7.bias"] = np.full(128, np.nan, np.float32)
+    with pytest.raises(CheckpointError, match="module.7.bias holds non-finite"):
+        NavRLPolicy(w)
+
+
+# --- the numpy forward pass --------------------------------------------------------------------
+
+def test_conv_matches_scipy_with_stride_and_padding():
+    rng = np.random.default_rng(3)
+    x = rng.normal(size=(4, 36, 4))
+    w = rng.normal(size=(16, 4, 5, 3))
+    b = rng.normal(size=16)
+    out = _conv2d(x, w, b, (2, 1), (2, 1))
+    xp = np.pad(x, ((0, 0), (2, 2), (1, 1)))
+    ref = np.stack([correlate(xp, w[o], mode="valid")[0] for o in range(16)]) + b[:, None, None]
+    np.testing.assert_allclose(out, ref[:, ::2, ::1], atol=1e-12)
+    assert _conv2d(out, rng.normal(size=(16, 16, 5, 3)), b, (2, 2), (2, 1)).shape == (16, 9, 2)
+
+
+def _lidar(beams, dist):
+    deficit = np.zeros((36, 4))
+    deficit[beams, :] = 4.0 - dist
+    return deficit
+
+
+def test_released_policy_steers_away_from_the_obstacle_side(policy):
+    state = np.array([1.0, 0.0, 0.0, 20.0, 0.0, 1.0, 0.0, 0.0])
+    zeros = np.zeros((5, 10))
+    for dist in (0.8, 1.5, 2.5):
+        left = policy.mean_action(state, _lidar([1, 2, 3], dist), zeros)
+        right = policy.mean_action(state, _lidar([33, 34, 35], dist), zeros)
+        # goal frame: y points left; the mean 0.5 is no lateral velocity
+        assert left[1] < 0.45 < 0.55 < right[1], (dist, left, right)
+        assert np.all((left > 0) & (left < 1)) and np.all((right > 0) & (right < 1))
+    with pytest.raises(ValueError, match="lidar: 10 values, the policy takes 144"):
+        policy.mean_action(state, np.zeros(10), zeros)
+
+
+# --- lidar and goal frame ---------------------------------------------------------------------
+
+def test_goal_frame_and_lidar_geometry():
+    f = goal_frame([0.0, 3.0, 1.0])  # north, the vertical part ignored
+    np.testing.assert_allclose(f, [[0, 1, 0], [-1, 0, 0], [0, 0, 1]], atol=1e-12)
+    d = lidar_directions(math.pi / 2)
+    assert d.shape == (36, 4, 3)
+    np.testing.assert_allclose(np.linalg.norm(d, axis=-1), 1.0)
+    np.testing.assert_allclose(d[0, 1], [0, 1, 0], atol=1e-12)  # beam 0 at the goal, 0 deg
+    np.testing.assert_allclose(d[9, 1], [-1, 0, 0], atol=1e-12)  # 90 deg counter-clockwise
+    assert math.degrees(math.asin(d[0, 0, 2])) == pytest.approx(-10.0)
+    assert math.degrees(math.asin(d[0, 3, 2])) == pytest.approx(20.0)
+
+
+def test_cast_lidar_finds_a_wall_and_reports_range_otherwise():
+    def wall(points):  # a wall 2 m east of the vehicle
+        return points[..., 0] >= 2.0
+
+    pos = np.array([0.0, 0.0, 1.5])
+    dist = cast_lidar(wall, pos, lidar_directions(0.0))
+    assert dist[0, 1] == pytest.approx(2.0, abs=0.05)
+    assert dist[3, 1] == pytest.approx(2.0 / math.cos(math.radians(30)), abs=0.06)
+    assert dist[18, 1] == 4.0  # looking west: nothing within range
+    assert obstacle_in_range(4.0 - dist)
+    assert not obstacle_in_range(4.0 - cast_lidar(lambda p: p[..., 0] >= 3.9, pos,
+                                                  lidar_directions(0.0)))
+    # only the -10 deg row sees something: not "in range" (the original ignores that row)
+    low = np.zeros((36, 4))
+    low[0, 0] = 2.0
+    assert not obstacle_in_range(low)
+
+
+# --- the shield ---------------------------------------------------------------------------
+
+def test_dbscan_groups_near_points_and_drops_noise():
+    pts = np.array([[0, 0, 0], [0.15, 0, 0], [0.3, 0, 0],  # a chain: one cluster
+                    [5, 5, 0], [5, 5.1, 0],  # a pair
+                    [9, 9, 9]], dtype=float)  # noise
+    clusters = dbscan(pts)
+    assert sorted(map(list, clusters)) == [[0, 1, 2], [3, 4]]
+    spheres = cluster_spheres(pts, np.array([-1.0, 0.0, 0.0]))
+    centre, radius = spheres[0]
+    assert radius == pytest.approx(1.5 * 0.15)
+    np.testing.assert_allclose(centre, [0.15 + 0.15, 0, 0])  # pushed away from the vehicle
+
+
+def test_orca_shield_turns_a_colliding_command_and_keeps_a_safe_one():
+    pos = np.zeros(3)
+    obstacle = (np.array([2.0, 0.0, 0.0]), 0.5)
+    toward = np.array([1.0, 0.0, 0.0])
+    point, normal, in_vo = orca_plane(pos, toward, 0.0, obstacle[0], np.zeros(3), obstacle[1])
+    assert in_vo
+    v = safe_velocity(toward, [(point, normal, in_vo)], math.sqrt(3.0))
+    assert (v - point) @ normal >= -1e-6
+    assert abs(v[1]) + abs(v[2]) > 0.1 or v[0] < 0.8  # it deviates or slows down
+    # the new velocity stays clear of the sphere for the 2 s horizon
+    t = np.linspace(0.0, 2.0, 201)
+    assert np.min(np.linalg.norm(t[:, None] * v - obstacle[0], axis=1)) >= obstacle[1] - 1e-3
+    away = np.array([-1.0, 0.0, 0.0])
+    assert not orca_plane(pos, away, 0.0, obstacle[0], np.zeros(3), obstacle[1])[2]
+
+
+def test_shield_uses_ray_hits_and_leaves_free_commands_alone():
+    pos = np.array([0.0, 0.0, 1.5])
+    rays = lidar_directions(0.0)
+    free = (pos + rays * 4.0).reshape(-1, 3)  # every ray at range: no cluster
+    cmd = np.array([1.0, 0.0, 0.0])
+    out, solved = shield(pos, cmd, free, math.sqrt(3.0))
+    assert not solved and np.array_equal(out, cmd)
+    dist = cast_lidar(lambda p: p[..., 0] >= 0.8, pos, rays)  # a wall 0.8 m ahead
+    hits = (pos + rays * dist[..., None]).reshape(-1, 3)
+    out, solved = shield(pos, cmd, hits, math.sqrt(3.0))
+    assert solved and np.linalg.norm(out - cmd) > 0.2  # the command was changed
+
+
+def test_infeasible_constraints_give_the_least_violating_velocity():
+    planes = [(np.array([1.0, 0, 0]), np.array([1.0, 0, 0]), True),
+              (np.array([-1.0, 0, 0]), np.array([-1.0, 0, 0]), True)]  # v_x >= 1 and <= -1
+    v = safe_velocity(np.array([0.3, 0.0, 0.0]), planes, 2.0)
+    assert np.all(np.isfinite(v)) and abs(v[0]) < 1e-3 and np.linalg.norm(v) <= 2.0 + 1e-6
+
+
+# --- the navigator ----------------------------------------------------------------------------
+
+def _task(start_yaw=0.0):
+    return Task(start=np.array([0.0, 0.0, 1.5]), start_yaw=start_yaw,
+                goal=np.array([30.0, 0.0, 1.5]), limits=Limits(),
+                bounds_min=np.array([-5.0, -10.0, 0.0]), bounds_max=np.array([35.0, 10.0, 4.0]),
+                collision_radius_m=0.3, twr_max=3.0, alpha_xy_max=100.0, alpha_z_max=10.0)
+
+
+def _obs(t, yaw, pos=(0.0, 0.0, 1.5), vel=(0.0, 0.0, 0.0)):
+    return Observation(time_s=t, position=np.array(pos), velocity=np.array(vel), yaw=yaw,
+                       attitude=np.array([1.0, 0, 0, 0]), angular_velocity=np.zeros(3))
+
+
+def test_navigator_turns_first_waits_then_flies_at_the_limit(with_checkpoint):
+    nav = NavRL(latency_s=0.0)
+    nav.reset(_task(start_yaw=math.pi))
+    sp = nav.step(_obs(0.0, yaw=math.pi))
+    assert sp.row[SP_YAW] == pytest.approx(0.0)  # turn toward the goal, in place
+    np.testing.assert_allclose(sp.row[SP_POS:SP_POS + 3], [0, 0, 1.5])
+    turned = nav.step(_obs(0.05, yaw=0.0))  # aligned: ten control periods of waiting
+    assert turned is sp
+    t = 0.05
+    for _ in range(10):
+        t += 0.05
+        out = nav.step(_obs(t, yaw=0.0))
+    assert math.isnan(out.row[SP_POS]) and out.row[SP_POS + 2] == pytest.approx(1.5)
+    np.testing.assert_allclose(out.row[SP_VEL:SP_VEL + 2], [1.0, 0.0], atol=1e-9)
+    near = nav.step(_obs(t + 0.05, yaw=0.0, pos=(28.0, 0.0, 1.5)))  # within 3 m: 0.5 m/s
+    np.testing.assert_allclose(near.row[SP_VEL:SP_VEL + 2], [0.5, 0.0], atol=1e-9)
+
+
+def test_navigator_latency_delays_the_command(with_checkpoint):
+    nav = NavRL(latency_s=0.03)
+    nav.reset(_task(start_yaw=math.pi))
+    first = nav.step(_obs(0.0, yaw=math.pi))
+    assert first.row[SP_YAW] == pytest.approx(math.pi)  # still holding the start
+    assert nav.step(_obs(0.02, yaw=math.pi)).row[SP_YAW] == pytest.approx(math.pi)
+    assert nav.step(_obs(0.03, yaw=math.pi)).row[SP_YAW] == pytest.approx(0.0)
+
+
+def test_without_checkpoint_navrl_is_refused_by_name_and_left_out_of_all(without_checkpoint):
+    with pytest.raises(NavigatorError, match=f"navrl.*{ENV_VAR}"):
+        create("navrl")
+    with pytest.raises(NavigatorError, match="checkpoint: /nope.pt: no such file"):
+        create("navrl", {"checkpoint": "/nope.pt"})
+    c = load_campaign("quick")
+    assert "navrl" not in [a.name for a in c.algorithms]
+    assert any("navrl" in n and ENV_VAR in n for n in c.notes)
+
+
+def test_install_command_makes_navrl_available(without_checkpoint, navrl_checkpoint, tmp_path):
+    env = dict(os.environ)
+    cli = [str(Path(sys.executable).parent / "ft-sitl")]
+    bad = subprocess.run(cli + ["navigators", "install", "navrl", str(tmp_path / "x.pt")],
+                         env=env, capture_output=True, text=True)
+    assert bad.returncode == 2 and "x.pt: no such file" in bad.stderr
+    ok = subprocess.run(cli + ["navigators", "install", "navrl", str(navrl_checkpoint)],
+                        env=env, capture_output=True, text=True)
+    assert ok.returncode == 0, ok.stderr
+    installed = Path(env["XDG_DATA_HOME"]) / "ft-sitl" / "navrl" / "navrl_checkpoint.pt"
+    assert installed.read_bytes() == navrl_checkpoint.read_bytes()
+    assert "navrl" in [a.name for a in load_campaign("paper").algorithms]
+
+
+def test_real_forest_trial_succeeds_near_one_metre_per_second(with_checkpoint):
+    row = run_trial(TrialSpec(algorithm="navrl", platform=AGILE, family="forest",
+                              scenario_index=1)).row
+    assert row["reason"] == "success", row["detail"]
+    assert 0.7 < row["mean_speed_m_s"] < 1.1  # the deployment's 1 m/s cap, not 4 m/s
+    assert row["planner_calls"] > 0 and row["min_clearance_m"] > 0.0
