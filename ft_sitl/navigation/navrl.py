@@ -173,13 +173,13 @@ def dbscan(points: np.ndarray, eps: float = DBSCAN_EPS_M,
     n = len(points)
     if n == 0:
         return []
-    dist = np.linalg.norm(points[:, None, :] - points[None, :, :], axis=-1)
-    near = dist <= eps
+    diff = points[:, None, :] - points[None, :, :]
+    near = np.einsum("ijk,ijk->ij", diff, diff) <= eps * eps
     core = near.sum(axis=1) >= min_points
     label = np.full(n, -1)
     clusters = []
-    for i in range(n):
-        if label[i] != -1 or not core[i]:
+    for i in np.flatnonzero(core):
+        if label[i] != -1:
             continue
         cid = len(clusters)
         label[i] = cid

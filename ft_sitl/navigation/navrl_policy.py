@@ -193,7 +193,8 @@ def _conv2d(x, w, b, stride, pad):
     xp = np.pad(x, ((0, 0), (pad[0], pad[0]), (pad[1], pad[1])))
     win = np.lib.stride_tricks.sliding_window_view(xp, w.shape[2:], axis=(1, 2))
     win = win[:, :: stride[0], :: stride[1]]
-    return np.einsum("chwij,ocij->ohw", win, w, optimize=True) + b[:, None, None]
+    out = np.tensordot(win, w, axes=([0, 3, 4], [1, 2, 3]))  # (H', W', O)
+    return np.moveaxis(out, -1, 0) + b[:, None, None]
 
 
 def _elu(x):
