@@ -264,11 +264,7 @@ def run_trial(spec: TrialSpec, *, record: bool = False, navigator=None) -> Trial
         next_nav_us = t_nav0_us
         next_cam_us = t_nav0_us
         cam_period_us = round(1e6 / camera.config.rate_hz) if camera is not None else 0
-        timeout_us = round(spec.limits.timeout_s * 1e6)
-        hold_us = round(spec.limits.hold_s * 1e6)
-        entered_us = None
-        prev = fleet.state(0).position.copy()
-        t_sample_us = fleet.time_us
+        judge = NavigationJudge(fleet, guard, spec, sc, m, n_events, traj if record else None)
         tick_us = round(TICK_S * 1e6)
         while True:
             now = fleet.time_us
@@ -296,29 +292,21 @@ def run_trial(spec: TrialSpec, *, record: bool = False, navigator=None) -> Trial
                 next_nav_us += period_us
             # to the next navigator step or commander tick, at least one physics step
             fleet.run_us(max(fleet.sim.dt_us, min(tick_us, next_nav_us - fleet.time_us)))
-            s = fleet.state(0)
-            m.sample(fleet, guard, prev, s, (fleet.time_us - t_sample_us) * 1e-6)
-            t_sample_us = fleet.time_us
-            prev = s.position.copy()
-            t_nav_us = fleet.time_us - t_nav0_us
-            if record:
-                traj.append((t_nav_us * 1e-6, *s.position))
-            _check(fleet, n_events, s, spec)
-            dist = float(np.linalg.norm(s.position - sc.goal))
-            if dist <= spec.limits.goal_radius_m:
-                if entered_us is None:
-                    entered_us = t_nav_us
-                    m.time_to_goal_s = t_nav_us * 1e-6
-                elif t_nav_us - entered_us >= hold_us:
-                    break
-            elif entered_us is not None:
-                raise _Fail("unstable", f"left the goal sphere {(t_nav_us - entered_us) * 1e-6:.2f}"
-                                        f" s after entering it (hold {spec.limits.hold_s:g} s)")
-            if entered_us is None and t_nav_us >= timeout_us:
-                raise _Fail("timeout", f"not in the goal sphere after {spec.limits.timeout_s:g}"
-                                       f" s ({dist:.1f} m away)")
+            if judge.after_step():
+                break
     except _Fail as f:
         reason, detail = f.reason, f.detail
+    finish_row(row, spec, fleet, m, reason, detail, (t_nav0_us, sat0, steps0, e0),
+               _count(getattr(nav, "replans", 0)), wall0)
+    return TrialOutcome(row, np.array(traj) if record else None, sc)
+
+
+def finish_row(row: dict, spec, fleet, m, reason: str, detail: str, baselines,
+               replans: int, wall0: float) -> None:
+    """Complete a trial's row: outcome, metrics, navigation-phase totals (``baselines`` =
+    time, saturation steps, physics steps and energy at navigation start; time None when
+    navigation never started)."""
+    t_nav0_us, sat0, steps0, e0 = baselines
     if reason == "collision":
         m.min_clear = 0.0  # it touched (the contact response leaves it 1 mm off)
     navigated = t_nav0_us is not None
@@ -330,14 +318,13 @@ def run_trial(spec: TrialSpec, *, record: bool = False, navigator=None) -> Trial
         "saturation_fraction": (float(fleet.sim.ctrl[0, C_SAT_STEPS] - sat0) / nav_steps
                                 if nav_steps else math.nan),
         "energy_j": fleet.sim.energy_j(0) - e0 if navigated else math.nan,
-        "replans": _count(getattr(nav, "replans", 0)),
+        "replans": replans,
         "sim_time_s": fleet.time_us * 1e-6,
         "wall_time_s": time.perf_counter() - wall0,
         "code_version": __version__,
         "finished_utc": datetime.datetime.now(datetime.UTC).strftime("%Y-%m-%dT%H:%M:%SZ"),
         "spec": spec.to_json(),
     })
-    return TrialOutcome(row, np.array(traj) if record else None, sc)
 
 
 def _count(v) -> int:
@@ -479,6 +466,51 @@ def _check(fleet: Fleet, n_events: int, s, spec) -> None:
         raise _Fail("loss_of_control", f"tilt {math.degrees(s.tilt):.0f} deg")
     if s.on_ground:
         raise _Fail("out_of_bounds", "touched the floor")
+
+
+class NavigationJudge:
+    """The protocol's outcome checks during navigation, after every advance of the
+    simulation (in-process and over the wire alike): metrics, the trajectory record,
+    collision / bounds / control checks, the goal sphere with its hold, the timeout.
+    :meth:`after_step` raises _Fail with the outcome, or returns True on success."""
+
+    def __init__(self, fleet, guard, spec, sc, metrics, n_events: int, traj=None):
+        self.fleet, self.guard, self.spec, self.sc = fleet, guard, spec, sc
+        self.m = metrics
+        self.n_events = n_events
+        self.traj = traj
+        self.t_nav0_us = fleet.time_us
+        self.t_sample_us = fleet.time_us
+        self.prev = fleet.state(0).position.copy()
+        self.entered_us = None
+        self.timeout_us = round(spec.limits.timeout_s * 1e6)
+        self.hold_us = round(spec.limits.hold_s * 1e6)
+
+    def after_step(self) -> bool:
+        fleet, spec, m = self.fleet, self.spec, self.m
+        s = fleet.state(0)
+        m.sample(fleet, self.guard, self.prev, s, (fleet.time_us - self.t_sample_us) * 1e-6)
+        self.t_sample_us = fleet.time_us
+        self.prev = s.position.copy()
+        t_nav_us = fleet.time_us - self.t_nav0_us
+        if self.traj is not None:
+            self.traj.append((t_nav_us * 1e-6, *s.position))
+        _check(fleet, self.n_events, s, spec)
+        dist = float(np.linalg.norm(s.position - self.sc.goal))
+        if dist <= spec.limits.goal_radius_m:
+            if self.entered_us is None:
+                self.entered_us = t_nav_us
+                m.time_to_goal_s = t_nav_us * 1e-6
+            elif t_nav_us - self.entered_us >= self.hold_us:
+                return True
+        elif self.entered_us is not None:
+            raise _Fail("unstable", f"left the goal sphere "
+                                    f"{(t_nav_us - self.entered_us) * 1e-6:.2f} s after "
+                                    f"entering it (hold {spec.limits.hold_s:g} s)")
+        if self.entered_us is None and t_nav_us >= self.timeout_us:
+            raise _Fail("timeout", f"not in the goal sphere after {spec.limits.timeout_s:g}"
+                                   f" s ({dist:.1f} m away)")
+        return False
 
 
 class _Metrics:
