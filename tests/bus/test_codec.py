@@ -1,0 +1,424 @@
+"""Payload codecs: round trips, and a BusPayloadError naming the problem for every kind of
+malformed input."""
+
+import json
+import math
+import struct
+
+import numpy as np
+import pytest
+
+from ft_sitl.bus import codec
+from ft_sitl.bus.codec import (
+    HEADER_SIZE,
+    BusPayloadError,
+    Event,
+    Status,
+    Telemetry,
+    decode_config,
+    decode_event,
+    decode_frame,
+    decode_status,
+    decode_telemetry,
+    encode_config,
+    encode_depth,
+    encode_event,
+    encode_points,
+    encode_status,
+    encode_telemetry,
+    validate_config,
+)
+
+
+def sample_telemetry(**overrides) -> Telemetry:
+    args = dict(time_usec=12_345_678, p_world_m=(1.25, -3.5, 10.123456789),
+                v_world_m_s=np.array([0.1, 0.2, -0.3]),
+                q_world_body=(math.cos(0.3), 0.0, 0.0, math.sin(0.3)),
+                w_body_rad_s=[0.01, -0.02, 0.5], motors=(0.51, 0.52, 0.49, 0.5))
+    args.update(overrides)
+    return Telemetry(**args)
+
+
+def telemetry_obj(**overrides) -> dict:
+    obj = json.loads(encode_telemetry(sample_telemetry()))
+    obj.update(overrides)
+    return obj
+
+
+def dumps(obj) -> bytes:
+    return json.dumps(obj).encode()
+
+
+# --- telemetry ----------------------------------------------------------------------------------
+def test_telemetry_round_trip():
+    s = sample_telemetry()
+    payload = encode_telemetry(s)
+    assert b" " not in payload  # compact
+    obj = json.loads(payload)
+    assert obj["v"] == 1 and obj["time_usec"] == 12_345_678 and obj["t"] == 12.345678
+    assert set(obj) == {"v", "t", "time_usec", "p_world_m", "v_world_m_s", "q_world_body",
+                        "w_body_rad_s", "motors"}
+    back = decode_telemetry(payload)
+    assert back.time_usec == s.time_usec and back.t == pytest.approx(12.345678)
+    for name, tol in (("p_world_m", 5e-7), ("v_world_m_s", 5e-7), ("q_world_body", 5e-10),
+                      ("w_body_rad_s", 5e-7), ("motors", 5e-5)):
+        np.testing.assert_allclose(getattr(back, name), getattr(s, name), rtol=0, atol=tol)
+    assert decode_telemetry(payload.decode()) == back  # str payloads too
+
+
+@pytest.mark.parametrize("overrides, message", [
+    ({"time_usec": -1}, r"time_usec must be in \[0, 2\*\*63 - 1\]"),
+    ({"time_usec": 1.5}, "time_usec must be an integer"),
+    ({"time_usec": True}, "time_usec must be an integer"),
+    ({"p_world_m": (0.0, 0.0)}, "p_world_m must have 3 elements, got 2"),
+    ({"v_world_m_s": (0.0, math.nan, 0.0)}, r"v_world_m_s\[1\] must be finite"),
+    ({"w_body_rad_s": (0.0, "x", 0.0)}, r"w_body_rad_s\[1\] must be a number"),
+    ({"q_world_body": (1.0, 0.1, 0.0, 0.0)}, "q_world_body must be a unit quaternion"),
+    ({"motors": ()}, "motors must have 1 to 16 elements, got 0"),
+    ({"motors": (0.5,) * 17}, "motors must have 1 to 16 elements, got 17"),
+    ({"motors": (0.5, 1.2)}, r"motors\[1\] must be in \[0, 1\]"),
+    ({"motors": (-0.1,)}, r"motors\[0\] must be in \[0, 1\]"),
+    ({"p_world_m": np.zeros((3, 1))}, "p_world_m must be one-dimensional"),
+])
+def test_telemetry_rejects_bad_values(overrides, message):
+    with pytest.raises(BusPayloadError, match=message):
+        sample_telemetry(**overrides)
+
+
+@pytest.mark.parametrize("payload, message", [
+    (b"{not json", "not valid JSON"),
+    (b"\xff\xfe{}", "not UTF-8"),
+    (b"[1, 2]", "must be a JSON object, got a JSON array"),
+    (b"42", "must be a JSON object, got a JSON number"),
+    (dumps({k: v for k, v in telemetry_obj().items() if k != "v"}),
+     'missing schema version field "v"'),
+    (dumps(telemetry_obj(v=2)), "unsupported schema version v=2"),
+    (dumps(telemetry_obj(v="1")), '"v" must be an integer, got string'),
+    (dumps({k: v for k, v in telemetry_obj().items() if k != "motors"}),
+     "missing field.*'motors'"),
+    (dumps(telemetry_obj(extra=1)), "unknown field.*'extra'"),
+    (dumps(telemetry_obj(t=99.0)), "t = 99.0 s disagrees with time_usec = 12345678"),
+    (dumps(telemetry_obj(time_usec=12345678.0)), "time_usec must be an integer"),
+    (dumps(telemetry_obj(p_world_m="1,2,3")), "p_world_m must be an array of numbers, got "
+                                              "string"),
+    (dumps(telemetry_obj(p_world_m=[1, 2, True])), r"p_world_m\[2\] must be a number, got "
+                                                   "boolean"),
+    (dumps(telemetry_obj(motors=[0.5, 2.0])), r"motors\[1\] must be in \[0, 1\]"),
+    (dumps(telemetry_obj(q_world_body=[0, 0, 0, 0])), "unit quaternion"),
+    (encode_telemetry(sample_telemetry()).replace(b'"p_world_m":[1.25',
+                                                  b'"p_world_m":[NaN'),
+     "JSON constant NaN is not allowed"),
+    (encode_telemetry(sample_telemetry()).replace(b'"p_world_m":[1.25',
+                                                  b'"p_world_m":[Infinity'),
+     "JSON constant Infinity is not allowed"),
+    (b'{"v":1,"pad":"' + b"x" * 70000 + b'"}', "more than the 65536 allowed"),
+    (12, "payload must be bytes or str, got int"),
+])
+def test_telemetry_decoder_rejects(payload, message):
+    with pytest.raises(BusPayloadError, match=message) as info:
+        decode_telemetry(payload)
+    assert str(info.value).startswith("telemetry: ")
+
+
+# --- events -------------------------------------------------------------------------------------
+@pytest.mark.parametrize("event", [
+    Event("armed", 1_000_000),
+    Event("disarmed", 2_000_000),
+    Event("mode", 1_500_000, {"mode": "OFFBOARD"}),
+    Event("collision", 7_250_000, {"object": "tree_3", "speed_m_s": 2.5}),
+    Event("trial_start", 0, {"trial_id": "a1b2", "scenario": "forest/3"}),
+    Event("trial_end", 60_000_000, {"outcome": "success", "path_m": 41.2, "ok": True,
+                                    "goal": [5.0, 18.0, 1.5], "note": None}),
+    Event("battery_low", 30_000_001, {"remaining": 0.15}),
+])
+def test_event_round_trip(event):
+    payload = encode_event(event)
+    obj = json.loads(payload)
+    assert obj["v"] == 1 and obj["type"] == event.type and obj["t"] == event.t
+    assert obj["time_usec"] == event.time_usec
+    assert decode_event(payload) == event
+
+
+def test_event_normalises_numpy_values():
+    e = Event("collision", 5, {"object": "wall", "speed_m_s": np.float32(1.5),
+                               "n": np.int64(3), "flag": np.bool_(True),
+                               "at": np.array([1.0, 2.0, 3.0])})
+    assert e.fields == {"object": "wall", "speed_m_s": 1.5, "n": 3, "flag": True,
+                        "at": [1.0, 2.0, 3.0]}
+    assert decode_event(encode_event(e)) == e
+
+
+@pytest.mark.parametrize("args, message", [
+    (("Collision", 0, {}), r"type must match \[a-z\]"),
+    (("", 0, {}), "type must match"),
+    (("collision", 0, {"speed_m_s": 1.0}), "missing required field 'object'"),
+    (("collision", 0, {"object": "x", "speed_m_s": -1.0}), "speed_m_s must be >= 0"),
+    (("collision", 0, {"object": "x", "speed_m_s": "fast"}), "speed_m_s must be a number"),
+    (("mode", 0, {"mode": ""}), "mode must be a non-empty string"),
+    (("trial_end", 0, {}), "missing required field 'outcome'"),
+    (("armed", -5, {}), r"time_usec must be in \[0"),
+    (("armed", 0, {"t": 1.0}), "field name 't' is reserved"),
+    (("armed", 0, {"Bad-Name": 1}), "field name 'Bad-Name' must match"),
+    (("armed", 0, {"x": {"nested": 1}}), "must be a string, number, boolean, null or array"),
+    (("armed", 0, {"x": math.inf}), "field 'x' must be finite"),
+    (("armed", 0, {"x": ["a"]}), r"field 'x'\[0\] must be a number"),
+    (("armed", 0, {"x": "y" * 1025}), "more than 1024"),
+])
+def test_event_rejects_bad_values(args, message):
+    with pytest.raises(BusPayloadError, match=message):
+        Event(*args)
+
+
+@pytest.mark.parametrize("obj, message", [
+    ({"v": 1, "t": 1.0, "time_usec": 1_000_000}, r"missing field\(s\) 'type'"),
+    ({"v": 1, "type": "armed", "time_usec": 1_000_000}, r"missing field\(s\) 't'"),
+    ({"type": "armed", "t": 1.0, "time_usec": 1_000_000}, 'missing schema version field "v"'),
+    ({"v": 3, "type": "armed", "t": 1.0, "time_usec": 1_000_000}, "unsupported schema "
+                                                                   "version v=3"),
+    ({"v": 1, "type": 7, "t": 1.0, "time_usec": 1_000_000}, "type must match"),
+    ({"v": 1, "type": "armed", "t": 2.0, "time_usec": 1_000_000}, "disagrees with time_usec"),
+    ({"v": 1, "type": "armed", "t": 1.0, "time_usec": "1000000"}, "time_usec must be an "
+                                                                  "integer"),
+    ({"v": 1, "type": "collision", "t": 1.0, "time_usec": 1_000_000, "object": "w",
+      "speed_m_s": -2}, "speed_m_s must be >= 0"),
+    ({"v": 1, "type": "armed", "t": 1.0, "time_usec": 1_000_000, "x": {"a": 1}},
+     "field 'x' must not be a JSON object"),
+])
+def test_event_decoder_rejects(obj, message):
+    with pytest.raises(BusPayloadError, match=message):
+        decode_event(dumps(obj))
+
+
+def test_event_decoder_rejects_bad_json():
+    with pytest.raises(BusPayloadError, match="event: payload is not valid JSON"):
+        decode_event(b'{"v":1,')
+
+
+# --- status and config --------------------------------------------------------------------------
+def test_status_round_trip():
+    for status in (Status("0", True), Status("0", False, "closed"),
+                   Status("uav-7", False, "connection lost")):
+        assert decode_status(encode_status(status)) == status
+    assert json.loads(encode_status(Status("3", True))) == {"v": 1, "vehicle": "3",
+                                                           "status": "online"}
+
+
+@pytest.mark.parametrize("obj, message", [
+    ({"v": 1, "vehicle": "0", "status": "sleeping"}, 'status must be "online" or "offline"'),
+    ({"v": 1, "vehicle": "a/b", "status": "online"}, "vehicle must be 1 to 64 characters"),
+    ({"v": 1, "status": "online"}, "missing field.*'vehicle'"),
+    ({"v": 1, "vehicle": "0", "status": "online", "x": 1}, "unknown field.*'x'"),
+    ({"v": 1, "vehicle": "0", "status": "offline", "reason": 5}, "reason must be a non-empty"),
+])
+def test_status_decoder_rejects(obj, message):
+    with pytest.raises(BusPayloadError, match=message):
+        decode_status(dumps(obj))
+
+
+def test_config_accepts_subsets():
+    assert decode_config(b'{"telemetry_rate_hz": 20, "depth": true, "points": false}') == {
+        "telemetry_rate_hz": 20.0, "depth": True, "points": False}
+    assert decode_config(b'{"v": 1, "depth": false}') == {"depth": False}
+    assert decode_config(b'{"telemetry_rate_hz": 0}') == {"telemetry_rate_hz": 0.0}
+    assert json.loads(encode_config({"depth": True})) == {"v": 1, "depth": True}
+
+
+@pytest.mark.parametrize("payload, message", [
+    (b"{oops", "config: payload is not valid JSON"),
+    (b'"depth"', "must be a JSON object, got a JSON string"),
+    (b"{}", "names no setting"),
+    (b'{"v": 1}', "names no setting"),
+    (b'{"v": 2, "depth": true}', "unsupported schema version v=2"),
+    (b'{"depth": "yes"}', "depth must be true or false, got string"),
+    (b'{"points": 1}', "points must be true or false, got number"),
+    (b'{"telemetry_rate_hz": "20"}', "telemetry_rate_hz must be a number, got string"),
+    (b'{"telemetry_rate_hz": true}', "telemetry_rate_hz must be a number, got boolean"),
+    (b'{"telemetry_rate_hz": -1}', r"telemetry_rate_hz must be in \[0, 1000\], got -1"),
+    (b'{"telemetry_rate_hz": 5000}', r"telemetry_rate_hz must be in \[0, 1000\], got 5000"),
+    (b'{"telemetry_rate_hz": 1e999}', "telemetry_rate_hz must be finite"),
+    (b'{"depth": true, "video": true}', "unknown setting.*'video'"),
+])
+def test_config_decoder_rejects(payload, message):
+    with pytest.raises(BusPayloadError, match=message):
+        decode_config(payload)
+
+
+def test_validate_config_rejects_non_mapping():
+    with pytest.raises(BusPayloadError, match="must be a JSON object / mapping"):
+        validate_config([("depth", True)])
+
+
+# --- binary frames ------------------------------------------------------------------------------
+def test_depth_frame_round_trip(depth_sample):
+    frame, config = depth_sample
+    payload = encode_depth(frame, config)
+    assert len(payload) == HEADER_SIZE + 160 * 120 * 2 == 192 + 38400
+    assert payload[:4] == b"FTSF"
+    msg = decode_frame(payload)
+    assert (msg.kind, msg.frame, msg.width, msg.height) == ("depth", "optical", 160, 120)
+    assert msg.time_usec == frame.t_us and msg.t == pytest.approx(12.345678)
+    assert (msg.fx, msg.fy, msg.cx, msg.cy) == (config.fx, config.fy, config.cx, config.cy)
+    assert (msg.min_range_m, msg.max_range_m) == (config.min_range_m, config.max_range_m)
+
+    back = msg.to_depth_frame()
+    assert back.t_us == frame.t_us
+    assert back.depth.shape == frame.depth.shape and back.depth.dtype == np.float32
+    np.testing.assert_array_equal(np.isnan(back.depth), np.isnan(frame.depth))
+    valid = np.isfinite(frame.depth)
+    np.testing.assert_allclose(back.depth[valid], frame.depth[valid], rtol=0, atol=5.01e-4)
+    np.testing.assert_array_equal(back.pixels, frame.pixels)
+    # a point is its pixel's ray times the depth: the error scales with the ray length
+    np.testing.assert_allclose(back.points_world, frame.points_world, rtol=0, atol=1e-3)
+    np.testing.assert_allclose(back.points_body, frame.points_body, rtol=0, atol=1e-3)
+    np.testing.assert_allclose(back.p_world_body, frame.p_world_body, atol=1e-12)
+    np.testing.assert_allclose(back.q_world_body, frame.q_world_body, atol=1e-12)
+    np.testing.assert_allclose(back.p_world_camera, frame.p_world_camera, atol=1e-12)
+    np.testing.assert_allclose(back.r_world_optical, frame.r_world_optical, atol=1e-12)
+
+
+def test_depth_zero_means_no_return(depth_sample):
+    frame, config = depth_sample
+    msg = decode_frame(encode_depth(frame, config))
+    np.testing.assert_array_equal(msg.depth_mm == 0, np.isnan(frame.depth))
+    assert msg.depth_mm.dtype == np.uint16
+
+
+@pytest.mark.parametrize("frame_id, attr", [("world", "points_world"),
+                                            ("body", "points_body")])
+def test_points_round_trip(depth_sample, frame_id, attr):
+    frame, config = depth_sample
+    payload = encode_points(frame, config, frame_id)
+    n = len(frame.points_world)
+    assert len(payload) == HEADER_SIZE + n * 12
+    msg = decode_frame(payload, expect_kind="points")
+    assert (msg.kind, msg.frame, msg.width, msg.height) == ("points", frame_id, n, 1)
+    assert msg.points.dtype == np.float32 and msg.points.shape == (n, 3)
+    np.testing.assert_allclose(msg.points, getattr(frame, attr), rtol=1e-6, atol=1e-5)
+
+
+def test_empty_point_cloud(depth_sample):
+    frame, config = depth_sample
+    from dataclasses import replace
+
+    empty = replace(frame, points_world=np.zeros((0, 3)))
+    msg = decode_frame(encode_points(empty, config))
+    assert msg.points.shape == (0, 3)
+
+
+def test_encode_depth_rejects(depth_sample):
+    from dataclasses import replace
+
+    frame, config = depth_sample
+    with pytest.raises(BusPayloadError, match=r"depth image has shape \(120, 160\), the "
+                                              r"camera config says .* \(240, 320\)"):
+        encode_depth(frame, replace(config, width=320, height=240, cx=None, cy=None))
+    with pytest.raises(BusPayloadError, match="max_range_m = 100.0 m exceeds 65.535 m"):
+        encode_depth(frame, replace(config, max_range_m=100.0))
+    neg = frame.depth.copy()
+    neg[0, 0] = -1.0
+    with pytest.raises(BusPayloadError, match="depth has negative values"):
+        encode_depth(replace(frame, depth=neg), config)
+    with pytest.raises(BusPayloadError, match="r_world_optical is not a rotation matrix"):
+        encode_depth(replace(frame, r_world_optical=2 * np.eye(3)), config)
+    with pytest.raises(BusPayloadError, match="frame_id must be 'world' or 'body'"):
+        encode_points(frame, config, "camera")
+    bad = frame.points_world.copy()
+    bad[0, 0] = np.nan
+    with pytest.raises(BusPayloadError, match="points contain non-finite values"):
+        encode_points(replace(frame, points_world=bad), config)
+
+
+# offsets in the header (see codec._HEADER)
+OFF_VERSION, OFF_KIND, OFF_FRAME, OFF_RESERVED = 4, 5, 6, 7
+OFF_WIDTH, OFF_HEIGHT, OFF_TIME, OFF_T = 8, 12, 16, 24
+OFF_Q_OPTICAL, OFF_FX, OFF_CX, OFF_MAX_RANGE, OFF_Q_BODY = 56, 88, 104, 128, 160
+
+
+def patched(payload: bytes, offset: int, fmt: str, value) -> bytes:
+    buf = bytearray(payload)
+    struct.pack_into("<" + fmt, buf, offset, value)
+    return bytes(buf)
+
+
+@pytest.fixture(scope="module")
+def depth_payload(depth_sample):
+    return encode_depth(*depth_sample)
+
+
+@pytest.fixture(scope="module")
+def points_payload(depth_sample):
+    return encode_points(*depth_sample)
+
+
+@pytest.mark.parametrize("mutate, message", [
+    (lambda p: b"XXXX" + p[4:], r"wrong magic b'XXXX' \(expected b'FTSF'\)"),
+    (lambda p: patched(p, OFF_VERSION, "B", 2), "unsupported layout version 2"),
+    (lambda p: patched(p, OFF_KIND, "B", 9), r"unknown kind 9 \(1 = depth, 2 = points\)"),
+    (lambda p: patched(p, OFF_FRAME, "B", 1), "frame code 1 is not valid for depth"),
+    (lambda p: patched(p, OFF_RESERVED, "B", 1), "reserved byte 7 must be 0"),
+    (lambda p: p[:100], "truncated: 100 bytes, the header alone is 192"),
+    (lambda p: b"", "truncated: 0 bytes"),
+    (lambda p: p[:-2], r"truncated: 38398 bytes of depth after the header, 160 x 120 x 2 = "
+                       "38400 expected"),
+    (lambda p: p + b"\0\0", "size mismatch: 38402 bytes of depth"),
+    (lambda p: patched(p, OFF_WIDTH, "I", 161), "truncated: 38400 bytes of depth"),
+    (lambda p: patched(p, OFF_HEIGHT, "I", 0), r"width and height must be in \[1, 16384\]"),
+    (lambda p: patched(p, OFF_WIDTH, "I", 20000), r"width and height must be in \[1, 16384\]"),
+    (lambda p: patched(p, OFF_T, "d", 99.0), "t = 99.0 s disagrees with time_usec"),
+    (lambda p: patched(p, OFF_TIME, "Q", 2**63), "time_usec 9223372036854775808 exceeds"),
+    (lambda p: patched(p, OFF_Q_OPTICAL, "d", 0.9), "q_world_optical is not a unit quaternion"),
+    (lambda p: patched(p, OFF_Q_BODY, "d", 5.0), "q_world_body is not a unit quaternion"),
+    (lambda p: patched(p, OFF_FX, "d", math.nan), "fx/fy/cx/cy contains non-finite values"),
+    (lambda p: patched(p, OFF_FX, "d", -1.0), "fx and fy must be > 0"),
+    (lambda p: patched(p, OFF_CX, "d", 500.0), "principal point .* lies outside the 160 x "
+                                               "120 image"),
+    (lambda p: patched(p, OFF_MAX_RANGE, "d", 0.1), "0 <= min_range_m < max_range_m"),
+    (lambda p: patched(p, OFF_MAX_RANGE, "d", 80.0), "max_range_m 80.0 exceeds 65.535"),
+    (lambda p: patched(p, OFF_MAX_RANGE, "d", 1.0), r"depth value \d+ mm beyond max_range_m "
+                                                    "1.0 m"),
+    (lambda p: p[:HEADER_SIZE] + struct.pack("<H", 100) + p[HEADER_SIZE + 2:],
+     "depth value 100 mm below min_range_m 0.2 m"),
+])
+def test_depth_decoder_rejects(depth_payload, mutate, message):
+    with pytest.raises(BusPayloadError, match=message):
+        decode_frame(mutate(depth_payload))
+
+
+@pytest.mark.parametrize("mutate, message", [
+    (lambda p: patched(p, OFF_FRAME, "B", 0), "frame code 0 is not valid for points"),
+    (lambda p: patched(p, OFF_HEIGHT, "I", 2), "height must be 1 for a point cloud"),
+    (lambda p: p[:-4], "truncated: .* bytes of points after the header"),
+    (lambda p: p + b"\0" * 12, "size mismatch: .* bytes of points after the header"),
+    (lambda p: p[:HEADER_SIZE] + struct.pack("<f", math.inf) + p[HEADER_SIZE + 4:],
+     "points contain non-finite values"),
+])
+def test_points_decoder_rejects(points_payload, mutate, message):
+    with pytest.raises(BusPayloadError, match=message):
+        decode_frame(mutate(points_payload))
+
+
+def test_decoder_checks_expected_kind(depth_payload, points_payload):
+    with pytest.raises(BusPayloadError, match="expected a points frame on this topic"):
+        decode_frame(depth_payload, expect_kind="points")
+    with pytest.raises(BusPayloadError, match="expected a depth frame on this topic"):
+        decode_frame(points_payload, expect_kind="depth")
+    with pytest.raises(BusPayloadError, match="payload must be bytes, got str"):
+        decode_frame("FTSF")
+
+
+def test_points_frame_has_no_depth(points_payload):
+    msg = decode_frame(points_payload)
+    with pytest.raises(ValueError, match="a points frame has no depth image"):
+        _ = msg.depth_m
+    with pytest.raises(ValueError, match="needs a depth frame"):
+        msg.to_depth_frame()
+
+
+def test_quaternion_matrix_conversions_agree():
+    rng = np.random.default_rng(7)
+    for _ in range(200):
+        q = rng.normal(size=4)
+        q /= np.linalg.norm(q)
+        q = -q if q[0] < 0 else q
+        r = codec._matrix_from_quat(q)
+        np.testing.assert_allclose(codec._quat_from_matrix(r), q, atol=1e-12)
