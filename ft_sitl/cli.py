@@ -216,6 +216,56 @@ def _sitl_scenario(text: str):
         raise CliError(f"--scenario: {exc}") from None
 
 
+def _sitl_bus(args, server, fleet, scenario):
+    """The MQTT bus of ``ft-sitl sitl``: one SitlBus per vehicle on the user's broker or
+    an embedded one; none with --no-mqtt."""
+    if args.no_mqtt:
+        return [], None
+    from ft_sitl.bus.options import TlsOptions, parse_broker_url
+    from ft_sitl.bus.publisher import BusPublisher
+    from ft_sitl.navigation.common import camera_config
+    from ft_sitl.wire.sitl_bus import SitlBus
+
+    tls = None
+    if any((args.mqtt_ca, args.mqtt_cert, args.mqtt_key, args.mqtt_insecure)):
+        try:
+            tls = TlsOptions(args.mqtt_ca, args.mqtt_cert, args.mqtt_key, args.mqtt_insecure)
+        except ValueError as exc:
+            raise CliError(f"--mqtt TLS options: {exc}") from None
+    broker = None
+    if args.mqtt:
+        try:
+            opts = parse_broker_url(args.mqtt, tls)
+        except ValueError as exc:
+            raise CliError(f"--mqtt: {exc}") from None
+    else:
+        if tls is not None:
+            raise CliError("--mqtt-ca/--mqtt-cert/--mqtt-key/--mqtt-insecure need --mqtt "
+                           "mqtts://...")
+        from ft_sitl.bus.broker import EmbeddedBroker
+
+        try:
+            broker = EmbeddedBroker().start()
+        except Exception as exc:  # noqa: BLE001 - amqtt failing must not stop the SITL
+            print(f"warning: no MQTT bus: the embedded broker did not start ({exc})",
+                  file=sys.stderr)
+            return [], None
+        opts = parse_broker_url(broker.url)
+    if not 1.0 <= args.telemetry_rate <= 1000.0:
+        raise CliError(f"--telemetry-rate: {args.telemetry_rate} must be within 1..1000 Hz")
+    cam = None
+    if scenario is not None and args.camera != "none":
+        cam = camera_config(args.camera, None, None, None)
+    buses = []
+    for i in range(fleet.n):
+        vid = str(server.base_instance + i)
+        buses.append(SitlBus(lambda on_config, vid=vid: BusPublisher(opts, vid,
+                                                                      on_config=on_config),
+                             fleet, i, scenario=scenario, camera_config=cam,
+                             telemetry_rate_hz=args.telemetry_rate))
+    return buses, broker
+
+
 def _scenario_spawn(scenario, platform, n: int):
     """Spawn points: the scenario's takeoff point, further vehicles 1.5 m apart across the
     start direction; each must be clear of the obstacles."""
@@ -251,6 +301,8 @@ def cmd_sitl(args) -> int:
 
     if not 1 <= args.instances <= 64:
         raise CliError(f"--instances: {args.instances} must be within 1..64")
+    if not 0 <= args.instance <= 1000 - args.instances:
+        raise CliError(f"--instance: {args.instance} must be within 0..{1000 - args.instances}")
     geo = _parse_home(args.home) if args.home else GeoReference(*PX4_SITL_HOME)
     try:
         loopback = ipaddress.ip_address(args.bind).is_loopback
@@ -266,10 +318,15 @@ def cmd_sitl(args) -> int:
     fleet = Fleet([p] * args.instances, spawn=spawn, spawn_yaw=yaw, scenario=scenario)
     try:
         server = SitlServer(fleet, geo, bind=args.bind, speed_factor=args.speed_factor,
-                            tlog=args.tlog, signing_key=args.signing_key)
+                            tlog=args.tlog, signing_key=args.signing_key,
+                            base_instance=args.instance)
     except (ValueError, OSError) as exc:
         raise CliError(str(exc)) from None
     urls = server.urls()
+    buses, broker = _sitl_bus(args, server, fleet, scenario)
+    for u, b in zip(urls, buses):
+        u["mqtt"] = b.pub.url
+        u["bus_vehicle"] = b.pub.vehicle
     if args.json:
         out = {"platform": p.name, "vehicles": urls}
         if scenario is not None:
@@ -286,6 +343,10 @@ def cmd_sitl(args) -> int:
         for u in urls:
             print(f"  vehicle sysid {u['sysid']}: MAVSDK {u['mavsdk']}   pymavlink "
                   f"{u['pymavlink']}   GCS {u['gcs']}", flush=True)
+        if buses:
+            where = "embedded broker" if broker is not None else "broker"
+            print(f"MQTT bus ({where}) {buses[0].pub.url}: topics ft-sitl/v1/<vehicle>/..., "
+                  f"vehicles {', '.join(b.pub.vehicle for b in buses)}", flush=True)
         if scenario is not None:
             from ft_sitl.frames import enu_to_ned
 
@@ -310,7 +371,20 @@ def cmd_sitl(args) -> int:
         finally:
             server.close()
 
-    asyncio.run(main())
+    if buses:
+        server.on_chunk = lambda: [b.service() for b in buses]
+    try:
+        asyncio.run(main())
+    finally:
+        for b in buses:
+            st = b.stats()
+            sent = sum(st.sent.values())
+            dropped = ", ".join(f"{k} {v}" for k, v in st.dropped.items() if v) or "none"
+            print(f"bus vehicle {b.pub.vehicle}: {sent} messages sent, dropped: {dropped}; "
+                  f"{st.reconnects} reconnects", file=sys.stderr)
+            b.close()
+        if broker is not None:
+            broker.stop()
     sim_s = fleet.time_us * 1e-6
     print(f"stopped after {sim_s:.1f} s simulated; achieved speed factor "
           f"{server.achieved_speed_factor:.2f} (asked {args.speed_factor:g}); "
@@ -605,6 +679,23 @@ def build_parser() -> argparse.ArgumentParser:
     sitl.add_argument("--platform", default="0.98kg-EGO Planner DIY",
                       help="platform name (default: %(default)s)")
     sitl.add_argument("--instances", type=int, default=1, help="number of vehicles (1..64)")
+    sitl.add_argument("--mqtt", metavar="URL", help="MQTT broker for the bus "
+                      "(mqtt://[user[:pass]@]host[:port] or mqtts://...; default: an "
+                      "embedded broker on a free port)")
+    sitl.add_argument("--mqtt-ca", metavar="FILE", help="CA bundle for mqtts://")
+    sitl.add_argument("--mqtt-cert", metavar="FILE", help="client certificate for mqtts://")
+    sitl.add_argument("--mqtt-key", metavar="FILE", help="client key for mqtts://")
+    sitl.add_argument("--mqtt-insecure", action="store_true",
+                      help="do not verify the broker's certificate (testing only)")
+    sitl.add_argument("--no-mqtt", action="store_true", help="no MQTT bus")
+    sitl.add_argument("--telemetry-rate", type=float, default=50.0, metavar="HZ",
+                      help="bus telemetry rate in simulated Hz (default 50)")
+    sitl.add_argument("--camera", choices=("benchmark", "d435", "none"), default="benchmark",
+                      help="depth camera for bus depth frames with --scenario (default "
+                           "benchmark: 160 x 120 @ 15 Hz)")
+    sitl.add_argument("--instance", type=int, default=0, metavar="I",
+                      help="first instance number, as PX4's -i: ports 14580+I, 14540+I, "
+                           "18570+I (default 0)")
     sitl.add_argument("--speed-factor", type=float, default=1.0,
                       help="simulated seconds per wall second (default: 1)")
     sitl.add_argument("--home", metavar="LAT,LON,ALT",
@@ -630,8 +721,10 @@ def build_parser() -> argparse.ArgumentParser:
     parl.set_defaults(func=cmd_params_list)
 
     from ft_sitl.cli_missions import add_parsers
+    from ft_sitl.cli_wire import add_parsers as add_wire_parsers
 
     add_parsers(sub)
+    add_wire_parsers(sub)
 
     _add_scenarios_parser(sub)
     return ap

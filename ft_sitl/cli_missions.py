@@ -68,9 +68,22 @@ def cmd_campaign_run(args) -> int:
     out = Path(args.out)
     for note in c.notes:
         print(f"note: {note}", file=sys.stderr)
+    from ft_sitl.missions.campaign import CampaignError, Transport
+
+    try:
+        transport = Transport(args.transport, args.speed_factor, args.mqtt)
+    except CampaignError as exc:
+        raise _cli_error()(str(exc)) from None
+    if args.mqtt:
+        from ft_sitl.bus.options import parse_broker_url as parse_url
+
+        try:
+            parse_url(args.mqtt)
+        except ValueError as exc:
+            raise _cli_error()(f"--mqtt: {exc}") from None
     try:
         summary = run_campaign(c, out, workers=args.workers, progress=not args.quiet,
-                               limit=args.limit)
+                               limit=args.limit, transport=transport)
     except StoreError as exc:
         raise _cli_error()(str(exc)) from None
     except KeyboardInterrupt:
@@ -298,6 +311,14 @@ def add_parsers(sub) -> None:
     cr.add_argument("--no-report", action="store_true", help="do not write the report")
     cr.add_argument("--limit", type=int, metavar="N", help="stop after N new trials")
     cr.add_argument("--quiet", action="store_true", help="no progress bar")
+    cr.add_argument("--transport", choices=("inprocess", "mavlink"), default="inprocess",
+                    help="inprocess (default): navigators called in lockstep; mavlink: each "
+                         "trial's vehicle served over MAVLink and its navigator run as a "
+                         "MAVSDK client process (docs/wire.md)")
+    cr.add_argument("--speed-factor", type=float, default=2.0,
+                    help="simulated/wall time over MAVLink (default 2)")
+    cr.add_argument("--mqtt", metavar="URL", help="MQTT broker for the bus over MAVLink "
+                    "(default: an embedded broker per worker)")
     cr.set_defaults(func=cmd_campaign_run)
     cc = csub.add_parser("check", help="validate a campaign and show its matrix")
     cc.add_argument("campaign", help="campaign file (.toml, .yaml) or preset: quick, paper")

@@ -570,7 +570,7 @@ class VehicleAgent:
         acc = None if mask & 0b111000000 == 0b111000000 else [m.afx, m.afy, m.afz]
         s = self._state()
         try:
-            pos, vel, acc = (None if v is None else _finite3(v, name)
+            pos, vel, acc = (None if v is None else _no_inf3(v, name)
                              for v, name in ((pos, "position"), (vel, "velocity"),
                                              (acc, "acceleration")))
         except SetpointError as exc:
@@ -595,6 +595,8 @@ class VehicleAgent:
 
         yaw = None if mask & (1 << 10) else m.yaw
         yaw_rate = None if mask & (1 << 11) else m.yaw_rate
+        if yaw is not None and math.isnan(yaw):
+            yaw = None  # PX4: a NaN yaw is not controlled (heading held)
         if yaw is not None and not math.isfinite(yaw):
             return self._reject_setpoint("yaw is not finite")
         if yaw_rate is not None and not math.isfinite(yaw_rate):
@@ -842,6 +844,15 @@ class VehicleAgent:
 
 def _f(v: float) -> float:
     return v if math.isfinite(v) else 0.0
+
+
+def _no_inf3(v, name: str) -> list[float]:
+    """A local-NED vector where NaN components stay NaN: PX4 controls such an axis at the
+    next level (position NaN -> velocity), as in its trajectory_setpoint; the setpoint is
+    refused later if an axis ends up controlled at no level. Infinities are refused."""
+    if any(math.isinf(x) for x in v):
+        raise SetpointError(f"{name} has infinite components")
+    return [float(x) for x in v]
 
 
 def _finite3(v, name: str) -> list[float]:

@@ -112,6 +112,7 @@ class SitlServer:
         if not (math.isfinite(speed_factor) and 0.01 <= speed_factor <= 1000):
             raise ValueError(f"--speed-factor: {speed_factor!r} must be within [0.01, 1000]")
         self.fleet = fleet
+        self.base_instance = base_instance
         self.geo = geo
         self.bind = bind
         self.speed_factor = speed_factor
@@ -132,6 +133,8 @@ class SitlServer:
         self._stop = asyncio.Event()
         self.achieved_speed_factor = 0.0
         self.bad_packets = 0
+        #: called after every chunk of simulated time (a trial's judge, the MQTT bus)
+        self.on_chunk = None
         self._last_hb_wall = [0.0] * fleet.n
 
     def urls(self) -> list[dict]:
@@ -236,9 +239,12 @@ class SitlServer:
                     break
                 target = sim0 + (now - wall0) * self.speed_factor * 1e6
                 busy_until = now + 0.02
-                while self.fleet.time_us + CHUNK_US <= target and time.monotonic() < busy_until:
+                while self.fleet.time_us + CHUNK_US <= target and time.monotonic() < busy_until \
+                        and not self._stop.is_set():
                     self.fleet.run_us(CHUNK_US)
                     self.service()
+                    if self.on_chunk is not None:
+                        self.on_chunk()
                 wall_us = int(time.monotonic() * 1e6)
                 for a in self.agents:
                     self.send_all(a.i, a.poll(wall_us))

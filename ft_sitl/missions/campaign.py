@@ -281,8 +281,11 @@ def _algorithms(where: str, v, notes: list[str] | None = None) -> list[Algorithm
         if not isinstance(item, dict):
             raise CampaignError(f"{w}: must be a navigator name or a table with 'name'")
         for key in item:
-            if key not in ("name", "label", "params"):
-                raise _unknown(w, key, ("name", "label", "params"))
+            if key not in ("name", "label", "params", "command"):
+                raise _unknown(w, key, ("name", "label", "params", "command"))
+        if "command" in item:
+            out.append(_command_entry(w, item, labels))
+            continue
         name = item.get("name")
         if not isinstance(name, str):
             raise CampaignError(f"{w}: missing 'name' (a registered navigator)")
@@ -302,6 +305,36 @@ def _algorithms(where: str, v, notes: list[str] | None = None) -> list[Algorithm
         labels.add(label)
         out.append(AlgorithmEntry(name, label, dict(params)))
     return out
+
+
+def _command_entry(w: str, item: dict, labels: set) -> AlgorithmEntry:
+    """A user program as the navigator: ``{label = "mine", command = "python nav.py"}``."""
+    import shlex
+
+    if "name" in item or "params" in item:
+        raise CampaignError(f"{w}: a 'command' entry takes only 'label' and 'command'")
+    cmd = item["command"]
+    if isinstance(cmd, str):
+        try:
+            argv = shlex.split(cmd)
+        except ValueError as exc:
+            raise CampaignError(f"{w}: command: {exc}") from None
+    elif isinstance(cmd, list) and all(isinstance(a, str) for a in cmd):
+        argv = list(cmd)
+    else:
+        raise CampaignError(f"{w}: command: must be a command line (a string or a list of "
+                            "strings)")
+    if not argv:
+        raise CampaignError(f"{w}: command: is empty")
+    label = item.get("label")
+    if not isinstance(label, str) or not label:
+        raise CampaignError(f"{w}: a 'command' entry needs a 'label' (its name in the "
+                            "results)")
+    if label in labels:
+        raise CampaignError(f"{w}: label {label!r} is used twice; give each entry its "
+                            "own label")
+    labels.add(label)
+    return AlgorithmEntry("command", label, {"argv": argv})
 
 
 def _platforms(where: str, v, files, base: Path) -> list:
@@ -416,13 +449,41 @@ def _weights(where: str, v) -> dict:
 
 
 # --- executors ------------------------------------------------------------------------------
-def run_chunk(specs: list[dict]) -> list[tuple[str, dict | None, str | None]]:
+@dataclass(frozen=True)
+class Transport:
+    """How trials fly: ``inprocess`` (the navigator called in lockstep) or ``mavlink`` (the
+    vehicle served over MAVLink at ``speed_factor``, the navigator in another process,
+    ``mqtt`` the bus broker URL or None for the embedded one). A ``command`` algorithm
+    always flies over MAVLink."""
+
+    kind: str = "inprocess"
+    speed_factor: float = 2.0
+    mqtt: str | None = None
+
+    def __post_init__(self):
+        if self.kind not in ("inprocess", "mavlink"):
+            raise CampaignError(f"--transport: {self.kind!r} is not inprocess or mavlink")
+        sf = self.speed_factor
+        if isinstance(sf, bool) or not isinstance(sf, (int, float)) or not 0.1 <= sf <= 20:
+            raise CampaignError(f"--speed-factor: {sf!r} must be within 0.1..20")
+
+
+def run_chunk(specs: list[dict], transport: Transport | None = None
+              ) -> list[tuple[str, dict | None, str | None]]:
     """Run trials (as spec dicts) one after the other: (trial_id, row or None, error)."""
     out = []
+    transport = transport or Transport()
     for d in specs:
         spec = TrialSpec.from_dict(d)
         try:
-            out.append((spec.trial_id, run_trial(spec).row, None))
+            if transport.kind == "mavlink" or spec.algorithm == "command":
+                from ft_sitl.wire.trial import run_trial_wire, worker_bus
+
+                row = run_trial_wire(spec, speed_factor=transport.speed_factor,
+                                     **worker_bus(transport.mqtt)).row
+            else:
+                row = run_trial(spec).row
+            out.append((spec.trial_id, row, None))
         except KeyboardInterrupt:
             raise
         except BaseException as exc:  # noqa: BLE001 - reported, the campaign goes on
@@ -621,9 +682,11 @@ class RunSummary:
 
 def run_campaign(campaign: Campaign, out_dir: str | Path, *, workers: int = 1,
                  executor: Executor | None = None, progress: bool = True,
-                 limit: int | None = None) -> RunSummary:
+                 limit: int | None = None, transport: Transport | None = None) -> RunSummary:
     """Run (or resume) a campaign into out_dir. ``limit``: stop after that many new trials
-    (tests, smoke runs)."""
+    (tests, smoke runs); ``transport``: in-process (default) or over MAVLink."""
+    import functools
+
     from ft_sitl.missions.store import ResultStore
 
     specs = campaign.trial_specs()
@@ -647,7 +710,8 @@ def run_campaign(campaign: Campaign, out_dir: str | Path, *, workers: int = 1,
                    desc=campaign.name, smoothing=0.05)
     ran = 0
     try:
-        for _chunk, results in ex.imap(run_chunk, _chunks(todo)):
+        fn = functools.partial(run_chunk, transport=transport or Transport())
+        for _chunk, results in ex.imap(fn, _chunks(todo)):
             for tid, row, err in results:
                 if row is not None and row.get("__died__"):
                     row = died_row(row["spec"])
@@ -669,6 +733,7 @@ def run_campaign(campaign: Campaign, out_dir: str | Path, *, workers: int = 1,
             "finished_utc": time.strftime("%Y-%m-%dT%H:%M:%SZ", time.gmtime()),
             "wall_time_s": round(wall, 3), "trials_run": ran, "trials_skipped": skipped,
             "errors": len(errors), "workers": workers, "machine": machine_info(),
+            "transport": (transport or Transport()).kind,
             "code_version": __version__})
     if store.done:
         store.write_tables()

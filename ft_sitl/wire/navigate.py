@@ -1,0 +1,367 @@
+"""``ft-sitl navigate``: a registered navigator flying a vehicle as a MAVSDK client.
+
+The navigator runs in its own process and talks to the flight controller only through
+MAVLink (MAVSDK 4.x): it waits until the vehicle is armable, arms and takes off (MAVSDK
+Action) to the start altitude, flies to the start in offboard position mode and holds it
+until stable (within 0.3 m, slower than 0.3 m/s for 1 s: the protocol's criterion), then
+calls the navigator at its rate and streams every setpoint with MAVSDK Offboard
+(position + velocity + acceleration + yaw in local NED, NaN where the navigator leaves an
+axis to the next control level).
+
+State and time. With an MQTT bus (``--mqtt``), observations come from the vehicle's bus
+telemetry (world ENU, simulated time stamps) and depth frames from its depth topic (the
+navigator's camera is requested through the config topic). Without a bus, observations come
+from MAVSDK telemetry and time is wall time x ``speed_factor`` (a navigator that needs
+depth frames then cannot run and says so).
+
+The client ends when the goal sphere has been held for the hold time (exit 0), when the
+navigation timeout passes (exit 1), when the navigator gives up (exit 1) or fails (exit 3);
+in a campaign the judge ends it earlier.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import json
+import logging
+import math
+import time
+from dataclasses import asdict, dataclass, field
+
+import numpy as np
+
+from ft_sitl import frames
+from ft_sitl.navigation.base import GiveUp, Limits, Observation, Task
+from ft_sitl.wire.convert import ned_to_world, send, to_offboard
+
+log = logging.getLogger("ft_sitl.navigate")
+
+STABLE_POS_M = 0.3
+STABLE_SPEED_M_S = 0.3
+STABLE_FOR_S = 1.0
+
+
+@dataclass
+class WireTask:
+    """Everything a navigator process is told about its trial (world ENU metres)."""
+
+    goal: list
+    start: list
+    start_yaw: float
+    origin: list = field(default_factory=lambda: [0.0, 0.0, 0.0])  # the local NED origin
+    max_speed_m_s: float = 4.0
+    timeout_s: float = 90.0
+    goal_radius_m: float = 2.0
+    hold_s: float = 3.0
+    bounds_min: list = field(default_factory=lambda: [-1e3, -1e3, 0.0])
+    bounds_max: list = field(default_factory=lambda: [1e3, 1e3, 100.0])
+    collision_radius_m: float = 0.3
+    twr_max: float = 2.0
+    alpha_xy_max: float = 50.0
+    alpha_z_max: float = 5.0
+    seed: int = 0
+
+    def __post_init__(self):
+        for name in ("goal", "start", "origin", "bounds_min", "bounds_max"):
+            v = getattr(self, name)
+            if not (isinstance(v, (list, tuple)) and len(v) == 3
+                    and all(isinstance(x, (int, float)) and not isinstance(x, bool)
+                            and math.isfinite(x) for x in v)):
+                raise ValueError(f"task {name}: {v!r} is not three finite numbers")
+            setattr(self, name, [float(x) for x in v])
+        for name in ("start_yaw", "max_speed_m_s", "timeout_s", "goal_radius_m", "hold_s",
+                     "collision_radius_m", "twr_max", "alpha_xy_max", "alpha_z_max"):
+            v = getattr(self, name)
+            if isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v):
+                raise ValueError(f"task {name}: {v!r} is not a finite number")
+        if not isinstance(self.seed, int) or isinstance(self.seed, bool):
+            raise ValueError(f"task seed: {self.seed!r} is not an integer")
+
+    def to_json(self) -> str:
+        return json.dumps(asdict(self), sort_keys=True)
+
+    @classmethod
+    def from_json(cls, text: str) -> WireTask:
+        try:
+            doc = json.loads(text)
+        except json.JSONDecodeError as exc:
+            raise ValueError(f"task: not JSON ({exc})") from None
+        if not isinstance(doc, dict):
+            raise ValueError("task: must be a JSON object")
+        known = set(cls.__dataclass_fields__)
+        unknown = sorted(set(doc) - known)
+        if unknown:
+            raise ValueError(f"task: unknown field(s) {', '.join(unknown)}")
+        try:
+            return cls(**doc)
+        except TypeError as exc:
+            raise ValueError(f"task: {exc}") from None
+
+    def limits(self) -> Limits:
+        return Limits(max_speed_m_s=self.max_speed_m_s, timeout_s=self.timeout_s,
+                      goal_radius_m=self.goal_radius_m, hold_s=self.hold_s)
+
+    def task(self) -> Task:
+        return Task(start=np.array(self.start), start_yaw=self.start_yaw,
+                    goal=np.array(self.goal), limits=self.limits(),
+                    bounds_min=np.array(self.bounds_min), bounds_max=np.array(self.bounds_max),
+                    collision_radius_m=self.collision_radius_m, twr_max=self.twr_max,
+                    alpha_xy_max=self.alpha_xy_max, alpha_z_max=self.alpha_z_max,
+                    rng=np.random.default_rng(self.seed))
+
+    def env(self, connect: str, mqtt: str | None, vehicle: str) -> dict:
+        """The environment a user's navigator script is started with (docs/wire.md)."""
+        env = {
+            "FT_SITL_CONNECT": connect, "FT_SITL_VEHICLE": vehicle,
+            "FT_SITL_TASK": self.to_json(),
+            "FT_SITL_GOAL_ENU": ",".join(f"{x:.3f}" for x in self.goal),
+            "FT_SITL_START_ENU": ",".join(f"{x:.3f}" for x in self.start),
+            "FT_SITL_ORIGIN_ENU": ",".join(f"{x:.3f}" for x in self.origin),
+            "FT_SITL_GOAL_NED": ",".join(f"{x:.3f}" for x in frames.enu_to_ned(
+                np.array(self.goal) - self.origin)),
+            "FT_SITL_START_NED": ",".join(f"{x:.3f}" for x in frames.enu_to_ned(
+                np.array(self.start) - self.origin)),
+            "FT_SITL_START_YAW_DEG": f"{math.degrees(frames.yaw_enu_to_ned(self.start_yaw)):.2f}",
+            "FT_SITL_MAX_SPEED": f"{self.max_speed_m_s:g}",
+            "FT_SITL_TIMEOUT_S": f"{self.timeout_s:g}",
+        }
+        if mqtt:
+            env["FT_SITL_MQTT"] = mqtt
+        return env
+
+
+class NavigateError(RuntimeError):
+    """The client could not fly (no vehicle, refused arming, ...); the message says why."""
+
+
+class _State:
+    """The latest vehicle state, from MAVSDK telemetry or the bus."""
+
+    def __init__(self):
+        self.position = None  # world ENU
+        self.velocity = None
+        self.q = np.array([1.0, 0.0, 0.0, 0.0])  # ENU/FLU
+        self.rates = np.zeros(3)
+        self.sim_time = None  # from the bus
+        self.depth = None
+        self.depth_new = False
+        self.updated = asyncio.Event()
+
+    @property
+    def yaw(self) -> float:
+        from ft_sitl.physics.quaternion import qto_euler
+
+        return float(qto_euler(self.q)[2])
+
+
+async def _mavsdk_state(drone, state: _State, origin) -> None:
+    from mavsdk.asyncio.plugins.telemetry import TelemetryAsync
+
+    tel = TelemetryAsync(drone)
+    for setter in (tel.set_rate_position_velocity_ned, tel.set_rate_attitude_quaternion):
+        try:
+            await setter(50.0)
+        except Exception as exc:  # noqa: BLE001 - a rate request is a wish
+            log.debug("rate request refused: %s", exc)
+
+    async def pv():
+        async for m in tel.subscribe_position_velocity_ned():
+            state.position = ned_to_world([m.position.north_m, m.position.east_m,
+                                           m.position.down_m], origin)
+            state.velocity = frames.ned_to_enu(np.array([m.velocity.north_m_s,
+                                                         m.velocity.east_m_s,
+                                                         m.velocity.down_m_s]))
+            state.updated.set()
+
+    async def att():
+        async for q in tel.subscribe_attitude_quaternion():
+            state.q = frames.q_ned_frd_to_enu_flu(np.array([q.w, q.x, q.y, q.z]))
+
+    async def rates():
+        async for w in tel.subscribe_attitude_angular_velocity_body():
+            state.rates = frames.frd_to_flu(np.array([w.roll_rad_s, w.pitch_rad_s,
+                                                      w.yaw_rad_s]))
+
+    await asyncio.gather(pv(), att(), rates())
+
+
+async def _bus_state(url: str, vehicle: str, state: _State, camera) -> None:
+    """Follow the vehicle's bus telemetry (and depth frames when the navigator has a
+    camera); reconnect if the broker goes away."""
+    import aiomqtt
+
+    from ft_sitl.bus.client import BusClient
+
+    kinds = ("telemetry", "depth") if camera is not None else ("telemetry",)
+    while True:
+        try:
+            async with BusClient(url, vehicle, kinds=kinds, queue_size=4096) as bus:
+                await bus.request_config(telemetry_rate_hz=100.0, depth=camera is not None)
+                async for msg in bus:
+                    if msg.kind == "telemetry":
+                        tm = msg.data
+                        state.position = np.array(tm.p_world_m, dtype=float)
+                        state.velocity = np.array(tm.v_world_m_s, dtype=float)
+                        state.q = np.array(tm.q_world_body, dtype=float)
+                        state.rates = np.array(tm.w_body_rad_s, dtype=float)
+                        state.sim_time = tm.time_usec * 1e-6
+                        state.updated.set()
+                    elif msg.kind == "depth":
+                        state.depth = msg.data.to_depth_frame()
+                        state.depth_new = True
+        except aiomqtt.MqttError as exc:
+            log.warning("bus connection lost (%s); reconnecting", exc)
+            await asyncio.sleep(0.5)
+
+
+async def fly(nav, wt: WireTask, connect: str, *, mqtt: str | None = None,
+              vehicle: str = "0", speed_factor: float = 1.0,
+              connect_timeout_s: float = 60.0, progress=None) -> dict:
+    """Fly ``nav`` through MAVSDK; returns a summary dict (``result``: success, timeout,
+    gave_up, error; ``detail``)."""
+    from mavsdk import ComponentType
+    from mavsdk.asyncio import Configuration, Mavsdk
+    from mavsdk.asyncio.plugins.action import ActionAsync
+    from mavsdk.asyncio.plugins.offboard import OffboardAsync
+    from mavsdk.asyncio.plugins.telemetry import TelemetryAsync
+    from mavsdk.plugins.offboard import PositionNedYaw
+
+    camera = getattr(nav, "camera", None)
+    if camera is not None and not mqtt:
+        raise NavigateError(f"navigator {nav.name!r} needs depth frames: give --mqtt URL "
+                            "(the simulator's bus)")
+    m = Mavsdk(Configuration.create_with_component_type(ComponentType.GROUND_STATION))
+    tasks = []
+    try:
+        await m.add_any_connection(connect)
+        drone = await m.first_autopilot(timeout_s=connect_timeout_s)
+        if drone is None:
+            raise NavigateError(f"no autopilot at {connect} within {connect_timeout_s:g} s")
+        state = _State()
+        origin = np.array(wt.origin)
+        if mqtt:
+            tasks.append(asyncio.create_task(_bus_state(mqtt, vehicle, state, camera)))
+        else:
+            tasks.append(asyncio.create_task(_mavsdk_state(drone, state, origin)))
+        action, off, tel = ActionAsync(drone), OffboardAsync(drone), TelemetryAsync(drone)
+
+        async def first(gen, pred, what, timeout):
+            async def scan():
+                async for v in gen:
+                    if pred(v):
+                        return v
+            try:
+                return await asyncio.wait_for(scan(), timeout)
+            except TimeoutError:
+                raise NavigateError(f"timed out waiting for {what}") from None
+
+        await first(tel.subscribe_health(), lambda h: h.is_armable, "the vehicle to be armable",
+                    connect_timeout_s)
+        wall_limit = 60.0 / speed_factor + 30.0
+        start = np.array(wt.start)
+        start_ned = frames.enu_to_ned(start - origin)
+        yaw_ned_deg = math.degrees(frames.wrap_pi(frames.yaw_enu_to_ned(wt.start_yaw)))
+        await action.set_takeoff_altitude(float(start[2] - origin[2]))
+        await action.arm()
+        await action.takeoff()
+        await first(tel.subscribe_position_velocity_ned(),
+                    lambda p: abs(-p.position.down_m - (start[2] - origin[2])) < STABLE_POS_M,
+                    "the take-off altitude", wall_limit)
+        target = PositionNedYaw(*[float(x) for x in start_ned], yaw_ned_deg)
+        await off.set_position_ned(target)
+        await off.start()
+        while state.position is None:
+            await asyncio.wait_for(state.updated.wait(), wall_limit)
+            state.updated.clear()
+        stable_since = None
+        t_wall0 = time.monotonic()
+        while True:  # hold the start until stable (the protocol's criterion)
+            await off.set_position_ned(target)
+            now = _now(state, t_wall0, speed_factor)
+            ok = (np.linalg.norm(state.position - start) < STABLE_POS_M
+                  and np.linalg.norm(state.velocity) < STABLE_SPEED_M_S)
+            if ok and stable_since is None:
+                stable_since = now
+            elif not ok:
+                stable_since = None
+            if stable_since is not None and now - stable_since >= STABLE_FOR_S:
+                break
+            if time.monotonic() - t_wall0 > wall_limit:
+                raise NavigateError("could not hold the start (30 s simulated)")
+            await asyncio.sleep(0.02 / speed_factor)
+        crash: list[str] = []
+
+        async def watch_texts():  # the simulator announces a crash as a STATUSTEXT
+            async for st in tel.subscribe_status_text():
+                if st.text.startswith("Collision"):
+                    crash.append(st.text)
+                    state.updated.set()
+
+        tasks.append(asyncio.create_task(watch_texts()))
+        return await _navigate(nav, wt, off, state, t_wall0, speed_factor, progress, crash)
+    finally:
+        for t in tasks:
+            t.cancel()
+        await asyncio.gather(*tasks, return_exceptions=True)
+        m.destroy()
+
+
+def _now(state: _State, t_wall0: float, speed_factor: float) -> float:
+    """Simulated seconds: the bus's stamp, or wall time x the speed factor."""
+    if state.sim_time is not None:
+        return state.sim_time
+    return (time.monotonic() - t_wall0) * speed_factor
+
+
+async def _navigate(nav, wt: WireTask, off, state: _State, t_wall0: float,
+                    speed_factor: float, progress, crash: list) -> dict:
+    from ft_sitl.autopilot.setpoints import Setpoint
+
+    task = wt.task()
+    nav.reset(task)
+    t0 = _now(state, t_wall0, speed_factor)
+    period = 1.0 / float(nav.rate_hz)
+    next_step = 0.0
+    goal = np.array(wt.goal)
+    entered = None
+    steps = 0
+    while True:
+        await state.updated.wait()
+        state.updated.clear()
+        if crash:
+            return {"result": "collision", "detail": crash[0], "steps": steps}
+        t = _now(state, t_wall0, speed_factor) - t0
+        if t + 1e-9 < next_step:
+            continue
+        # a slow navigator skips steps instead of falling behind the vehicle
+        next_step = max(next_step + period, t - period / 2.0 + period)
+        depth = None
+        if state.depth_new:
+            depth, state.depth_new = state.depth, False
+        obs = Observation(time_s=t, position=state.position.copy(),
+                          velocity=state.velocity.copy(), yaw=state.yaw,
+                          attitude=state.q.copy(), angular_velocity=state.rates.copy(),
+                          depth=depth)
+        try:
+            # in a worker thread: the event loop keeps reading MAVLink and the bus while
+            # the navigator computes (a long replan must not overflow the bus queue)
+            sp = await asyncio.get_running_loop().run_in_executor(None, nav.step, obs)
+        except GiveUp as exc:
+            return {"result": "gave_up", "detail": str(exc), "steps": steps}
+        if not isinstance(sp, Setpoint):
+            raise NavigateError(f"navigator returned {type(sp).__name__}, not a Setpoint")
+        await send(off, to_offboard(sp, wt.origin))
+        steps += 1
+        if progress is not None:
+            progress(t, obs)
+        dist = float(np.linalg.norm(state.position - goal))
+        if dist <= wt.goal_radius_m:
+            entered = t if entered is None else entered
+            if t - entered >= wt.hold_s:
+                return {"result": "success", "detail": f"goal held at t = {t:.1f} s",
+                        "steps": steps}
+        else:
+            entered = None
+        if entered is None and t >= wt.timeout_s:
+            return {"result": "timeout", "detail": f"{dist:.1f} m from the goal after "
+                                                   f"{wt.timeout_s:g} s", "steps": steps}

@@ -1,0 +1,386 @@
+"""One trial flown over the wire: the vehicle served over MAVLink, the navigator outside.
+
+``run_trial_wire(spec, ...)`` builds the same vehicle, scenario and collision guard as the
+in-process :func:`~ft_sitl.missions.trial.run_trial`, serves it with the MAVLink
+:class:`~ft_sitl.mavlink.server.SitlServer` on its own instance ports (paced at a speed
+factor against the wall clock), optionally publishes it on the MQTT bus, and starts the
+navigator as a separate process:
+
+* a registered navigator: ``python -m ft_sitl navigate --algorithm NAME ...`` (MAVSDK
+  client, :mod:`ft_sitl.wire.navigate`);
+* a user command (the ``command`` pseudo-navigator): any program, started with the
+  connection URL, MQTT URL, goal and limits in ``FT_SITL_*`` environment variables
+  (docs/wire.md) and ``{connect}``-style placeholders in its arguments.
+
+The judge is the in-process protocol's code (:class:`~ft_sitl.missions.trial.NavigationJudge`)
+run after every 4 ms of simulated time. Approach: the navigator process takes off and
+holds the start itself; navigation starts when the vehicle is stable at the start (within
+0.3 m, slower than 0.3 m/s, for 1 s), as in-process. A navigator process that exits with
+an error fails the trial as ``navigator_error`` (its stderr's last line in the detail); one
+that hangs runs into the protocol's timeout; one that never arms fails after
+``arm_timeout_s`` of wall time.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import fcntl
+import json
+import math
+import os
+import shlex
+import signal
+import subprocess
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+import numpy as np
+
+from ft_sitl import frames
+from ft_sitl.autopilot.cascade import C_SAT_STEPS
+from ft_sitl.autopilot.fleet import Fleet
+from ft_sitl.autopilot.params import ParamSet
+from ft_sitl.missions.trial import (
+    APPROACH_TIMEOUT_S,
+    STABLE_FOR_S,
+    STABLE_POS_M,
+    STABLE_SPEED_M_S,
+    NavigationJudge,
+    TrialOutcome,
+    TrialSpec,
+    _check,
+    _Fail,
+    _identity_row,
+    _Metrics,
+    _world_and_grid,
+    finish_row,
+    load_scenario_for,
+    platform_for,
+)
+from ft_sitl.wire.navigate import WireTask
+
+COMMAND = "command"  # the pseudo-navigator: a user's program
+INSTANCE_BASE = 20
+INSTANCE_SLOTS = 40
+ARM_TIMEOUT_S = 90.0
+
+
+class InstanceLock:
+    """An exclusive instance number (ports 14580+i, 14540+i, 18570+i) among the processes
+    of this machine, held with a lock file."""
+
+    def __init__(self, base: int = INSTANCE_BASE, slots: int = INSTANCE_SLOTS):
+        self.base, self.slots = base, slots
+        self.instance = None
+        self._fh = None
+
+    def __enter__(self) -> int:
+        d = Path(tempfile.gettempdir()) / "ft-sitl-instances"
+        d.mkdir(exist_ok=True)
+        for i in range(self.base, self.base + self.slots):
+            fh = open(d / f"{i}.lock", "w")  # noqa: SIM115 - held until __exit__
+            try:
+                fcntl.flock(fh, fcntl.LOCK_EX | fcntl.LOCK_NB)
+            except OSError:
+                fh.close()
+                continue
+            self._fh, self.instance = fh, i
+            return i
+        raise RuntimeError(f"no free SITL instance in {self.base}..{self.base + self.slots - 1}")
+
+    def __exit__(self, *exc) -> None:
+        if self._fh is not None:
+            self._fh.close()
+            self._fh = None
+
+
+_BROKER = None  # this process's embedded broker, started on first use
+
+
+def worker_bus(mqtt: str | None) -> dict:
+    """``run_trial_wire`` keyword arguments for the bus: the given broker, or an embedded
+    one started once per process."""
+    global _BROKER
+    if mqtt is None:
+        from ft_sitl.bus.broker import EmbeddedBroker
+
+        if _BROKER is None or not _BROKER.running:
+            _BROKER = EmbeddedBroker().start()
+        mqtt = _BROKER.url
+    return {"mqtt": mqtt, "bus_factory": make_bus_factory(mqtt)}
+
+
+def make_bus_factory(url: str):
+    """A factory of the SITL-side bus for one trial's vehicle (its topics named after the
+    trial id); the depth camera is the navigator's (the benchmark camera for a command)."""
+
+    def factory(server, fleet, sc, vehicle, spec):
+        from ft_sitl.bus.publisher import BusPublisher
+        from ft_sitl.wire.sitl_bus import SitlBus
+
+        camera = None
+        if spec.algorithm != COMMAND:
+            from ft_sitl.navigation.registry import create
+
+            camera = getattr(create(spec.algorithm, spec.algorithm_params), "camera", None)
+        if camera is None:
+            from ft_sitl.navigation.common import camera_config
+
+            camera = camera_config("benchmark", None, None, None)
+        bus = SitlBus(lambda on_config: BusPublisher(url, vehicle, on_config=on_config),
+                      fleet, 0, scenario=sc, camera_config=camera,
+                      seed=spec.seed + 1000 * spec.trial)
+        bus.pub.wait_connected(10.0)
+        return bus
+
+    return factory
+
+
+def wire_task(spec: TrialSpec, sc, platform) -> WireTask:
+    ind = platform.indicators()
+    lim = spec.limits
+    return WireTask(goal=list(sc.goal), start=list(sc.start), start_yaw=float(sc.start_yaw),
+                    origin=list(sc.takeoff), max_speed_m_s=lim.max_speed_m_s,
+                    timeout_s=lim.timeout_s, goal_radius_m=lim.goal_radius_m,
+                    hold_s=lim.hold_s, bounds_min=list(sc.bounds_min),
+                    bounds_max=list(sc.bounds_max),
+                    collision_radius_m=platform.collision_radius_m, twr_max=ind.twr_max,
+                    alpha_xy_max=ind.alpha_xy_max_rad_s2, alpha_z_max=ind.alpha_z_max_rad_s2,
+                    seed=int(np.random.SeedSequence([spec.seed, spec.trial]).generate_state(1)[0]))
+
+
+def navigator_argv(spec: TrialSpec, wt: WireTask, connect: str, mqtt: str | None,
+                   vehicle: str, speed_factor: float) -> tuple[list[str], dict]:
+    """The navigator process's command line and extra environment."""
+    env = wt.env(connect, mqtt, vehicle)
+    env["FT_SITL_SPEED_FACTOR"] = f"{speed_factor:g}"
+    if spec.algorithm == COMMAND:
+        argv = spec.algorithm_params.get("argv")
+        if isinstance(argv, str):
+            argv = shlex.split(argv)
+        if not (isinstance(argv, list) and argv and all(isinstance(a, str) for a in argv)):
+            raise ValueError("command navigator: params.argv must be a command line")
+        subst = {"connect": connect, "mqtt": mqtt or "", "vehicle": vehicle,
+                 "goal_ned": env["FT_SITL_GOAL_NED"], "start_ned": env["FT_SITL_START_NED"],
+                 "max_speed": env["FT_SITL_MAX_SPEED"], "timeout": env["FT_SITL_TIMEOUT_S"]}
+        try:
+            argv = [a.format(**subst) for a in argv]
+        except (KeyError, IndexError, ValueError) as exc:
+            raise ValueError(f"command navigator: bad placeholder in argv ({exc}); known: "
+                             f"{', '.join('{' + k + '}' for k in subst)}") from None
+        return argv, env
+    argv = [sys.executable, "-m", "ft_sitl", "navigate", "--algorithm", spec.algorithm,
+            "--connect", connect, "--vehicle", vehicle, "--task-json", wt.to_json(),
+            "--speed-factor", f"{speed_factor:g}", "--quiet", "--json"]
+    for k, v in sorted(spec.algorithm_params.items()):
+        argv += ["--param", f"{k}={json.dumps(v)}"]
+    if mqtt:
+        argv += ["--mqtt", mqtt]
+    return argv, env
+
+
+class _Referee:
+    """Called after every chunk of simulated time: the approach, then the judge."""
+
+    def __init__(self, fleet, guard, spec, sc, metrics, record):
+        self.fleet, self.guard, self.spec, self.sc, self.m = fleet, guard, spec, sc, metrics
+        self.record = record
+        self.traj: list = []
+        self.judge: NavigationJudge | None = None
+        self.baselines = (None, 0.0, 0, math.nan)
+        self.armed_us = None
+        self.stable_us = None
+        self.outcome: tuple[str, str] | None = None
+        self.on_start = None  # callback when navigation starts
+
+    def __call__(self) -> None:
+        if self.outcome is not None:
+            return
+        try:
+            if self.judge is None:
+                self._approach()
+            elif self.judge.after_step():
+                self.outcome = ("success", "")
+        except _Fail as f:
+            self.outcome = (f.reason, f.detail)
+
+    def _approach(self) -> None:
+        fleet, sc = self.fleet, self.sc
+        cmd = fleet.commanders[0]
+        if fleet.events and fleet.events[-1].kind == "collision":
+            raise _Fail("collision", f"hit {fleet.events[-1].what} before navigation started")
+        if not cmd.armed:
+            return
+        now = fleet.time_us
+        if self.armed_us is None:
+            self.armed_us = now
+        s = fleet.state(0)
+        if not s.on_ground:
+            _check(fleet, len(fleet.events), s, self.spec)  # tilt, non-finite state
+        ok = (float(np.linalg.norm(s.position - sc.start)) < STABLE_POS_M
+              and float(np.linalg.norm(s.velocity)) < STABLE_SPEED_M_S)
+        if ok and self.stable_us is None:
+            self.stable_us = now
+        elif not ok:
+            self.stable_us = None
+        if self.stable_us is not None and now - self.stable_us >= round(STABLE_FOR_S * 1e6):
+            self.baselines = (now, float(fleet.sim.ctrl[0, C_SAT_STEPS]), fleet.sim.steps,
+                              fleet.sim.energy_j(0))
+            self.judge = NavigationJudge(fleet, self.guard, self.spec, sc, self.m,
+                                         len(fleet.events),
+                                         self.traj if self.record else None)
+            if self.on_start is not None:
+                self.on_start()
+            return
+        if now - self.armed_us > round((APPROACH_TIMEOUT_S + 30.0) * 1e6):
+            raise _Fail("loss_of_control", "could not reach the start "
+                        f"({np.linalg.norm(s.position - sc.start):.2f} m off)")
+
+
+def run_trial_wire(spec: TrialSpec, *, speed_factor: float = 2.0, mqtt: str | None = None,
+                   record: bool = False, instance: int | None = None,
+                   arm_timeout_s: float = ARM_TIMEOUT_S, log_dir: Path | None = None,
+                   bus_factory=None) -> TrialOutcome:
+    """Fly one trial with the navigator in another process (module docstring)."""
+    from ft_sitl.mavlink.server import SitlServer
+    from ft_sitl.scenarios.guard import CollisionGuard
+
+    wall0 = time.perf_counter()
+    sc = load_scenario_for(spec)
+    platform = platform_for(spec)
+    world, grid = _world_and_grid(sc)
+    guard = CollisionGuard(world, [platform.collision_radius_m], grid=grid,
+                           names=sc.obstacle_name)
+    params = ParamSet({"MPC_XY_VEL_MAX": spec.limits.max_speed_m_s})
+    fleet = Fleet([platform], params=[params], spawn=[sc.takeoff], spawn_yaw=[sc.start_yaw],
+                  physics_hz=spec.physics_hz, guard=guard)
+    row = _identity_row(spec, platform, platform.indicators(), sc)
+    m = _Metrics()
+    ref = _Referee(fleet, guard, spec, sc, m, record)
+    wt = wire_task(spec, sc, platform)
+    vehicle = spec.trial_id
+    lock = InstanceLock() if instance is None else None
+    inst = lock.__enter__() if lock is not None else instance
+    proc = None
+    client: dict = {}
+    try:
+        server = SitlServer(fleet, frames.GeoReference(*frames.PX4_SITL_HOME),
+                            speed_factor=speed_factor, base_instance=inst)
+        bus = bus_factory(server, fleet, sc, vehicle, spec) if bus_factory else None
+        if bus is not None:
+            ref.on_start = lambda: bus.event("trial_start", trial=spec.trial_id)
+        connect = f"udpin://0.0.0.0:{server.links[0].default_remote[1]}"
+        try:
+            argv, env = navigator_argv(spec, wt, connect, mqtt, vehicle, speed_factor)
+        except ValueError as exc:
+            raise _Fail("navigator_error", str(exc)) from None
+        logs = Path(log_dir or tempfile.mkdtemp(prefix="ft-sitl-nav-"))
+        logs.mkdir(parents=True, exist_ok=True)
+        out_path, err_path = logs / f"{spec.trial_id}.out", logs / f"{spec.trial_id}.err"
+        with open(out_path, "wb") as out_fh, open(err_path, "wb") as err_fh:
+            try:
+                proc = subprocess.Popen(argv, stdout=out_fh, stderr=err_fh,
+                                        env={**os.environ, **env}, start_new_session=True)
+            except OSError as exc:
+                raise _Fail("navigator_error", f"cannot start {argv[0]}: {exc}") from None
+            asyncio.run(_serve(server, fleet, ref, proc, spec, speed_factor, arm_timeout_s,
+                               bus, out_path))
+        client = _client_result(out_path)
+        reason, detail = ref.outcome or ("navigator_error", "no outcome")
+        if reason == "navigator_error" and not detail:
+            detail = _tail(err_path)
+    except _Fail as f:
+        reason, detail = f.reason, f.detail
+    finally:
+        if proc is not None:
+            _stop(proc)
+        if lock is not None:
+            lock.__exit__(None, None, None)
+    # setpoints the client sent (unknown when the judge ended it first)
+    m.planner_calls = int(client["steps"]) if "steps" in client else -1
+    finish_row(row, spec, fleet, m, reason, detail, ref.baselines, -1, wall0)
+    return TrialOutcome(row, np.array(ref.traj) if record else None, sc)
+
+
+async def _serve(server, fleet, ref: _Referee, proc, spec, speed_factor: float,
+                 arm_timeout_s: float, bus, out_path: Path) -> None:
+    await server.start()
+    wall0 = time.monotonic()
+    # the whole trial's wall-clock ceiling: approach + timeout at the speed factor, x3
+    wall_limit = arm_timeout_s + 3.0 * (APPROACH_TIMEOUT_S + 30.0 + spec.limits.timeout_s
+                                         + spec.limits.hold_s) / speed_factor
+
+    def after_chunk():
+        if bus is not None:
+            bus.service()
+        ref()
+        if ref.outcome is not None:
+            server.stop()
+
+    server.on_chunk = after_chunk
+    runner = asyncio.create_task(server.run())
+    try:
+        while not runner.done():
+            await asyncio.sleep(0.05)
+            if ref.outcome is not None:
+                continue
+            code = proc.poll()
+            if code is not None and code != 0 and ref.outcome is None:
+                # ft-sitl navigate exits 1 when it gives up (or times out by its own
+                # clock): the protocol's "no plan" timeout; anything else is an error
+                res = _client_result(out_path) if code == 1 else {}
+                if res.get("result") in ("gave_up", "timeout"):
+                    ref.outcome = ("timeout", f"navigator gave up: {res.get('detail', '')}")
+                else:
+                    ref.outcome = ("navigator_error", "")
+                server.stop()
+            elif ref.judge is None and not fleet.commanders[0].armed and \
+                    time.monotonic() - wall0 > arm_timeout_s:
+                ref.outcome = ("navigator_error", f"the vehicle was not armed within "
+                                                  f"{arm_timeout_s:g} s")
+                server.stop()
+            elif time.monotonic() - wall0 > wall_limit:
+                ref.outcome = ("timeout", f"wall-clock limit {wall_limit:.0f} s reached "
+                                          "(the simulator could not keep its speed factor)")
+                server.stop()
+        await runner
+    finally:
+        server.close()
+        if bus is not None:
+            bus.event("trial_end", trial=spec.trial_id, outcome=(ref.outcome or ("?",))[0])
+            bus.close()
+
+
+def _client_result(path: Path) -> dict:
+    try:
+        lines = path.read_text(errors="replace").strip().splitlines()
+        return json.loads(lines[-1]) if lines else {}
+    except (OSError, json.JSONDecodeError):
+        return {}
+
+
+def _tail(path: Path, n: int = 300) -> str:
+    try:
+        lines = [ln for ln in path.read_text(errors="replace").splitlines() if ln.strip()]
+    except OSError:
+        return ""
+    return lines[-1][-n:] if lines else "the navigator process failed (no output)"
+
+
+def _stop(proc) -> None:
+    if proc.poll() is not None:
+        return
+    try:
+        os.killpg(proc.pid, signal.SIGTERM)
+    except (ProcessLookupError, PermissionError):
+        pass
+    try:
+        proc.wait(5.0)
+    except subprocess.TimeoutExpired:
+        try:
+            os.killpg(proc.pid, signal.SIGKILL)
+        except (ProcessLookupError, PermissionError):
+            pass
+        proc.wait(5.0)

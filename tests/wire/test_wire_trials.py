@@ -1,0 +1,152 @@
+"""Trials over the wire with real components: the SITL on UDP, MAVSDK client processes
+(``ft-sitl navigate`` and a user's script), the MQTT bus through mosquitto and the embedded
+broker; the outcome judged by the in-process protocol's code."""
+
+import asyncio
+import json
+import subprocess
+import sys
+import textwrap
+import time
+from pathlib import Path
+
+from ft_sitl.bus.client import BusClient
+from ft_sitl.missions.campaign import Transport, load_campaign, run_campaign
+from ft_sitl.missions.trial import TrialSpec
+from ft_sitl.wire.trial import run_trial_wire, worker_bus
+
+from ..bus.conftest import Mosquitto, free_port
+
+AGILE = "0.98kg-EGO Planner DIY"
+REPO = Path(__file__).resolve().parents[2]
+FT_SITL = str(Path(sys.executable).parent / "ft-sitl")
+
+
+def _rows(out: Path) -> dict:
+    return {(r["algorithm"], r["family"], r["scenario_index"]): r
+            for r in map(json.loads, (out / "trials.jsonl").read_text().splitlines())}
+
+
+def test_inprocess_and_mavlink_transports_agree(tmp_path):
+    """The small version of docs/wire.md's agreement check: the same trials (same seeds)
+    in-process and over MAVLink (ft-sitl navigate as a MAVSDK client process, depth frames
+    over the embedded MQTT broker) end the same way."""
+    p = tmp_path / "c.toml"
+    p.write_text(textwrap.dedent(f"""\
+        name = "agree"
+        trials = 1
+        platforms = ["{AGILE}"]
+        scenarios = [{{family = "forest", indices = [1]}}, {{family = "urban", indices = [1]}}]
+        algorithms = ["straight", "ego"]
+        """))
+    c = load_campaign(p)
+    run_campaign(c, tmp_path / "inproc", progress=False)
+    run_campaign(c, tmp_path / "wire", progress=False,
+                 transport=Transport("mavlink", speed_factor=1.5))
+    a, b = _rows(tmp_path / "inproc"), _rows(tmp_path / "wire")
+    assert a.keys() == b.keys() and len(a) == 4
+    for key in a:
+        assert a[key]["reason"] == b[key]["reason"], (key, a[key]["detail"], b[key]["detail"])
+        assert b[key]["nav_time_s"] > 0.0
+    ego = b[("ego", "forest", 1)]
+    assert ego["success"] and abs(ego["nav_time_s"] - a[("ego", "forest", 1)]["nav_time_s"]) < 3
+    runs = json.loads((tmp_path / "wire" / "runs.json").read_text())
+    assert runs[-1]["transport"] == "mavlink"
+
+
+def _command_spec(argv, **kw):
+    return TrialSpec(algorithm="command", algorithm_params={"argv": argv}, platform=AGILE,
+                     family="forest", scenario_index=2, label="user", **kw)
+
+
+def test_user_scripts_crashing_hanging_or_flying(tmp_path):
+    bus = worker_bus(None)
+    crash = run_trial_wire(_command_spec([sys.executable, "-c",
+                                          "import sys; print('no map here', file=sys.stderr);"
+                                          " sys.exit(2)"]), log_dir=tmp_path, **bus).row
+    assert crash["reason"] == "navigator_error" and "no map here" in crash["detail"]
+    hang = run_trial_wire(_command_spec([sys.executable, "-c", "import time; time.sleep(600)"]),
+                          arm_timeout_s=8.0, log_dir=tmp_path, **bus).row
+    assert hang["reason"] == "navigator_error" and "not armed within 8 s" in hang["detail"]
+    flown = run_trial_wire(_command_spec([sys.executable,
+                                          str(REPO / "examples" / "user_navigator.py")]),
+                           speed_factor=3.0, log_dir=tmp_path, **bus).row
+    # the example climbs 0.5 m and flies the straight line: it navigated and was judged
+    assert flown["nav_time_s"] > 1.0 and flown["reason"] != "navigator_error", flown["detail"]
+    assert flown["path_length_m"] > 3.0
+
+
+def test_bad_placeholder_in_a_command_fails_only_its_trial(tmp_path):
+    row = run_trial_wire(_command_spec(["python", "{nope}"]), log_dir=tmp_path,
+                         **worker_bus(None)).row
+    assert row["reason"] == "navigator_error" and "bad placeholder" in row["detail"]
+
+
+def test_navigate_cli_against_sitl_cli_through_mosquitto(tmp_path):
+    broker = Mosquitto(tmp_path / "mq").start()
+    inst = 14
+    sitl = subprocess.Popen([FT_SITL, "sitl", "--scenario", "forest:1", "--instance", str(inst),
+                             "--speed-factor", "1", "--mqtt", broker.url, "--duration", "200"],
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    try:
+        nav = subprocess.run([FT_SITL, "navigate", "--algorithm", "ego", "--scenario",
+                              "forest:1", "--connect", f"udpin://0.0.0.0:{14540 + inst}",
+                              "--mqtt", broker.url, "--vehicle", str(inst), "--json",
+                              "--quiet"], capture_output=True, text=True, timeout=200)
+        assert nav.returncode == 0, nav.stdout[-2000:] + nav.stderr[-2000:]
+        assert json.loads(nav.stdout.strip().splitlines()[-1])["result"] == "success"
+    finally:
+        sitl.terminate()
+        out, err = sitl.communicate(timeout=30)
+        broker.kill()
+    assert "MQTT bus (broker)" in out
+    assert "dropped: none" in err, err
+
+
+def test_broker_killed_mid_flight_the_vehicle_flies_on_and_the_bus_reconnects(tmp_path):
+    """Kill mosquitto while a MAVSDK navigator (not using the bus) flies; restart it on the
+    same port: the flight reaches its goal, the bus reconnects, the drops are reported."""
+    port = free_port()
+    broker = Mosquitto(tmp_path / "mq", port=port).start()
+    inst = 15
+    sitl = subprocess.Popen([FT_SITL, "sitl", "--instance", str(inst), "--speed-factor", "2",
+                             "--mqtt", broker.url, "--duration", "150"],
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    nav = subprocess.Popen([FT_SITL, "navigate", "--algorithm", "straight", "--goal",
+                            "150,0,-2", "--connect", f"udpin://0.0.0.0:{14540 + inst}",
+                            "--speed-factor", "2", "--json", "--quiet"],
+                           stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    seen = []
+
+    async def listen(deadline_s):
+        async with BusClient(broker.url, str(inst), kinds=("telemetry",)) as bus:
+            async with asyncio.timeout(deadline_s):
+                while True:
+                    msg = await bus.receive()
+                    seen.append(msg.data.time_usec)
+                    if len(seen) > 20:
+                        return
+
+    try:
+        asyncio.run(listen(60))
+        broker.kill()
+        t_kill = seen[-1]
+        time.sleep(4.0)  # the vehicle flies on without a broker
+        assert sitl.poll() is None and nav.poll() is None
+        broker = Mosquitto(tmp_path / "mq2", port=port).start()
+        seen.clear()
+        asyncio.run(listen(60))
+        assert min(seen) > t_kill + 2_000_000  # telemetry again, from later simulated time
+        out_nav, err_nav = nav.communicate(timeout=200)
+        assert nav.returncode == 0, out_nav + err_nav[-2000:]
+        assert json.loads(out_nav.strip().splitlines()[-1])["result"] == "success"
+    finally:
+        for p in (nav, sitl):
+            if p.poll() is None:
+                p.terminate()
+        out, err = sitl.communicate(timeout=30)
+        broker.kill()
+    summary = [ln for ln in err.splitlines() if ln.startswith("bus vehicle")][-1]
+    assert "dropped: none" not in summary and "telemetry" in summary, summary
+    reconnects = int(summary.split(";")[-1].split()[0])
+    assert reconnects >= 1, summary
