@@ -30,6 +30,11 @@ SP_KIND, SP_POS, SP_VEL, SP_ACC, SP_YAW, SP_YAWRATE, SP_Q, SP_RATES, SP_THRUST =
 )
 N_SP = 20
 KIND_OFF, KIND_IDLE, KIND_TRAJECTORY, KIND_ATTITUDE, KIND_RATES = 0, 1, 2, 3, 4
+#: direct motor commands (an external autopilot's outputs, autopilot-in-the-loop): u in
+#: [0, 1] per rotor in SP_MOTORS.., rotor speed command u * w_max (as Gazebo's motor model)
+KIND_MOTORS = 5
+SP_MOTORS = 1
+MAX_SP_MOTORS = 12
 
 # --- gain / limit row ---------------------------------------------------------------------
 (
@@ -381,6 +386,18 @@ def reset_controller(cs):
 def controller_step_one(x, sp, gn, a, cs, dt, w_out):
     """One control tick for one vehicle: fills w_out with rotor speed commands (rad/s)."""
     kind = int(sp[SP_KIND])
+    if kind == KIND_MOTORS:
+        w_max = math.sqrt(gn[G_TROT_MAX] / gn[G_CT])
+        for i in range(w_out.shape[0]):
+            u = sp[SP_MOTORS + i] if i < MAX_SP_MOTORS else 0.0
+            if not math.isfinite(u):
+                u = 0.0
+            w_out[i] = _clamp(u, 0.0, 1.0) * w_max
+        reset_controller(cs)
+        for i in range(3):
+            cs[C_RATE_PREV + i] = x[X_OMEGA + i]
+            cs[C_VEL_PREV + i] = x[X_VEL + i]
+        return
     if kind == KIND_OFF or kind == KIND_IDLE:
         w_idle = math.sqrt(gn[G_TROT_MIN] / gn[G_CT]) if kind == KIND_IDLE else 0.0
         for i in range(w_out.shape[0]):

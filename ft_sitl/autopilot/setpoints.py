@@ -143,6 +143,19 @@ class Setpoint:
         return cls(row)
 
     @classmethod
+    def motors(cls, commands) -> Setpoint:
+        """Direct motor commands in [0, 1] per rotor (in the platform's rotor order), as an
+        external autopilot outputs them: rotor speed command u * w_max."""
+        u = np.asarray(commands, dtype=float).reshape(-1)
+        if not 1 <= len(u) <= c.MAX_SP_MOTORS:
+            raise SetpointError(f"motors: {len(u)} commands, 1..{c.MAX_SP_MOTORS} expected")
+        if not np.all(np.isfinite(u)) or np.any(u < 0.0) or np.any(u > 1.0):
+            raise SetpointError(f"motors: commands must be within 0..1, got {u}")
+        row = cls._base(c.KIND_MOTORS)
+        row[c.SP_MOTORS:c.SP_MOTORS + len(u)] = u
+        return cls(row)
+
+    @classmethod
     def body_rates(cls, rates_body, thrust: float) -> Setpoint:
         """Body rates (rad/s, FLU) and normalised collective thrust 0..1."""
         row = cls._base(c.KIND_RATES)
