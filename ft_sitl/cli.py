@@ -720,11 +720,13 @@ def build_parser() -> argparse.ArgumentParser:
     parl.add_argument("--json", action="store_true", help="machine-readable output")
     parl.set_defaults(func=cmd_params_list)
 
+    from ft_sitl.cli_bridge import add_parsers as add_bridge_parsers
     from ft_sitl.cli_missions import add_parsers
     from ft_sitl.cli_wire import add_parsers as add_wire_parsers
 
     add_parsers(sub)
     add_wire_parsers(sub)
+    add_bridge_parsers(sub)
 
     _add_scenarios_parser(sub)
     return ap
