@@ -146,6 +146,64 @@ def cmd_campaign_report(args) -> int:
     return 0
 
 
+def compare_runs(a_rows: list[dict], b_rows: list[dict]) -> dict:
+    """Outcome agreement of two result sets on their common trial ids (e.g. the same
+    campaign in-process and over MAVLink): per algorithm and overall, with the trials that
+    disagree."""
+    a = {r["trial_id"]: r for r in a_rows}
+    b = {r["trial_id"]: r for r in b_rows}
+    common = sorted(set(a) & set(b))
+    per: dict = {}
+    diffs = []
+    for tid in common:
+        ra, rb = a[tid], b[tid]
+        alg = per.setdefault(ra["algorithm"], {"trials": 0, "same_success": 0,
+                                               "same_reason": 0})
+        alg["trials"] += 1
+        alg["same_success"] += bool(ra["success"]) == bool(rb["success"])
+        alg["same_reason"] += ra["reason"] == rb["reason"]
+        if bool(ra["success"]) != bool(rb["success"]) or ra["reason"] != rb["reason"]:
+            diffs.append({"trial_id": tid, "algorithm": ra["algorithm"],
+                          "platform": ra["platform"], "scenario": ra["scenario"],
+                          "a": f"{ra['reason']} {ra.get('detail', '')}".strip(),
+                          "b": f"{rb['reason']} {rb.get('detail', '')}".strip()})
+    n = len(common)
+    return {"common_trials": n, "only_in_a": len(set(a) - set(b)),
+            "only_in_b": len(set(b) - set(a)), "algorithms": per,
+            "same_success": sum(v["same_success"] for v in per.values()),
+            "same_reason": sum(v["same_reason"] for v in per.values()),
+            "disagreements": diffs}
+
+
+def cmd_campaign_compare(args) -> int:
+    from ft_sitl.missions.store import StoreError, load_rows
+
+    try:
+        _, ra = load_rows(Path(args.a))
+        _, rb = load_rows(Path(args.b))
+    except StoreError as exc:
+        raise _cli_error()(str(exc)) from None
+    res = compare_runs(ra, rb)
+    if res["common_trials"] == 0:
+        raise _cli_error()(f"{args.a} and {args.b} have no trial in common (different "
+                           "campaigns or seeds?)")
+    if args.json:
+        print(json.dumps(res, indent=2))
+        return 0
+    n = res["common_trials"]
+    print(f"{n} common trials: success/failure agrees in {res['same_success']} "
+          f"({100.0 * res['same_success'] / n:.0f} %), the reason in {res['same_reason']} "
+          f"({100.0 * res['same_reason'] / n:.0f} %)")
+    for alg, v in sorted(res["algorithms"].items()):
+        print(f"  {alg:12s} {v['trials']:4d} trials  success agrees "
+              f"{100.0 * v['same_success'] / v['trials']:5.1f} %  reason agrees "
+              f"{100.0 * v['same_reason'] / v['trials']:5.1f} %")
+    for d in res["disagreements"]:
+        print(f"  {d['trial_id'][:10]} {d['algorithm']} {d['platform']} {d['scenario']}: "
+              f"A {d['a']} | B {d['b']}")
+    return 0
+
+
 # --- trial -----------------------------------------------------------------------------------
 def _find_spec(args):
     from ft_sitl.missions.store import StoreError, load_rows
@@ -328,6 +386,16 @@ def add_parsers(sub) -> None:
     crep.add_argument("dir", help="campaign result directory")
     crep.add_argument("--csv", action="store_true", help="also write trials.csv")
     crep.set_defaults(func=cmd_campaign_report)
+
+    ccmp = csub.add_parser("compare", help="outcome agreement of two result dirs",
+                           description="Compare two result directories trial by trial (the "
+                                       "same campaign in-process and --transport mavlink, "
+                                       "or two code versions): how often success and the "
+                                       "reason agree, and which trials differ.")
+    ccmp.add_argument("a", help="result directory A")
+    ccmp.add_argument("b", help="result directory B")
+    ccmp.add_argument("--json", action="store_true", help="machine-readable output")
+    ccmp.set_defaults(func=cmd_campaign_compare)
 
     tr = sub.add_parser("trial", help="single trials")
     tsub = tr.add_subparsers(dest="trial_command", metavar="ACTION", required=True)
