@@ -94,8 +94,9 @@ def cmd_navigate(args) -> int:
         except ValueError as exc:
             raise _cli_error()(f"--mqtt: {exc}") from None
     wt = wire_task_from_args(args)
+    params = _params(args.param)
     try:
-        nav = create(args.algorithm, _params(args.param))
+        nav = create(args.algorithm, params)
     except NavigatorError as exc:
         raise _cli_error()(str(exc)) from None
     last = [-1.0]
@@ -109,7 +110,8 @@ def cmd_navigate(args) -> int:
     try:
         out = asyncio.run(fly(nav, wt, args.connect, mqtt=args.mqtt, vehicle=args.vehicle,
                               speed_factor=args.speed_factor,
-                              connect_timeout_s=args.connect_timeout, progress=progress))
+                              connect_timeout_s=args.connect_timeout, progress=progress,
+                              real_latency="latency_s" not in params))
     except NavigateError as exc:
         print(f"ft-sitl navigate: {exc}", file=sys.stderr)
         return 3

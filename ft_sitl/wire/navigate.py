@@ -216,9 +216,11 @@ async def _bus_state(url: str, vehicle: str, state: _State, camera) -> None:
 
 async def fly(nav, wt: WireTask, connect: str, *, mqtt: str | None = None,
               vehicle: str = "0", speed_factor: float = 1.0,
-              connect_timeout_s: float = 60.0, progress=None) -> dict:
+              connect_timeout_s: float = 60.0, progress=None,
+              real_latency: bool = True) -> dict:
     """Fly ``nav`` through MAVSDK; returns a summary dict (``result``: success, timeout,
-    gave_up, error; ``detail``)."""
+    gave_up, collision; ``detail``). ``real_latency``: switch the navigator's modelled
+    planning latency off (a plan acts when it reaches the flight controller)."""
     from mavsdk import ComponentType
     from mavsdk.asyncio import Configuration, Mavsdk
     from mavsdk.asyncio.plugins.action import ActionAsync
@@ -298,7 +300,8 @@ async def fly(nav, wt: WireTask, connect: str, *, mqtt: str | None = None,
                     state.updated.set()
 
         tasks.append(asyncio.create_task(watch_texts()))
-        return await _navigate(nav, wt, off, state, t_wall0, speed_factor, progress, crash)
+        return await _navigate(nav, wt, off, state, t_wall0, speed_factor, progress, crash,
+                               real_latency)
     finally:
         for t in tasks:
             t.cancel()
@@ -314,10 +317,17 @@ def _now(state: _State, t_wall0: float, speed_factor: float) -> float:
 
 
 async def _navigate(nav, wt: WireTask, off, state: _State, t_wall0: float,
-                    speed_factor: float, progress, crash: list) -> dict:
+                    speed_factor: float, progress, crash: list,
+                    real_latency: bool = True) -> dict:
     from ft_sitl.autopilot.setpoints import Setpoint
 
     task = wt.task()
+    if real_latency and hasattr(nav, "latency"):
+        # over the wire the latency is real (compute, transport, the flight controller's
+        # input): the modelled one would count it twice
+        nav.latency = 0.0
+        if hasattr(nav, "measured_latency"):
+            nav.measured_latency = False
     nav.reset(task)
     t0 = _now(state, t_wall0, speed_factor)
     period = 1.0 / float(nav.rate_hz)

@@ -15,6 +15,7 @@ EXAMPLES = Path(__file__).resolve().parents[2] / "examples"
     ("mavsdk_offboard.py", 3.0, "-- landed and disarmed"),
     ("mavsdk_mission.py", 4.0, "-- landed and disarmed"),
     ("pymavlink_takeoff_land.py", 2.0, "-- landed and disarmed"),
+    ("mavsdk_square_check.py", 3.0, "SQUARE OK"),
 ])
 def test_example_flies(script, speed, expect):
     with running_sitl(speed_factor=speed, params=None) as server:
