@@ -263,6 +263,10 @@ def _sitl_bus(args, server, fleet, scenario):
                                                                       on_config=on_config),
                              fleet, i, scenario=scenario, camera_config=cam,
                              telemetry_rate_hz=args.telemetry_rate))
+    # start publishing connected (later outages only cost dropped messages, counted)
+    if buses and not all(b.pub.wait_connected(10.0) for b in buses):
+        print(f"warning: MQTT broker {opts.url} not reachable yet; the bus keeps trying "
+              "(messages are dropped and counted until it connects)", file=sys.stderr)
     return buses, broker
 
 

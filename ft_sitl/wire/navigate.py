@@ -196,7 +196,16 @@ async def _bus_state(url: str, vehicle: str, state: _State, camera) -> None:
     while True:
         try:
             async with BusClient(url, vehicle, kinds=kinds, queue_size=4096) as bus:
-                await bus.request_config(telemetry_rate_hz=100.0, depth=camera is not None)
+                # the request is lost if the simulator is not subscribed yet (it may start
+                # after us): repeat it until what we asked for arrives
+                async def request():
+                    while not (state.sim_time is not None
+                               and (camera is None or state.depth is not None)):
+                        await bus.request_config(telemetry_rate_hz=100.0,
+                                                 depth=camera is not None)
+                        await asyncio.sleep(1.0)
+
+                asker = asyncio.create_task(request())
                 async for msg in bus:
                     if msg.kind == "telemetry":
                         tm = msg.data
@@ -210,6 +219,9 @@ async def _bus_state(url: str, vehicle: str, state: _State, camera) -> None:
                         state.depth = msg.data.to_depth_frame()
                         state.depth_new = True
         except aiomqtt.MqttError as exc:
+            asker = locals().get("asker")
+            if asker is not None:
+                asker.cancel()
             log.warning("bus connection lost (%s); reconnecting", exc)
             await asyncio.sleep(0.5)
 

@@ -72,7 +72,7 @@ def test_check_prints_the_matrix(capsys, campaign, yard):
         "platforms": [PLATFORM], "scenarios": [{"family": "yard", "indices": [1]}],
         "trials_per_combination": 2,
         "limits": {"max_speed_m_s": 4.0, "timeout_s": 90.0, "goal_radius_m": 2.0,
-                   "hold_s": 3.0}}
+                   "hold_s": 3.0}, "notes": []}
 
 
 def test_check_a_preset(capsys):
@@ -199,7 +199,8 @@ def test_navigators_list(capsys):
     rows = {r["name"]: r for r in json.loads(out)}
     assert rows["straight"] == {
         "name": "straight", "class": "ft_sitl.navigation.straight.StraightLine",
-        "rate_hz": 20.0, "depth_camera": False, "parameters": {"speed_m_s": None},
+        "rate_hz": 20.0, "depth_camera": False, "unavailable": None,
+        "parameters": {"speed_m_s": None},
         "summary": "The straight-flight baseline (paper Sec. IV-A): no sensing, no avoidance."}
 
 

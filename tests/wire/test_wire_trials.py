@@ -83,16 +83,22 @@ def test_bad_placeholder_in_a_command_fails_only_its_trial(tmp_path):
 
 
 def test_navigate_cli_against_sitl_cli_through_mosquitto(tmp_path):
+    """The two commands a user runs, with a user scenario: a wall beside the line, which the
+    planner sees through depth frames carried by mosquitto."""
+    from ..missions.conftest import write_yard
+
+    yard = str(write_yard(tmp_path / "yard", wall=((6.0, 8.0, 0.0), (8.0, 12.0, 3.0))))
     broker = Mosquitto(tmp_path / "mq").start()
     inst = 14
-    sitl = subprocess.Popen([FT_SITL, "sitl", "--scenario", "forest:1", "--instance", str(inst),
+    sitl = subprocess.Popen([FT_SITL, "sitl", "--scenario", yard, "--instance", str(inst),
                              "--speed-factor", "1", "--mqtt", broker.url, "--duration", "200"],
                             stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
     try:
         nav = subprocess.run([FT_SITL, "navigate", "--algorithm", "ego", "--scenario",
-                              "forest:1", "--connect", f"udpin://0.0.0.0:{14540 + inst}",
+                              yard, "--connect", f"udpin://0.0.0.0:{14540 + inst}",
                               "--mqtt", broker.url, "--vehicle", str(inst), "--json",
-                              "--quiet"], capture_output=True, text=True, timeout=200)
+                              "--quiet", "--max-speed", "2"],
+                             capture_output=True, text=True, timeout=200)
         assert nav.returncode == 0, nav.stdout[-2000:] + nav.stderr[-2000:]
         assert json.loads(nav.stdout.strip().splitlines()[-1])["result"] == "success"
     finally:
