@@ -192,27 +192,11 @@ def _heading_deg(yaw_enu: float) -> float:
 
 def _sitl_scenario(text: str):
     """``FAMILY:INDEX[:SEED]`` or a scenario spec file -> Scenario."""
-    from ft_sitl.scenarios.scenario import ScenarioError
+    from ft_sitl.scenarios.io import scenario_from_spec
 
-    path = Path(text)
     try:
-        if path.suffix.lower() in (".yaml", ".yml", ".toml"):
-            from ft_sitl.scenarios.io import load_scenario
-
-            return load_scenario(path)
-        from ft_sitl.scenarios.families import build_scenario
-
-        parts = text.split(":")
-        if len(parts) not in (2, 3):
-            raise CliError(f"--scenario: {text!r} must be FAMILY:INDEX[:SEED] (e.g. "
-                           f"forest:3) or a scenario spec file (.yaml, .toml)")
-        try:
-            index = int(parts[1])
-            seed = int(parts[2]) if len(parts) == 3 else 0
-        except ValueError:
-            raise CliError(f"--scenario: {text!r}: INDEX and SEED must be integers") from None
-        return build_scenario(parts[0], index, seed)
-    except ScenarioError as exc:
+        return scenario_from_spec(text)
+    except ValueError as exc:
         raise CliError(f"--scenario: {exc}") from None
 
 

@@ -55,6 +55,16 @@ def cmd_bridge_ardupilot(args) -> int:
     return 0
 
 
+def _common(p) -> None:
+    """The options both bridges take: the vehicle and its world."""
+    p.add_argument("--platform", default="0.98kg-EGO Planner DIY", help="platform name")
+    p.add_argument("--platform-file", action="append", metavar="FILE",
+                   help="extra platform definitions")
+    p.add_argument("--scenario", metavar="FAMILY:INDEX[:SEED]|SPEC",
+                   help="fly in a scenario world (collisions crash the vehicle)")
+    p.add_argument("--bind", default="127.0.0.1", help="address to listen on")
+
+
 def add_parsers(sub) -> None:
     from ft_sitl.bridge.ardupilot import DEFAULT_PORT
 
@@ -66,14 +76,9 @@ def add_parsers(sub) -> None:
     ap = bsub.add_parser("ardupilot", help="ArduPilot's JSON physics interface (UDP)",
                          description="Serve ArduPilot SITL's JSON interface (--model JSON): "
                                      "one JSON state per servo packet, in lockstep.")
-    ap.add_argument("--platform", default="0.98kg-EGO Planner DIY", help="platform name")
-    ap.add_argument("--platform-file", action="append", metavar="FILE",
-                    help="extra platform definitions")
-    ap.add_argument("--scenario", metavar="FAMILY:INDEX[:SEED]|SPEC",
-                    help="fly in a scenario world (collisions crash the vehicle)")
+    _common(ap)
     ap.add_argument("--port", type=int, default=DEFAULT_PORT,
                     help=f"UDP port ArduPilot sends to (default {DEFAULT_PORT})")
-    ap.add_argument("--bind", default="127.0.0.1", help="address to listen on")
     ap.add_argument("--speed-factor", type=float, metavar="X",
                     help="pace to X x real time (default: as fast as ArduPilot steps)")
     ap.add_argument("--print-params", action="store_true",
@@ -106,14 +111,9 @@ def _add_px4(bsub) -> None:
                          description="Listen on TCP 4560+I for a PX4 SITL (px4_sitl_default, "
                                      "airframe none_iris) and fly our physics in lockstep: "
                                      "HIL_SENSOR / HIL_GPS out, HIL_ACTUATOR_CONTROLS in.")
-    px.add_argument("--platform", default="0.98kg-EGO Planner DIY", help="platform name")
-    px.add_argument("--platform-file", action="append", metavar="FILE",
-                    help="extra platform definitions")
-    px.add_argument("--scenario", metavar="FAMILY:INDEX[:SEED]|SPEC",
-                    help="fly in a scenario world (collisions crash the vehicle)")
+    _common(px)
     px.add_argument("--instance", type=int, default=0, metavar="I",
                     help="PX4 instance (px4 -i I): TCP port 4560+I (default 0)")
-    px.add_argument("--bind", default="127.0.0.1", help="address to listen on")
     px.add_argument("--speed-factor", type=float, metavar="X",
                     help="pace to X x real time (default: as fast as PX4 steps)")
     px.add_argument("--ground-truth", action="store_true",

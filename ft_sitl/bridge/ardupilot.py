@@ -504,28 +504,6 @@ class ArduPilotBridge:
 
 
 # --- the command's entry point -----------------------------------------------------------
-def _resolve_scenario(spec):
-    if spec is None or not isinstance(spec, str):
-        return spec  # None or a Scenario
-    from pathlib import Path
-
-    if Path(spec).suffix.lower() in (".yaml", ".yml", ".toml"):
-        from ft_sitl.scenarios.io import load_scenario
-
-        return load_scenario(Path(spec))
-    from ft_sitl.scenarios.families import build_scenario
-
-    parts = spec.split(":")
-    try:
-        if len(parts) not in (2, 3):
-            raise ValueError
-        index, seed = int(parts[1]), int(parts[2]) if len(parts) == 3 else 0
-    except ValueError:
-        raise ValueError(f"scenario {spec!r} must be FAMILY:INDEX[:SEED] (e.g. forest:3) or a "
-                         f"scenario spec file (.yaml, .toml)") from None
-    return build_scenario(parts[0], index, seed)
-
-
 def run_ardupilot_bridge(platform_name, scenario_spec=None, port: int = DEFAULT_PORT,
                          speed_factor: float | None = None, *, host: str = "127.0.0.1",
                          seed: int = 0, physics_hz: int = DEFAULT_PHYSICS_HZ,
@@ -547,7 +525,9 @@ def run_ardupilot_bridge(platform_name, scenario_spec=None, port: int = DEFAULT_
 
     platform = (platform_name if isinstance(platform_name, Platform)
                 else PlatformRegistry(platform_files).get(platform_name))
-    scenario = _resolve_scenario(scenario_spec)
+    from ft_sitl.scenarios.io import scenario_from_spec
+
+    scenario = scenario_from_spec(scenario_spec)
     bridge = ArduPilotBridge(platform, scenario=scenario, port=port, host=host,
                              speed_factor=speed_factor, seed=seed, physics_hz=physics_hz,
                              accel_noise_m_s2=accel_noise_m_s2)

@@ -62,7 +62,6 @@ import threading
 import time
 from collections.abc import Callable
 from dataclasses import dataclass
-from pathlib import Path
 
 import numpy as np
 from pymavlink.dialects.v20 import common as mav
@@ -664,32 +663,7 @@ class Px4Bridge:
 
 
 # --- command line ---------------------------------------------------------------------------
-def scenario_from_spec(spec):
-    """A Scenario from ``FAMILY:INDEX[:SEED]`` or a scenario spec file (.yaml/.yml/.toml);
-    a Scenario or None passes through."""
-    if spec is None or not isinstance(spec, str):
-        return spec
-    from ft_sitl.scenarios.scenario import ScenarioError
-
-    path = Path(spec)
-    try:
-        if path.suffix.lower() in (".yaml", ".yml", ".toml"):
-            from ft_sitl.scenarios.io import load_scenario
-
-            return load_scenario(path)
-        from ft_sitl.scenarios.families import build_scenario
-
-        parts = spec.split(":")
-        if len(parts) not in (2, 3):
-            raise ValueError(f"scenario {spec!r}: expected FAMILY:INDEX[:SEED] (e.g. forest:3)"
-                             f" or a scenario spec file (.yaml, .toml)")
-        try:
-            index, seed = int(parts[1]), int(parts[2]) if len(parts) == 3 else 0
-        except ValueError:
-            raise ValueError(f"scenario {spec!r}: INDEX and SEED must be integers") from None
-        return build_scenario(parts[0], index, seed)
-    except ScenarioError as exc:
-        raise ValueError(f"scenario {spec!r}: {exc}") from None
+from ft_sitl.scenarios.io import scenario_from_spec  # noqa: E402,F401 - re-exported
 
 
 def run_px4_bridge(platform_name: str, scenario=None, *, instance: int = 0,

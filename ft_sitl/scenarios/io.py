@@ -815,3 +815,29 @@ def load_scenario(spec_path) -> Scenario:
                         provenance=provenance)
     except ScenarioError as exc:  # every field was checked above; name the file regardless
         raise ScenarioError(f"{w}: {exc}") from None
+
+
+def scenario_from_spec(spec):
+    """A scenario named on a command line: ``FAMILY:INDEX[:SEED]`` (e.g. ``forest:3``) or a
+    scenario spec file (.yaml, .yml, .toml); None and Scenario objects pass through.
+    ValueError names what is wrong."""
+    if spec is None or isinstance(spec, Scenario):
+        return spec
+    if not isinstance(spec, str):
+        raise ValueError(f"scenario: {spec!r} is not FAMILY:INDEX[:SEED] or a spec file")
+    from ft_sitl.scenarios.families import build_scenario
+
+    try:
+        if Path(spec).suffix.lower() in (".yaml", ".yml", ".toml"):
+            return load_scenario(Path(spec))
+        parts = spec.split(":")
+        if len(parts) not in (2, 3):
+            raise ValueError(f"scenario {spec!r}: expected FAMILY:INDEX[:SEED] (e.g. "
+                             "forest:3) or a scenario spec file (.yaml, .toml)")
+        try:
+            index, seed = int(parts[1]), int(parts[2]) if len(parts) == 3 else 0
+        except ValueError:
+            raise ValueError(f"scenario {spec!r}: INDEX and SEED must be integers") from None
+        return build_scenario(parts[0], index, seed)
+    except ScenarioError as exc:
+        raise ValueError(f"scenario {spec!r}: {exc}") from None

@@ -421,7 +421,7 @@ def test_run_ardupilot_bridge_writes_params_serves_and_stops(tmp_path):
 
 
 def test_run_ardupilot_bridge_names_a_bad_scenario_or_platform():
-    with pytest.raises(ValueError, match="'forest' must be FAMILY:INDEX"):
+    with pytest.raises(ValueError, match="'forest': expected FAMILY:INDEX"):
         run_ardupilot_bridge(PLATFORM, "forest", 0)
     with pytest.raises(ValueError, match="no-such-quad"):
         run_ardupilot_bridge("no-such-quad", None, 0)
