@@ -209,23 +209,29 @@ class _Fail(Exception):
         self.reason, self.detail = reason, detail
 
 
-def run_trial(spec: TrialSpec, *, record: bool = False, navigator=None) -> TrialOutcome:
-    """Fly one trial; the row of the results table (and the trajectory when ``record``).
-    ``navigator`` overrides the registry lookup (an instance; tests)."""
-    from ft_sitl.navigation.registry import create
+def trial_vehicle(spec: TrialSpec, sc, platform):
+    """The trial's collision guard and its one-vehicle Fleet, on the takeoff point facing
+    the goal, the speed cap as MPC_XY_VEL_MAX (in-process and over the wire alike)."""
     from ft_sitl.scenarios.guard import CollisionGuard
 
-    wall0 = time.perf_counter()
-    sc = load_scenario_for(spec)
-    platform = platform_for(spec)
-    nav = navigator if navigator is not None else create(spec.algorithm,
-                                                         spec.algorithm_params)
     world, grid = _world_and_grid(sc)
     guard = CollisionGuard(world, [platform.collision_radius_m], grid=grid,
                            names=sc.obstacle_name)
     params = ParamSet({"MPC_XY_VEL_MAX": spec.limits.max_speed_m_s})
     fleet = Fleet([platform], params=[params], spawn=[sc.takeoff], spawn_yaw=[sc.start_yaw],
                   physics_hz=spec.physics_hz, guard=guard)
+    return guard, fleet
+
+
+def run_trial(spec: TrialSpec, *, record: bool = False, navigator=None) -> TrialOutcome:
+    """Fly one trial; the row of the results table (and the trajectory when ``record``).
+    ``navigator`` overrides the registry lookup (an instance; tests)."""
+    from ft_sitl.navigation.registry import create
+    wall0 = time.perf_counter()
+    sc, platform = load_scenario_for(spec), platform_for(spec)
+    nav = navigator if navigator is not None else create(spec.algorithm,
+                                                         spec.algorithm_params)
+    guard, fleet = trial_vehicle(spec, sc, platform)
     cmd = fleet.commanders[0]
     ind = platform.indicators()
     row = _identity_row(spec, platform, ind, sc)

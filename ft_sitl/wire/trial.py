@@ -40,8 +40,6 @@ import numpy as np
 
 from ft_sitl import frames
 from ft_sitl.autopilot.cascade import C_SAT_STEPS
-from ft_sitl.autopilot.fleet import Fleet
-from ft_sitl.autopilot.params import ParamSet
 from ft_sitl.missions.trial import (
     APPROACH_TIMEOUT_S,
     STABLE_FOR_S,
@@ -54,10 +52,10 @@ from ft_sitl.missions.trial import (
     _Fail,
     _identity_row,
     _Metrics,
-    _world_and_grid,
     finish_row,
     load_scenario_for,
     platform_for,
+    trial_vehicle,
 )
 from ft_sitl.wire.navigate import WireTask
 
@@ -245,17 +243,10 @@ def run_trial_wire(spec: TrialSpec, *, speed_factor: float = 2.0, mqtt: str | No
                    bus_factory=None) -> TrialOutcome:
     """Fly one trial with the navigator in another process (module docstring)."""
     from ft_sitl.mavlink.server import SitlServer
-    from ft_sitl.scenarios.guard import CollisionGuard
 
     wall0 = time.perf_counter()
-    sc = load_scenario_for(spec)
-    platform = platform_for(spec)
-    world, grid = _world_and_grid(sc)
-    guard = CollisionGuard(world, [platform.collision_radius_m], grid=grid,
-                           names=sc.obstacle_name)
-    params = ParamSet({"MPC_XY_VEL_MAX": spec.limits.max_speed_m_s})
-    fleet = Fleet([platform], params=[params], spawn=[sc.takeoff], spawn_yaw=[sc.start_yaw],
-                  physics_hz=spec.physics_hz, guard=guard)
+    sc, platform = load_scenario_for(spec), platform_for(spec)
+    guard, fleet = trial_vehicle(spec, sc, platform)
     row = _identity_row(spec, platform, platform.indicators(), sc)
     m = _Metrics()
     ref = _Referee(fleet, guard, spec, sc, m, record)
