@@ -65,6 +65,7 @@ from dataclasses import dataclass, field, replace
 
 import numpy as np
 import trimesh
+from numba import njit
 
 __all__ = [
     "NOISE_K_DEFAULT",
@@ -273,6 +274,61 @@ def optical_to_body(mount_pitch_rad: float) -> np.ndarray:
     return ry @ r0
 
 
+# --- kernels (one pass each over the pixels; the per-frame numpy glue cost as much as Embree) --
+@njit(cache=True)
+def _rotate_rays(dirs_optical, r_wo, origin, dirs_world, dirs32, org32, shift, scale):
+    """World ray directions (float64 and Embree's float32) and Embree's scaled origins."""
+    ox = np.float32((origin[0] - shift[0]) * scale)
+    oy = np.float32((origin[1] - shift[1]) * scale)
+    oz = np.float32((origin[2] - shift[2]) * scale)
+    for k in range(dirs_optical.shape[0]):
+        x, y, z = dirs_optical[k, 0], dirs_optical[k, 1], dirs_optical[k, 2]
+        for a in range(3):
+            d = r_wo[a, 0] * x + r_wo[a, 1] * y + r_wo[a, 2] * z
+            dirs_world[k, a] = d
+            dirs32[k, a] = d
+        org32[k, 0] = ox
+        org32[k, 1] = oy
+        org32[k, 2] = oz
+
+
+@njit(cache=True)
+def _hit_lengths(tri, dirs_world, origin, normals, plane_c, grazing, out):
+    """Ray length to the hit triangle's plane (float64); inf on a miss or a grazing hit."""
+    for k in range(tri.shape[0]):
+        t = tri[k]
+        out[k] = np.inf
+        if t >= 0:
+            nd = (normals[t, 0] * dirs_world[k, 0] + normals[t, 1] * dirs_world[k, 1]
+                  + normals[t, 2] * dirs_world[k, 2])
+            if abs(nd) > grazing:
+                num = plane_c[t] - (normals[t, 0] * origin[0] + normals[t, 1] * origin[1]
+                                    + normals[t, 2] * origin[2])
+                out[k] = num / nd
+
+
+@njit(cache=True)
+def _cloud(z, lo, hi, width, rays_z1, r_bo, mount, r_wb, p_wb, depth, pb, pw, pix):
+    """Range cut, the float32 depth image and the valid pixels' points; returns their count."""
+    n = 0
+    for k in range(z.shape[0]):
+        zk = z[k]
+        if not (zk >= lo and zk <= hi):
+            depth[k] = np.nan
+            continue
+        depth[k] = np.float32(zk)
+        x, y, w = rays_z1[k, 0] * zk, rays_z1[k, 1] * zk, rays_z1[k, 2] * zk
+        for a in range(3):
+            pb[n, a] = r_bo[a, 0] * x + r_bo[a, 1] * y + r_bo[a, 2] * w + mount[a]
+        for a in range(3):
+            pw[n, a] = r_wb[a, 0] * pb[n, 0] + r_wb[a, 1] * pb[n, 1] + r_wb[a, 2] * pb[n, 2] \
+                + p_wb[a]
+        pix[n, 0] = k // width
+        pix[n, 1] = k % width
+        n += 1
+    return n
+
+
 class DepthCamera:
     """A depth camera casting rays against ``mesh`` (a ``trimesh.Trimesh``, world ENU).
 
@@ -305,7 +361,6 @@ class DepthCamera:
         #: rotation optical -> body and the camera centre in the body frame
         self.r_body_optical = optical_to_body(config.mount_pitch_rad)
         self.mount_body = np.array(config.mount_position_body, dtype=np.float64)
-        self._pix = np.stack(np.divmod(np.arange(h * w, dtype=np.int32), w), axis=1)
 
         # unit face normals and plane offsets (own, from the vertices: robust to supplied
         # normals), for the float64 distance to the hit triangle's plane
@@ -330,6 +385,11 @@ class DepthCamera:
             from trimesh.ray import ray_triangle
 
             self._intersector = ray_triangle.RayMeshIntersector(mesh)
+        self._tfar32 = None
+        if self.uses_embree:
+            scale = float(self._intersector._scene.scale)
+            self._tfar32 = (config.max_range_m / self.cos_axis * scale * 1.001 + 1e-6).astype(
+                np.float32)
         # build the BVH now rather than in the first frame
         self._intersector.intersects_first(np.zeros((1, 3)), np.array([[0.0, 0.0, 1.0]]))
 
@@ -357,21 +417,49 @@ class DepthCamera:
         self.next_due_us = self._t0_us + math.ceil((k + 1) * period - 1e-6)
 
     # -- capture -------------------------------------------------------------------------------
+    def _embree(self):
+        """trimesh's scaled Embree scene (queried directly: its wrapper re-normalises and
+        converts every ray, which cost as much as the query), or None without Embree."""
+        return getattr(self._intersector, "_scene", None) if self.uses_embree else None
+
+    def _first_hits(self, origin: np.ndarray, dirs_world: np.ndarray, dirs32, org32,
+                    tfar32=None):
+        """Index of the first triangle each ray hits (-1: none); with Embree, ``tfar32``
+        limits each ray's length (scaled units)."""
+        wrap = self._embree()
+        if wrap is None:
+            return self._intersector.intersects_first(
+                np.broadcast_to(origin, dirs_world.shape), dirs_world)
+        if tfar32 is None:
+            return wrap.scene.run(org32, dirs32)
+        return wrap.scene.run(org32, dirs32, dists=tfar32.copy())
+
     def cast(self, origin_world: np.ndarray, dirs_world: np.ndarray) -> np.ndarray:
         """Ray length to the first hit for unit ``dirs_world`` (N, 3) from one origin (3,);
         inf where nothing is hit. float64, recomputed from the hit triangle's plane."""
-        origins = np.broadcast_to(origin_world, dirs_world.shape)
-        tri = self._intersector.intersects_first(origins, dirs_world)
-        dist = np.full(len(dirs_world), np.inf)
-        hit = np.flatnonzero(tri >= 0)
-        if hit.size:
-            t = tri[hit]
-            n = self._normals[t]
-            nd = np.einsum("ij,ij->i", n, dirs_world[hit])
-            num = self._plane_c[t] - n @ origin_world
-            ok = np.abs(nd) > _GRAZING_COS
-            dist[hit[ok]] = num[ok] / nd[ok]
-        return dist
+        origin = np.ascontiguousarray(origin_world, dtype=np.float64).reshape(3)
+        dirs = np.ascontiguousarray(dirs_world, dtype=np.float64)
+        if dirs.ndim != 2 or dirs.shape[1] != 3:
+            raise ValueError(f"dirs_world must have shape (N, 3), got {dirs.shape}")
+        dirs32, org32 = self._embree_rays(origin, dirs.shape[0])
+        if dirs32 is not None:
+            dirs32[:] = dirs
+        return self._lengths(origin, dirs, dirs32, org32)
+
+    def _embree_rays(self, origin: np.ndarray, n: int):
+        wrap = self._embree()
+        if wrap is None:
+            return None, None
+        org32 = np.empty((n, 3), np.float32)
+        org32[:] = ((origin - wrap.origin) * wrap.scale).astype(np.float32)
+        return np.empty((n, 3), np.float32), org32
+
+    def _lengths(self, origin, dirs_world, dirs32, org32, tfar32=None) -> np.ndarray:
+        tri = np.ascontiguousarray(
+            self._first_hits(origin, dirs_world, dirs32, org32, tfar32), dtype=np.int64)
+        out = np.empty(len(dirs_world))
+        _hit_lengths(tri, dirs_world, origin, self._normals, self._plane_c, _GRAZING_COS, out)
+        return out
 
     def capture(self, t_us: int, p_world, q_world_body,
                 rng: np.random.Generator | None = None) -> DepthFrame:
@@ -391,8 +479,20 @@ class DepthCamera:
         r_wo = r_wb @ self.r_body_optical
         origin = p_wb + r_wb @ self.mount_body
 
-        dirs_world = self.dirs_optical @ r_wo.T
-        z = self.cast(origin, dirs_world) * self.cos_axis  # z-depth, inf on a miss
+        n_pix = cfg.n_pixels
+        dirs_world = np.empty((n_pix, 3))
+        wrap = self._embree()
+        if wrap is not None:
+            dirs32, org32 = np.empty((n_pix, 3), np.float32), np.empty((n_pix, 3), np.float32)
+            _rotate_rays(self.dirs_optical, r_wo, origin, dirs_world, dirs32, org32,
+                         np.asarray(wrap.origin, np.float64).reshape(3), float(wrap.scale))
+        else:
+            dirs32 = org32 = None
+            np.matmul(self.dirs_optical, r_wo.T, out=dirs_world)
+        # without noise a surface beyond max_range is dropped anyway: Embree stops the ray
+        # just past it (0.1 % margin), which saves traversal in open scenes
+        tfar32 = self._tfar32 if (dirs32 is not None and not noisy) else None
+        z = self._lengths(origin, dirs_world, dirs32, org32, tfar32) * self.cos_axis
 
         if noisy:
             valid = np.isfinite(z)
@@ -402,14 +502,13 @@ class DepthCamera:
                 z[idx] = zi + rng.standard_normal(idx.size) * (cfg.noise_k * zi * zi)
             if cfg.dropout > 0.0:
                 z[idx[rng.random(idx.size) < cfg.dropout]] = np.inf
-        valid = (z >= cfg.min_range_m) & (z <= cfg.max_range_m)
-        idx = np.flatnonzero(valid)
 
-        depth = np.full(cfg.n_pixels, np.nan, dtype=np.float32)
-        depth[idx] = z[idx]
-        p_opt = self.rays_z1[idx] * z[idx, None]
-        points_body = p_opt @ self.r_body_optical.T + self.mount_body
-        points_world = points_body @ r_wb.T + p_wb
+        depth = np.empty(n_pix, dtype=np.float32)
+        pb, pw = np.empty((n_pix, 3)), np.empty((n_pix, 3))
+        pix = np.empty((n_pix, 2), np.int32)
+        n = _cloud(z, float(cfg.min_range_m), float(cfg.max_range_m), cfg.width, self.rays_z1,
+                   self.r_body_optical, self.mount_body, r_wb, p_wb, depth, pb, pw, pix)
+        points_body, points_world, pixels = pb[:n].copy(), pw[:n].copy(), pix[:n].copy()
 
         self._schedule(t_us)
         qn = np.asarray(q_world_body, dtype=np.float64)
@@ -418,7 +517,7 @@ class DepthCamera:
             depth=depth.reshape(cfg.height, cfg.width),
             points_body=points_body,
             points_world=points_world,
-            pixels=self._pix[idx],
+            pixels=pixels,
             p_world_body=p_wb.copy(),
             q_world_body=qn / np.linalg.norm(qn),
             p_world_camera=origin,
