@@ -60,6 +60,9 @@ class SplineTrajectory:
     def state(self, t: float):
         """Position, velocity, acceleration at time t (clamped to the trajectory)."""
         tau = min(max(t - self.t0, 0.0), self.spline.duration)
+        pva = getattr(self.spline, "pva", None)
+        if pva is not None:
+            return pva(tau)
         return (self.spline.position(tau), self.spline.velocity(tau),
                 self.spline.acceleration(tau))
 

@@ -52,6 +52,19 @@ def test_scalar_and_vector_evaluation_agree_and_domain_is_clamped():
     assert np.all(sp.evaluate(t, 4) == 0.0)
 
 
+@pytest.mark.parametrize("degree", [1, 2, 3, 5])
+def test_pva_is_evaluate_of_orders_0_to_2_at_one_time(degree):
+    sp = _random_spline(degree=degree, n=9, dt=0.37, seed=10 + degree)
+    # inside, on the knots, and clamped outside the domain
+    times = np.concatenate([np.linspace(-0.5, sp.duration + 0.5, 41), sp.knot_times()])
+    for t in times:
+        p, v, a = sp.pva(float(t))
+        for order, got in enumerate((p, v, a)):
+            np.testing.assert_allclose(got, sp.evaluate(t, order), rtol=0, atol=1e-12)
+    if degree == 1:
+        assert np.all(sp.pva(0.1)[2] == 0.0)  # above the degree: zero
+
+
 def test_derivatives_match_central_finite_differences():
     sp = _random_spline(seed=3)
     h = 1e-5
