@@ -459,30 +459,35 @@ def _integrate(pts, hit, n_rays, cam, inv_res, origin, box_lo, box_hi, dims, log
         if early_stop and (flags[idx] & _TRAV) != 0:
             continue
         nt = _touch(flags, touched, nt, idx, _TRAV)
+        # the walk in scalars: the axis with the smallest tmax steps (ties: lowest axis)
+        sx, sy, sz = step[0], step[1], step[2]
+        tx, ty, tz = tmax[0], tmax[1], tmax[2]
+        dx, dy, dz = tdel[0], tdel[1], tdel[2]
+        jx, jy, jz = js[0], js[1], js[2]
         for _ in range(n_steps):
-            best = -1
-            for a in range(3):
-                if step[a] != 0 and (best < 0 or tmax[a] < tmax[best]):
-                    best = a
-            if best == 0:
-                x += step[0]
-                tmax[0] += tdel[0]
-                if x == js[0]:
-                    step[0] = 0
-            elif best == 1:
-                y += step[1]
-                tmax[1] += tdel[1]
-                if y == js[1]:
-                    step[1] = 0
+            if sx != 0 and (sy == 0 or tx <= ty) and (sz == 0 or tx <= tz):
+                x += sx
+                tx += dx
+                if x == jx:
+                    sx = 0
+            elif sy != 0 and (sz == 0 or ty <= tz):
+                y += sy
+                ty += dy
+                if y == jy:
+                    sy = 0
             else:
-                z += step[2]
-                tmax[2] += tdel[2]
-                if z == js[2]:
-                    step[2] = 0
+                z += sz
+                tz += dz
+                if z == jz:
+                    sz = 0
             idx = (x * ny + y) * nz + z
-            if early_stop and (flags[idx] & _TRAV) != 0:
+            f = flags[idx]
+            if early_stop and (f & _TRAV) != 0:
                 break
-            nt = _touch(flags, touched, nt, idx, _TRAV)
+            if f == 0:
+                touched[nt] = idx
+                nt += 1
+            flags[idx] = f | _TRAV
     # one log-odds update per touched voxel; hits win
     d_occ = 0
     for k in range(nt):
@@ -708,6 +713,29 @@ def _query(points, inv_res, origin, logodds3, infl3, kind, l_occ, l_known, k_flo
         else:
             out[i] = 1
     return bad
+
+
+@njit(cache=True)
+def _march(position, dirs, dists, max_range, inv_res, origin, infl3, k_floor, k_ceil, out):
+    """Per ray: the first of ``dists`` along it whose point is planning-occupied (as
+    ``_query`` kind 1), else ``max_range``."""
+    nx, ny, nz = infl3.shape
+    for r in range(dirs.shape[0]):
+        out[r] = max_range
+        for i in range(dists.shape[0]):
+            px = position[0] + dirs[r, 0] * dists[i]
+            py = position[1] + dirs[r, 1] * dists[i]
+            pz = position[2] + dirs[r, 2] * dists[i]
+            gz = int(math.floor(pz * inv_res))
+            if gz < k_floor or gz >= k_ceil:
+                out[r] = dists[i]
+                break
+            x = int(math.floor(px * inv_res)) - origin[0]
+            y = int(math.floor(py * inv_res)) - origin[1]
+            z = gz - origin[2]
+            if 0 <= x < nx and 0 <= y < ny and 0 <= z < nz and infl3[x, y, z] > 0:
+                out[r] = dists[i]
+                break
 
 
 @njit(cache=True)
@@ -1068,6 +1096,23 @@ class LocalMap:
         above the ceiling voxel) and the floor (z below floor_m); unknown is free, and so is
         everything outside the window between floor and ceiling."""
         return self._ask(points, _Q_PLAN)
+
+    def first_occupied(self, position, directions, step_m: float, max_range_m: float):
+        """Per ray from ``position`` (3,) along unit ``directions`` (..., 3): the first
+        distance ``step_m, 2 step_m, ... <= max_range_m`` whose point is planning-occupied
+        (:meth:`occupied_inflated`), else ``max_range_m``. Shape ``directions.shape[:-1]``."""
+        pos = np.asarray(position, dtype=np.float64).reshape(3)
+        dirs, shape = _as_points(directions)
+        if not (np.all(np.isfinite(pos)) and np.all(np.isfinite(dirs))):
+            raise ValueError("position and directions must be finite")
+        if not (math.isfinite(step_m) and math.isfinite(max_range_m) and 0 < step_m
+                <= max_range_m):
+            raise ValueError(f"need 0 < step_m <= max_range_m, got {step_m}, {max_range_m}")
+        dists = np.arange(step_m, max_range_m + 1e-9, step_m)
+        out = np.empty(len(dirs))
+        _march(pos, dirs, dists, float(max_range_m), self._inv_res, self._origin, self._infl,
+               self.k_floor, self.k_ceil, out)
+        return _shaped(out, shape)
 
     def is_known(self, points):
         """Whether points (..., 3) lie in voxels that have been observed (and not

@@ -440,6 +440,27 @@ def forest_map():
     return m
 
 
+def test_first_occupied_is_the_sampled_march_over_planning_occupancy(forest_map):
+    from ft_sitl.navigation.navrl import cast_lidar, lidar_directions
+
+    m = forest_map
+    rng = np.random.default_rng(2)
+    dirs = rng.normal(size=(300, 3))
+    dirs /= np.linalg.norm(dirs, axis=1, keepdims=True)  # some rays reach floor or ceiling
+    dirs = dirs.reshape(100, 3, 3)  # cast_lidar takes (beams, elevations, 3)
+    for pos in (m.window_center_m, m.window_center_m + [1.0, 2.5, -0.3]):
+        for rays in (dirs, lidar_directions(0.3)):
+            got = m.first_occupied(pos, rays, 0.05, 4.0)
+            want = cast_lidar(m.occupied_inflated, pos, rays, max_range=4.0, step=0.05)
+            assert got.shape == rays.shape[:-1]
+            np.testing.assert_array_equal(got, want)
+            assert (got < 4.0).any() and (got == 4.0).any()
+    with pytest.raises(ValueError, match="step_m"):
+        m.first_occupied(m.window_center_m, dirs, 0.0, 4.0)
+    with pytest.raises(ValueError, match="finite"):
+        m.first_occupied([np.nan, 0, 0], dirs, 0.05, 4.0)
+
+
 def brute_distance(points: np.ndarray, sites: np.ndarray) -> np.ndarray:
     """Distance from each point to the nearest site, by trying them all."""
     out = np.empty(len(points))
