@@ -275,8 +275,8 @@ def run_trial(spec: TrialSpec, *, record: bool = False, navigator=None) -> Trial
         while True:
             now = fleet.time_us
             t_nav_us = now - t_nav0_us
-            s = fleet.state(0)
             if now >= next_nav_us:
+                s = fleet.state(0)
                 depth = None
                 if camera is not None and now >= next_cam_us:
                     depth = camera.capture(t_nav_us, fleet.sim.position(0),

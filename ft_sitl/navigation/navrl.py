@@ -58,6 +58,7 @@ import time
 from pathlib import Path
 
 import numpy as np
+from numba import njit
 
 from ft_sitl.autopilot.setpoints import Setpoint
 from ft_sitl.navigation.base import Navigator, Observation, Task, check_ranges, local_map_for
@@ -148,7 +149,8 @@ def lidar_directions(start_angle: float) -> np.ndarray:
 
 def cast_lidar(occupied, position, directions, max_range=LIDAR_RANGE_M, step=RAY_STEP_M):
     """Hit distance of each ray (clamped to ``max_range``): the first sample along the ray,
-    every ``step`` metres, that ``occupied`` (points (..., 3) -> bool) reports."""
+    every ``step`` metres, that ``occupied`` (points (..., 3) -> bool) reports. (The
+    navigator uses the map's compiled :meth:`LocalMap.first_occupied`, the same march.)"""
     d = np.arange(step, max_range + 1e-9, step)
     pts = position[None, None, None, :] + directions[:, :, None, :] * d[None, None, :, None]
     hit = occupied(pts)
@@ -166,35 +168,54 @@ def obstacle_in_range(lidar_deficit: np.ndarray) -> bool:
 
 # --- the safety shield ---------------------------------------------------------------------
 
+@njit(cache=True)
+def _dbscan_labels(points, eps2, min_points):
+    """Cluster label per point (-1: noise), clusters numbered in order of their lowest core
+    point, grown depth-first with neighbours in index order."""
+    n = points.shape[0]
+    near = np.zeros((n, n), np.bool_)
+    count = np.zeros(n, np.int64)
+    for i in range(n):
+        for j in range(n):
+            d2 = 0.0
+            for a in range(3):
+                t = points[i, a] - points[j, a]
+                d2 += t * t
+            if d2 <= eps2:
+                near[i, j] = True
+                count[i] += 1
+    label = np.full(n, -1, np.int64)
+    stack = np.empty(n + 1, np.int64)
+    n_clusters = 0
+    for i in range(n):
+        if count[i] < min_points or label[i] != -1:
+            continue
+        label[i] = n_clusters
+        stack[0] = i
+        top = 1
+        while top > 0:
+            top -= 1
+            j = stack[top]
+            if count[j] < min_points:
+                continue
+            for k in range(n):
+                if near[j, k] and label[k] == -1:
+                    label[k] = n_clusters
+                    stack[top] = k
+                    top += 1
+        n_clusters += 1
+    return label, n_clusters
+
+
 def dbscan(points: np.ndarray, eps: float = DBSCAN_EPS_M,
            min_points: int = DBSCAN_MIN_POINTS) -> list[np.ndarray]:
-    """Clusters of ``points`` (N, 3) as index arrays; noise is left out. A point's
+    """Clusters of ``points`` (N, 3) as sorted index arrays; noise is left out. A point's
     neighbourhood includes itself."""
-    n = len(points)
-    if n == 0:
+    pts = np.ascontiguousarray(points, dtype=np.float64).reshape(-1, 3)
+    if len(pts) == 0:
         return []
-    diff = points[:, None, :] - points[None, :, :]
-    near = np.einsum("ijk,ijk->ij", diff, diff) <= eps * eps
-    core = near.sum(axis=1) >= min_points
-    label = np.full(n, -1)
-    clusters = []
-    for i in np.flatnonzero(core):
-        if label[i] != -1:
-            continue
-        cid = len(clusters)
-        label[i] = cid
-        stack, members = [i], [i]
-        while stack:
-            j = stack.pop()
-            if not core[j]:
-                continue
-            for k in np.flatnonzero(near[j]):
-                if label[k] == -1:
-                    label[k] = cid
-                    members.append(int(k))
-                    stack.append(int(k))
-        clusters.append(np.array(sorted(members)))
-    return clusters
+    label, k = _dbscan_labels(pts, float(eps) * float(eps), int(min_points))
+    return [np.flatnonzero(label == c) for c in range(k)]
 
 
 def cluster_spheres(points: np.ndarray, position: np.ndarray) -> list[tuple[np.ndarray, float]]:
@@ -388,7 +409,7 @@ class NavRL(Navigator):
         self.settled += 1
         if self.settled <= SETTLE_PERIODS:
             return None
-        dist = cast_lidar(self.map.occupied_inflated, pos, self.rays)
+        dist = self.map.first_occupied(pos, self.rays, RAY_STEP_M, LIDAR_RANGE_M)
         deficit = LIDAR_RANGE_M - dist
         vel = np.asarray(obs.velocity, dtype=float)
         if obstacle_in_range(deficit):

@@ -28,6 +28,7 @@ from collections import OrderedDict
 from pathlib import Path
 
 import numpy as np
+from numba import njit
 
 LIDAR_H = 36  # horizontal beams, 10 deg apart
 LIDAR_V = 4  # vertical beams: -10, 0, 10, 20 deg
@@ -188,13 +189,34 @@ def load_checkpoint(path) -> dict[str, np.ndarray]:
 
 # --- the network ---------------------------------------------------------------------------
 
+@njit(cache=True)
+def _conv2d_kernel(x, w, b, sh, sw, ph, pw):
+    c_in, h, wd = x.shape
+    c_out, _, kh, kw = w.shape
+    ho = (h + 2 * ph - kh) // sh + 1
+    wo = (wd + 2 * pw - kw) // sw + 1
+    out = np.empty((c_out, ho, wo))
+    for o in range(c_out):
+        for i in range(ho):
+            for j in range(wo):
+                acc = 0.0
+                for c in range(c_in):
+                    for a in range(kh):
+                        r = i * sh + a - ph
+                        if r < 0 or r >= h:
+                            continue
+                        for e in range(kw):
+                            q = j * sw + e - pw
+                            if 0 <= q < wd:
+                                acc += x[c, r, q] * w[o, c, a, e]
+                out[o, i, j] = acc + b[o]
+    return out
+
+
 def _conv2d(x, w, b, stride, pad):
     """x (C, H, W), w (O, C, kh, kw) -> (O, H', W'), zero padding, cross-correlation."""
-    xp = np.pad(x, ((0, 0), (pad[0], pad[0]), (pad[1], pad[1])))
-    win = np.lib.stride_tricks.sliding_window_view(xp, w.shape[2:], axis=(1, 2))
-    win = win[:, :: stride[0], :: stride[1]]
-    out = np.tensordot(win, w, axes=([0, 3, 4], [1, 2, 3]))  # (H', W', O)
-    return np.moveaxis(out, -1, 0) + b[:, None, None]
+    return _conv2d_kernel(np.ascontiguousarray(x, dtype=np.float64), w, b,
+                          int(stride[0]), int(stride[1]), int(pad[0]), int(pad[1]))
 
 
 def _elu(x):

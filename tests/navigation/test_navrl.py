@@ -216,6 +216,39 @@ def test_dbscan_groups_near_points_and_drops_noise():
     np.testing.assert_allclose(centre, [0.15 + 0.15, 0, 0])  # pushed away from the vehicle
 
 
+def test_dbscan_finds_random_separated_clusters_in_input_order():
+    rng = np.random.default_rng(5)
+    blobs, pts = [], []
+    for c in range(6):  # chains of 2..9 points 0.15 m apart, blobs >= 2 m apart
+        start = np.array([3.0 * c, rng.uniform(-1, 1), rng.uniform(0, 2)])
+        step = rng.normal(size=3)
+        step *= 0.15 / np.linalg.norm(step)
+        blobs.append([start + i * step for i in range(int(rng.integers(2, 10)))])
+    noise = [np.array([3.0 * c + 1.5, 5.0, 5.0]) for c in range(4)]
+    pts = [p for b in blobs for p in b] + noise
+    order = rng.permutation(len(pts))
+    shuffled = np.array(pts)[order]
+    label_of = np.empty(len(pts), int)  # original index -> blob (-1 noise)
+    i = 0
+    for k, b in enumerate(blobs):
+        label_of[i:i + len(b)] = k
+        i += len(b)
+    label_of[i:] = -1
+    clusters = dbscan(shuffled)
+    assert len(clusters) == len(blobs)
+    seen = set()
+    for members in clusters:
+        assert list(members) == sorted(members)
+        blob = {int(label_of[order[m]]) for m in members}
+        assert len(blob) == 1 and -1 not in blob
+        assert len(members) == len(blobs[blob.pop()])
+        seen.update(int(m) for m in members)
+    # numbered by their lowest member; noise left out
+    assert [int(c[0]) for c in clusters] == sorted(int(c[0]) for c in clusters)
+    assert len(seen) == len(pts) - len(noise)
+    assert dbscan(np.zeros((0, 3))) == []
+
+
 def test_orca_shield_turns_a_colliding_command_and_keeps_a_safe_one():
     pos = np.zeros(3)
     obstacle = (np.array([2.0, 0.0, 0.0]), 0.5)
