@@ -1,18 +1,32 @@
 """Pieces the planners share: the depth camera they use, angle wrapping, a B-spline
-trajectory started at a time, yaw pursuit and the NaN guard on every setpoint."""
+trajectory started at a time, yaw pursuit, the NaN guard on every setpoint, and
+:class:`ReplanningPlanner`, the skeleton of the three optimisation planners (parameters,
+map, the pending plan and its latency, failure back-off and giving up)."""
 
 from __future__ import annotations
 
 import math
+import time
 
 import numpy as np
 
 from ft_sitl.autopilot.setpoints import Setpoint
+from ft_sitl.navigation.base import (
+    GiveUp,
+    Navigator,
+    Observation,
+    Task,
+    check_ranges,
+    local_map_for,
+)
 
 #: after a failed plan, the next attempt waits this long (simulated s), doubling with each
 #: further failure in a row up to RETRY_MAX_S
 RETRY_S = 0.05
 RETRY_MAX_S = 1.0
+#: failed attempts in a row from the same start with an unchanged map before a planner
+#: gives up (its deterministic planning would fail the same way until the timeout)
+GIVE_UP_AFTER = 8
 
 
 def wrap_angle(a: float) -> float:
@@ -89,3 +103,97 @@ def checked_setpoint(t: float, p, v, a, yaw: float, yaw_rate: float | None = Non
         raise FloatingPointError(f"non-finite setpoint at t = {t:.2f} s: p {p}, v {v}, "
                                  f"a {a}, yaw {yaw}, yaw rate {yaw_rate}")
     return Setpoint.position(p, velocity=v, acceleration=a, yaw=yaw, yaw_rate=yaw_rate)
+
+
+class ReplanningPlanner(Navigator):
+    """What EGO, Fast and PGO share around their own planning: the parameters every one of
+    them takes, the local map, the plan that takes effect ``latency_s`` after it was asked
+    for (or after its measured compute time), retries with a doubling back-off after a
+    failed plan, and giving up after :data:`GIVE_UP_AFTER` failures with nothing changed.
+
+    Subclasses implement ``_plan(obs)`` (ending in :meth:`_adopt_at` or :meth:`_failed`)
+    and their ``step``, which starts with :meth:`_perceive`.
+    """
+
+    rate_hz = 100.0
+
+    def __init__(self, max_acc_m_s2: float, latency_s: float, measured_latency: bool,
+                 camera: str, camera_width: int | None, camera_height: int | None,
+                 camera_rate_hz: float | None, ranges: tuple = ()):
+        """``ranges``: the subclass's own ``(name, value, lo, hi)`` checks."""
+        super().__init__()
+        check_ranges(("max_acc_m_s2", max_acc_m_s2, 0.5, 20.0), *ranges,
+                     ("latency_s", latency_s, 0.0, 1.0))
+        self.max_acc = float(max_acc_m_s2)
+        self.latency = float(latency_s)
+        self.measured_latency = bool(measured_latency)
+        self.camera = camera_config(camera, camera_width, camera_height, camera_rate_hz)
+
+    def reset(self, task: Task) -> None:
+        super().reset(task)
+        self.vmax = task.limits.max_speed_m_s
+        self.map = local_map_for(task, self.camera)
+        self.bounds = (np.array(task.bounds_min, dtype=float),
+                       np.array(task.bounds_max, dtype=float))
+        self.traj = None  # flying this (None: holding stop_at or the current position)
+        self.pending = None  # the next plan, in effect from pending_at
+        self.pending_at = math.inf
+        self.plan_now = True
+        self.from_rest = True  # the next plan starts at rest (at stop_at when set)
+        self.stop_at: np.ndarray | None = None
+        self.next_check = 0.0
+        self.yaw = float(task.start_yaw)
+        self.failures = 0  # failed plans in a row
+        self.retry_at = 0.0
+        self.fail_sig = None
+        self.same_failures = 0  # ... of them from the same start with the same map
+        self.compute_s: list[float] = []  # wall-clock compute time of every plan
+
+    def _perceive(self, obs: Observation) -> bool:
+        """Fuse the frame, if any, and switch to the pending plan when its time has come;
+        True when it switched."""
+        if obs.depth is not None:
+            self.map.fuse(obs.depth)
+        if self.pending is not None and obs.time_s >= self.pending_at:
+            self.traj, self.pending, self.pending_at = self.pending, None, math.inf
+            return True
+        return False
+
+    def _compute_time(self, t_start: float) -> float:
+        """Record the plan's compute time; the latency the plan takes effect after."""
+        dt = time.perf_counter() - t_start
+        self.compute_s.append(dt)
+        return dt if self.measured_latency else self.latency
+
+    def _adopt_at(self, traj, obs: Observation, latency: float) -> None:
+        """``traj`` (None: no new plan) takes effect ``latency`` s after ``obs``."""
+        self.plan_now = False
+        if traj is None:
+            return
+        traj.t0 = obs.time_s + latency
+        self.pending = traj
+        self.pending_at = obs.time_s + latency
+        self.from_rest = False
+
+    def _failed(self, obs: Observation, p0: np.ndarray, why: str, t_start: float) -> None:
+        """A failed plan from ``p0``: retry after a back-off doubling with each failure in a
+        row up to RETRY_MAX_S (a hovering vehicle's map barely changes between attempts);
+        GiveUp after GIVE_UP_AFTER of them from the same start with an unchanged map."""
+        self.failures += 1
+        sig = (self.map.occupied_count, tuple(np.round(np.asarray(p0) / 0.05).astype(int)))
+        self.same_failures = self.same_failures + 1 if sig == self.fail_sig else 1
+        self.fail_sig = sig
+        self._compute_time(t_start)
+        if self.same_failures >= GIVE_UP_AFTER:
+            raise GiveUp(f"no plan: {GIVE_UP_AFTER} attempts in a row failed ({why}) with an "
+                         f"unchanged map")
+        self.plan_now = True
+        self.retry_at = obs.time_s + min(RETRY_S * 2.0 ** (self.failures - 1), RETRY_MAX_S)
+
+    def _succeeded(self) -> None:
+        self.failures = self.same_failures = 0
+
+    def _hold(self, obs: Observation, yaw: float) -> Setpoint:
+        """Hover at stop_at (or where the vehicle is) while there is no trajectory."""
+        hold = self.stop_at if self.stop_at is not None else obs.position
+        return Setpoint.position(hold, yaw=yaw)

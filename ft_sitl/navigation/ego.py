@@ -44,23 +44,14 @@ view) at 15 Hz; ``camera="d435"`` selects the faithful 320 x 240 @ 30 Hz rays
 
 from __future__ import annotations
 
-import math
 import time
 
 import numpy as np
 
 from ft_sitl.autopilot.setpoints import Setpoint
-from ft_sitl.navigation.base import (
-    GiveUp,
-    Navigator,
-    Observation,
-    Task,
-    check_ranges,
-    local_map_for,
-)
-from ft_sitl.navigation.common import (  # noqa: F401 - camera_config, RETRY_* re-exported
-    RETRY_MAX_S,
-    RETRY_S,
+from ft_sitl.navigation.base import Observation, Task
+from ft_sitl.navigation.common import (  # noqa: F401 - camera_config re-exported
+    ReplanningPlanner,
     SplineTrajectory,
     camera_config,
     checked_setpoint,
@@ -73,9 +64,6 @@ DEFAULT_LATENCY_S = 0.01
 SAFETY_CHECK_HZ = 20.0
 #: EGO's control-point spacing of the initial path (m)
 CTRL_PT_DIST_M = 0.4
-#: failed plans in a row from the same state with the same map before giving up ("no
-#: plan": the trial ends as a timeout, as it would after 90 s of the same failures)
-GIVE_UP_AFTER = 8
 
 
 def _resample(path: np.ndarray, spacing: float, min_points: int = 7) -> np.ndarray:
@@ -95,11 +83,10 @@ def _resample(path: np.ndarray, spacing: float, min_points: int = 7) -> np.ndarr
     return np.column_stack([np.interp(s, cum, path[:, k]) for k in range(3)])
 
 
-class EgoPlanner(Navigator):
+class EgoPlanner(ReplanningPlanner):
     """EGO-Planner (Zhou et al. 2021): ESDF-free gradient-based local planning."""
 
     name = "ego"
-    rate_hz = 100.0
 
     def __init__(self, max_acc_m_s2: float = 3.0, planning_horizon_m: float = 7.5,
                  replan_threshold_m: float = 1.5, no_replan_threshold_m: float = 2.0,
@@ -107,21 +94,16 @@ class EgoPlanner(Navigator):
                  measured_latency: bool = False, camera: str = "benchmark",
                  camera_width: int | None = None, camera_height: int | None = None,
                  camera_rate_hz: float | None = None):
-        super().__init__()
-        check_ranges(("max_acc_m_s2", max_acc_m_s2, 0.5, 20.0),
-                     ("planning_horizon_m", planning_horizon_m, 2.0, 20.0),
-                     ("replan_threshold_m", replan_threshold_m, 0.2, 10.0),
-                     ("no_replan_threshold_m", no_replan_threshold_m, 0.0, 10.0),
-                     ("emergency_time_s", emergency_time_s, 0.0, 5.0),
-                     ("latency_s", latency_s, 0.0, 1.0))
-        self.max_acc = float(max_acc_m_s2)
+        super().__init__(max_acc_m_s2, latency_s, measured_latency, camera, camera_width,
+                         camera_height, camera_rate_hz,
+                         (("planning_horizon_m", planning_horizon_m, 2.0, 20.0),
+                          ("replan_threshold_m", replan_threshold_m, 0.2, 10.0),
+                          ("no_replan_threshold_m", no_replan_threshold_m, 0.0, 10.0),
+                          ("emergency_time_s", emergency_time_s, 0.0, 5.0)))
         self.horizon = float(planning_horizon_m)
         self.replan_threshold = float(replan_threshold_m)
         self.no_replan_threshold = float(no_replan_threshold_m)
         self.emergency_time = float(emergency_time_s)
-        self.latency = float(latency_s)
-        self.measured_latency = bool(measured_latency)
-        self.camera = camera_config(camera, camera_width, camera_height, camera_rate_hz)
 
     # --- set-up ---------------------------------------------------------------------------
     def reset(self, task: Task) -> None:
@@ -130,28 +112,11 @@ class EgoPlanner(Navigator):
         from ft_sitl.navigation.minsnap import global_reference
 
         super().reset(task)
-        self.vmax = task.limits.max_speed_m_s
-        self.map = local_map_for(task, self.camera)
-        lo = np.array(task.bounds_min, dtype=float)
-        hi = np.array(task.bounds_max, dtype=float)
-        self.grid = OccupancyView.from_map(self.map, bounds=(lo, hi))
+        self.grid = OccupancyView.from_map(self.map, bounds=self.bounds)
         self.optimizer = EgoOptimizer(self.grid, EgoParams(max_vel=self.vmax,
                                                            max_acc=self.max_acc))
         self.reference = global_reference(task.start, task.goal, self.vmax)
         self.progress_t = 0.0
-        self.traj: SplineTrajectory | None = None
-        self.pending: SplineTrajectory | None = None
-        self.pending_at = math.inf
-        self.plan_now = True
-        self.from_rest = True
-        self.stop_at: np.ndarray | None = None
-        self.next_check = 0.0
-        self.yaw = task.start_yaw
-        self.failures = 0
-        self.retry_at = 0.0
-        self.fail_sig = None
-        self.same_failures = 0
-        self.compute_s: list[float] = []
 
     # --- planning ---------------------------------------------------------------------------
     def _plan(self, obs: Observation) -> None:
@@ -200,38 +165,15 @@ class EgoPlanner(Navigator):
         spline = UniformBSpline.fit(points, dt, v0, target.velocity, a0, np.zeros(3))
         res = self.optimizer.optimize(spline, v0, target.velocity, a0, np.zeros(3))
         if not res.success:
-            self.failures += 1
-            sig = (self.map.occupied_count, tuple(np.round(p0 / 0.05).astype(int)))
-            self.same_failures = self.same_failures + 1 if sig == self.fail_sig else 1
-            self.fail_sig = sig
-            if self.same_failures >= GIVE_UP_AFTER:
-                # the same map, the same start state: the deterministic optimiser would
-                # fail the same way until the trial times out
-                raise GiveUp(f"no plan: {GIVE_UP_AFTER} attempts in a row failed "
-                             f"({res.status.value}) with an unchanged map")
-            self.compute_s.append(time.perf_counter() - t_start)
-            # try again, after RETRY_S doubling with each failure in a row up to
-            # RETRY_MAX_S (a hovering vehicle's map barely changes between attempts)
-            self.plan_now = True
-            self.retry_at = obs.time_s + min(RETRY_S * 2.0 ** (self.failures - 1),
-                                             RETRY_MAX_S)
+            self._failed(obs, p0, res.status.value, t_start)
             return
-        self.failures = self.same_failures = 0
+        self._succeeded()
         self._adopt(SplineTrajectory(res.spline, 0.0), obs, t_start)
 
     def _adopt(self, traj: SplineTrajectory | None, obs: Observation, t_start: float) -> None:
-        dt = time.perf_counter() - t_start
-        self.compute_s.append(dt)
-        lat = dt if self.measured_latency else self.latency
-        if traj is None:
-            self.plan_now = False
-            return
-        traj.t0 = obs.time_s + lat
-        self.pending = traj
-        self.pending_at = obs.time_s + lat
-        self.plan_now = False
-        self.from_rest = False
-        self.stop_at = None
+        self._adopt_at(traj, obs, self._compute_time(t_start))
+        if traj is not None:
+            self.stop_at = None
 
     def _collision_ahead(self, t: float) -> float | None:
         """Seconds until the current trajectory's first 2/3 meets an occupied voxel."""
@@ -248,10 +190,7 @@ class EgoPlanner(Navigator):
     # --- the step ---------------------------------------------------------------------------
     def step(self, obs: Observation) -> Setpoint:
         t = obs.time_s
-        if obs.depth is not None:
-            self.map.fuse(obs.depth)
-        if self.pending is not None and t >= self.pending_at:
-            self.traj, self.pending, self.pending_at = self.pending, None, math.inf
+        self._perceive(obs)
         goal_dist = float(np.linalg.norm(self.task.goal - obs.position))
         if self.traj is not None and self.pending is None and self.stop_at is None:
             moved = float(np.linalg.norm(obs.position - self.traj.start))
@@ -273,8 +212,7 @@ class EgoPlanner(Navigator):
     def _setpoint(self, obs: Observation) -> Setpoint:
         t = obs.time_s
         if self.traj is None:
-            hold = self.stop_at if self.stop_at is not None else obs.position
-            return Setpoint.position(hold, yaw=self.yaw)
+            return self._hold(obs, self.yaw)
         p, v, a = self.traj.state(t)
         self.yaw = pursue_yaw(self.yaw, self.traj.state(t + 1.0)[0] - p, self.rate_hz)
         if t > self.traj.end_time:

@@ -88,21 +88,8 @@ import time
 import numpy as np
 
 from ft_sitl.autopilot.setpoints import Setpoint
-from ft_sitl.navigation.base import (
-    GiveUp,
-    Navigator,
-    Observation,
-    Task,
-    check_ranges,
-    local_map_for,
-)
-from ft_sitl.navigation.common import (
-    RETRY_MAX_S,
-    RETRY_S,
-    camera_config,
-    checked_setpoint,
-    wrap_angle,
-)
+from ft_sitl.navigation.base import Observation, Task
+from ft_sitl.navigation.common import ReplanningPlanner, checked_setpoint, wrap_angle
 
 #: estimated time from state to command of one Fast-Planner replan in the original C++ on
 #: a desktop CPU: kinodynamic search a few ms, B-spline optimisation <= 300 evaluations
@@ -120,7 +107,6 @@ CHECK_RADIUS_M = 6.0
 CTRL_PT_DIST_M = 0.5
 #: no plan when the goal is this close to the start state (the original: "Close goal")
 CLOSE_GOAL_M = 0.2
-GIVE_UP_AFTER = 8
 
 
 class _Traj:
@@ -172,11 +158,10 @@ def first_collision(pos, tau0: float, occupied, step_s: float = CHECK_STEP_S,
     return float(t[hit[0]] - tau0) if hit.size else None
 
 
-class FastPlanner(Navigator):
+class FastPlanner(ReplanningPlanner):
     """Fast-Planner (Zhou et al. 2019): kinodynamic A* + ESDF B-spline optimisation."""
 
     name = "fast"
-    rate_hz = 100.0
 
     def __init__(self, max_acc_m_s2: float = 2.0, planning_horizon_m: float = 7.0,
                  replan_threshold_m: float = 1.5, no_replan_threshold_m: float = 2.0,
@@ -184,50 +169,28 @@ class FastPlanner(Navigator):
                  measured_latency: bool = False, camera: str = "benchmark",
                  camera_width: int | None = None, camera_height: int | None = None,
                  camera_rate_hz: float | None = None):
-        super().__init__()
-        check_ranges(("max_acc_m_s2", max_acc_m_s2, 0.5, 20.0),
-                     ("planning_horizon_m", planning_horizon_m, 2.0, 20.0),
-                     ("replan_threshold_m", replan_threshold_m, 0.2, 10.0),
-                     ("no_replan_threshold_m", no_replan_threshold_m, 0.0, 10.0),
-                     ("emergency_time_s", emergency_time_s, 0.0, 5.0),
-                     ("latency_s", latency_s, 0.0, 1.0))
-        self.max_acc = float(max_acc_m_s2)
+        super().__init__(max_acc_m_s2, latency_s, measured_latency, camera, camera_width,
+                         camera_height, camera_rate_hz,
+                         (("planning_horizon_m", planning_horizon_m, 2.0, 20.0),
+                          ("replan_threshold_m", replan_threshold_m, 0.2, 10.0),
+                          ("no_replan_threshold_m", no_replan_threshold_m, 0.0, 10.0),
+                          ("emergency_time_s", emergency_time_s, 0.0, 5.0)))
         self.horizon = float(planning_horizon_m)
         self.replan_threshold = float(replan_threshold_m)
         self.no_replan_threshold = float(no_replan_threshold_m)
         self.emergency_time = float(emergency_time_s)
-        self.latency = float(latency_s)
-        self.measured_latency = bool(measured_latency)
-        self.camera = camera_config(camera, camera_width, camera_height, camera_rate_hz)
 
     # --- set-up ---------------------------------------------------------------------------
     def reset(self, task: Task) -> None:
         from ft_sitl.navigation.fast_optim import FastOptimizer, FastParams
         from ft_sitl.navigation.kino_astar import KinoAstarParams
 
-        super().reset(task)
-        self.vmax = task.limits.max_speed_m_s
-        self.map = local_map_for(task, self.camera)
-        self.bounds = (np.array(task.bounds_min, dtype=float),
-                       np.array(task.bounds_max, dtype=float))
+        super().reset(task)  # yaw: continuous (unwrapped) here
         self.kino_params = KinoAstarParams(max_vel=self.vmax, max_acc=self.max_acc,
                                            horizon=self.horizon)
         self.optimizer = FastOptimizer(FastParams(max_vel=self.vmax, max_acc=self.max_acc))
-        self.traj: _Traj | None = None
-        self.pending: _Traj | None = None
-        self.pending_at = math.inf
-        self.plan_now = True
-        self.from_rest = True
-        self.stop_at: np.ndarray | None = None
-        self.next_check = 0.0
-        self.yaw = float(task.start_yaw)  # continuous (unwrapped)
-        self.failures = 0
-        self.retry_at = 0.0
-        self.fail_sig = None
-        self.same_failures = 0
         self.emergency = False
         self.stops = 0
-        self.compute_s: list[float] = []
         self.plan_log: list[dict] = []
 
     # --- planning ---------------------------------------------------------------------------
@@ -299,7 +262,7 @@ class FastPlanner(Navigator):
                 return
             log["collides_s"] = hit
         yaw = plan_yaw(pos, yaw0)
-        self.failures = self.same_failures = 0
+        self._succeeded()
         self._adopt(_Traj(pos, yaw, 0.0), obs, t_start, log)
 
     def _fail(self, obs: Observation, p0: np.ndarray, why: str, log: dict,
@@ -312,39 +275,20 @@ class FastPlanner(Navigator):
             self.traj = None
             self.stops += 1
         self.emergency = False
-        self.failures += 1
-        sig = (self.map.occupied_count, tuple(np.round(p0 / 0.05).astype(int)))
-        self.same_failures = self.same_failures + 1 if sig == self.fail_sig else 1
-        self.fail_sig = sig
-        dt = time.perf_counter() - t_start
-        self.compute_s.append(dt)
-        log.update(total_s=dt, failed=why)
+        log.update(total_s=time.perf_counter() - t_start, failed=why)
         self.plan_log.append(log)
-        if self.same_failures >= GIVE_UP_AFTER:
-            # the same map, the same start state: the deterministic planner would fail the
-            # same way until the trial times out
-            raise GiveUp(f"no plan: {GIVE_UP_AFTER} attempts in a row failed ({why}) with an "
-                         f"unchanged map")
-        self.plan_now = True
-        self.retry_at = obs.time_s + min(RETRY_S * 2.0 ** (self.failures - 1), RETRY_MAX_S)
+        self._failed(obs, p0, why, t_start)
 
     def _adopt(self, traj: _Traj | None, obs: Observation, t_start: float,
                log: dict | None = None) -> None:
-        dt = time.perf_counter() - t_start
-        self.compute_s.append(dt)
+        latency = self._compute_time(t_start)
         if log is not None:
-            log["total_s"] = dt
+            log["total_s"] = self.compute_s[-1]
             self.plan_log.append(log)
-        self.plan_now = False
         self.emergency = False
-        if traj is None:
-            return
-        lat = dt if self.measured_latency else self.latency
-        traj.t0 = obs.time_s + lat
-        self.pending = traj
-        self.pending_at = obs.time_s + lat
-        self.from_rest = False
-        self.stop_at = None
+        self._adopt_at(traj, obs, latency)
+        if traj is not None:
+            self.stop_at = None
 
     def _collision_ahead(self, t: float) -> float | None:
         """Seconds until the current trajectory (checked as the original: 6 m ahead) meets
@@ -358,10 +302,7 @@ class FastPlanner(Navigator):
     # --- the step ---------------------------------------------------------------------------
     def step(self, obs: Observation) -> Setpoint:
         t = obs.time_s
-        if obs.depth is not None:
-            self.map.fuse(obs.depth)
-        if self.pending is not None and t >= self.pending_at:
-            self.traj, self.pending, self.pending_at = self.pending, None, math.inf
+        self._perceive(obs)
         if self.traj is not None and self.pending is None and self.stop_at is None:
             # the original measures along the trajectory, not at the vehicle
             p_traj = self.traj.state(t)[0]
@@ -386,10 +327,9 @@ class FastPlanner(Navigator):
     def _setpoint(self, obs: Observation) -> Setpoint:
         t = obs.time_s
         if self.traj is None:
-            hold = self.stop_at if self.stop_at is not None else obs.position
             if not math.isfinite(self.yaw):
                 raise FloatingPointError(f"non-finite yaw at t = {t:.2f} s")
-            return Setpoint.position(hold, yaw=wrap_angle(self.yaw))
+            return self._hold(obs, wrap_angle(self.yaw))
         p, v, a = self.traj.state(t)
         y = self.traj.yaw_state(t)
         yaw, yaw_rate = float(y[0]), float(y[1])

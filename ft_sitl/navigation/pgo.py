@@ -61,20 +61,11 @@ import numpy as np
 from numba import njit
 
 from ft_sitl.autopilot.setpoints import Setpoint
-from ft_sitl.navigation.base import (
-    GiveUp,
-    Navigator,
-    Observation,
-    Task,
-    check_ranges,
-    local_map_for,
-)
+from ft_sitl.navigation.base import Observation, Task
 from ft_sitl.navigation.bspline import UniformBSpline
 from ft_sitl.navigation.common import (
-    RETRY_MAX_S,
-    RETRY_S,
+    ReplanningPlanner,
     SplineTrajectory,
-    camera_config,
     checked_setpoint,
     pursue_yaw,
 )
@@ -108,8 +99,6 @@ SAFETY_STEP_S = 0.02
 YAW_LOOKAHEAD_S = 2.0
 #: the fewest knot spans of a fitted segment (3 fixed control points at each end + >= 1)
 MIN_SEGMENTS = 4
-#: failed plans in a row from the same state with the same map before giving up
-GIVE_UP_AFTER = 8
 ORDER = 3
 
 
@@ -615,11 +604,10 @@ class _Reference:
 # ---------------------------------------------------------------------------------------
 # the navigator
 # ---------------------------------------------------------------------------------------
-class PgoPlanner(Navigator):
+class PgoPlanner(ReplanningPlanner):
     """Fast-Planner's topological replanning (Zhou et al. 2020): path-guided optimisation."""
 
     name = "pgo"
-    rate_hz = 100.0
 
     def __init__(self, max_acc_m_s2: float = 2.0, local_segment_m: float = 7.0,
                  replan_period_s: float = 0.5, no_replan_threshold_m: float = 2.0,
@@ -627,52 +615,30 @@ class PgoPlanner(Navigator):
                  latency_s: float = DEFAULT_LATENCY_S, measured_latency: bool = False,
                  camera: str = "benchmark", camera_width: int | None = None,
                  camera_height: int | None = None, camera_rate_hz: float | None = None):
-        super().__init__()
-        check_ranges(("max_acc_m_s2", max_acc_m_s2, 0.5, 20.0),
-                     ("local_segment_m", local_segment_m, 2.0, 20.0),
-                     ("replan_period_s", replan_period_s, 0.05, 5.0),
-                     ("no_replan_threshold_m", no_replan_threshold_m, 0.0, 10.0),
-                     ("stop_distance_m", stop_distance_m, 0.0, 5.0),
-                     ("ctrl_pt_dist_m", ctrl_pt_dist_m, 0.1, 2.0),
-                     ("latency_s", latency_s, 0.0, 1.0))
-        self.max_acc = float(max_acc_m_s2)
+        super().__init__(max_acc_m_s2, latency_s, measured_latency, camera, camera_width,
+                         camera_height, camera_rate_hz,
+                         (("local_segment_m", local_segment_m, 2.0, 20.0),
+                          ("replan_period_s", replan_period_s, 0.05, 5.0),
+                          ("no_replan_threshold_m", no_replan_threshold_m, 0.0, 10.0),
+                          ("stop_distance_m", stop_distance_m, 0.0, 5.0),
+                          ("ctrl_pt_dist_m", ctrl_pt_dist_m, 0.1, 2.0)))
         self.segment_len = float(local_segment_m)
         self.replan_period = float(replan_period_s)
         self.no_replan_threshold = float(no_replan_threshold_m)
         self.stop_distance = float(stop_distance_m)
         self.ctrl_pt_dist = float(ctrl_pt_dist_m)
-        self.latency = float(latency_s)
-        self.measured_latency = bool(measured_latency)
-        self.camera = camera_config(camera, camera_width, camera_height, camera_rate_hz)
 
     # --- set-up ---------------------------------------------------------------------------
     def reset(self, task: Task) -> None:
         from ft_sitl.navigation.astar import OccupancyView
 
         super().reset(task)
-        self.vmax = task.limits.max_speed_m_s
         self.params = PgoParams(max_vel=self.vmax, max_acc=self.max_acc,
                                 ctrl_pt_dist=self.ctrl_pt_dist)
         self.topo_params = TopoParams()
-        self.map = local_map_for(task, self.camera)
-        self.bounds = (np.array(task.bounds_min, dtype=float),
-                       np.array(task.bounds_max, dtype=float))
         self.view = OccupancyView.from_map(self.map, bounds=self.bounds)
         self.rng = task.rng
         self.ref: _Reference | None = None
-        self.traj: SplineTrajectory | None = None
-        self.pending: SplineTrajectory | None = None
-        self.pending_at = math.inf
-        self.plan_now = True
-        self.from_rest = True
-        self.stop_at: np.ndarray | None = None
-        self.next_check = 0.0
-        self.yaw = task.start_yaw
-        self.failures = 0
-        self.retry_at = 0.0
-        self.fail_sig = None
-        self.same_failures = 0
-        self.compute_s: list[float] = []
         self.stats = {"free": 0, "topo": 0, "ends_in_obstacle": 0, "no_path": 0,
                       "all_collide": 0, "stops": 0, "safety_replans": 0}
         self.last_plan: PgoPlan | None = None
@@ -712,35 +678,20 @@ class PgoPlanner(Navigator):
         self.last_plan = plan
         self.stats[plan.status] += 1
         if not plan.success:
-            self.failures += 1
-            p0 = ref.evaluate(t_eff)
-            sig = (self.map.occupied_count, tuple(np.round(p0 / 0.05).astype(int)))
-            self.same_failures = self.same_failures + 1 if sig == self.fail_sig else 1
-            self.fail_sig = sig
-            self.compute_s.append(time.perf_counter() - t_start)
-            if self.same_failures >= GIVE_UP_AFTER:
-                raise GiveUp(f"no plan: {GIVE_UP_AFTER} attempts in a row failed "
-                             f"({plan.status}) with an unchanged map")
-            self.plan_now = True
-            self.retry_at = obs.time_s + min(RETRY_S * 2.0 ** (self.failures - 1),
-                                             RETRY_MAX_S)
+            self._failed(obs, ref.evaluate(t_eff), plan.status, t_start)
             return
-        self.failures = self.same_failures = 0
+        self._succeeded()
         self._adopt(plan.spline, obs, t_start, duration)
 
     def _adopt(self, spline: UniformBSpline | None, obs: Observation, t_start: float,
                seg_duration: float = 0.0) -> None:
-        dt = time.perf_counter() - t_start
-        self.compute_s.append(dt)
-        lat = dt if self.measured_latency else self.latency
-        self.plan_now = False
-        if spline is None:
-            return
-        t0 = obs.time_s + lat
-        self.ref.set_local(spline, t0, spline.duration - seg_duration)
-        self.pending = SplineTrajectory(spline, t0)
-        self.pending_at = t0
-        self.from_rest = False
+        latency = self._compute_time(t_start)
+        traj = None
+        if spline is not None:
+            t0 = obs.time_s + latency
+            self.ref.set_local(spline, t0, spline.duration - seg_duration)
+            traj = SplineTrajectory(spline, t0)
+        self._adopt_at(traj, obs, latency)
 
     def _collision_distance(self, t: float) -> float | None:
         """Fast-Planner's ``checkTrajCollision``: the current trajectory sampled every
@@ -769,10 +720,7 @@ class PgoPlanner(Navigator):
     # --- the step ---------------------------------------------------------------------------
     def step(self, obs: Observation) -> Setpoint:
         t = obs.time_s
-        if obs.depth is not None:
-            self.map.fuse(obs.depth)
-        if self.pending is not None and t >= self.pending_at:
-            self.traj, self.pending, self.pending_at = self.pending, None, math.inf
+        if self._perceive(obs):
             self.stop_at = None  # a stopped vehicle holds its point until the new plan acts
         if self.traj is not None and self.pending is None and self.stop_at is None:
             if t >= self.traj.t0 + self.replan_period:
@@ -801,8 +749,7 @@ class PgoPlanner(Navigator):
     def _setpoint(self, obs: Observation) -> Setpoint:
         t = obs.time_s
         if self.traj is None:
-            hold = self.stop_at if self.stop_at is not None else obs.position
-            return Setpoint.position(hold, yaw=self.yaw)
+            return self._hold(obs, self.yaw)
         p, v, a = self.traj.state(t)
         self.yaw = pursue_yaw(self.yaw, self.traj.state(t + YAW_LOOKAHEAD_S)[0] - p,
                               self.rate_hz)

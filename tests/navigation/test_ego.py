@@ -2,14 +2,14 @@
 
 import math
 
-import numpy as np
 import pytest
 
 from ft_sitl.autopilot.cascade import SP_POS
 from ft_sitl.missions.trial import TrialSpec, run_trial
-from ft_sitl.navigation.base import Limits, Observation, Task
 from ft_sitl.navigation.ego import EgoPlanner, camera_config
 from ft_sitl.navigation.registry import create
+
+from .planner_util import obs_at, open_task
 
 AGILE = "0.98kg-EGO Planner DIY"
 
@@ -57,34 +57,22 @@ def test_gives_up_in_a_dead_end_instead_of_hovering_90_s():
     assert row["nav_time_s"] < 60
 
 
-def _task():
-    return Task(start=np.array([0.0, 0.0, 1.5]), start_yaw=0.0,
-                goal=np.array([20.0, 0.0, 1.5]), limits=Limits(),
-                bounds_min=np.array([-5.0, -10.0, 0.0]), bounds_max=np.array([30.0, 10.0, 3.0]),
-                collision_radius_m=0.2, twr_max=3.0, alpha_xy_max=200.0, alpha_z_max=20.0)
-
-
-def _obs(t, p=(0.0, 0.0, 1.5)):
-    return Observation(time_s=t, position=np.array(p), velocity=np.zeros(3), yaw=0.0,
-                       attitude=np.array([1.0, 0.0, 0.0, 0.0]), angular_velocity=np.zeros(3))
-
-
 def test_a_plan_acts_only_after_its_latency():
     nav = EgoPlanner(latency_s=0.2)
-    nav.reset(_task())
-    sp0 = nav.step(_obs(0.0))
+    nav.reset(open_task())
+    sp0 = nav.step(obs_at(0.0))
     assert nav.pending is not None and nav.traj is None  # planned, not yet in force
     assert sp0.row[SP_POS:SP_POS + 3] == pytest.approx([0.0, 0.0, 1.5])  # holds meanwhile
-    nav.step(_obs(0.19))
+    nav.step(obs_at(0.19))
     assert nav.traj is None
-    nav.step(_obs(0.2))
+    nav.step(obs_at(0.2))
     assert nav.traj is not None and nav.traj.t0 == pytest.approx(0.2)
 
 
 def test_never_commands_nan():
     nav = EgoPlanner(latency_s=0.0)
-    nav.reset(_task())
-    nav.step(_obs(0.0))
+    nav.reset(open_task())
+    nav.step(obs_at(0.0))
     nav.yaw = math.nan
     with pytest.raises(FloatingPointError):
-        nav.step(_obs(0.01))
+        nav.step(obs_at(0.01))

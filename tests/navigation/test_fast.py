@@ -10,7 +10,6 @@ import trimesh
 
 from ft_sitl.autopilot.cascade import SP_POS
 from ft_sitl.missions.trial import TrialSpec, run_trial
-from ft_sitl.navigation.base import Limits, Observation, Task
 from ft_sitl.navigation.bspline import UniformBSpline
 from ft_sitl.navigation.fast import FastPlanner, first_collision
 from ft_sitl.navigation.fast_optim import (
@@ -29,6 +28,8 @@ from ft_sitl.navigation.fast_optim import (
 from ft_sitl.navigation.mapping import LocalMap
 from ft_sitl.navigation.registry import available
 from ft_sitl.scenarios.camera import CameraConfig, DepthCamera
+
+from .planner_util import obs_at, open_task
 
 AGILE = "0.98kg-EGO Planner DIY"
 RES = 0.1
@@ -201,18 +202,6 @@ def test_yaw_points_ahead_continuously_from_the_start_state():
 
 
 # --- the navigator ----------------------------------------------------------------------
-def _task():
-    return Task(start=np.array([0.0, 0.0, 1.5]), start_yaw=0.0,
-                goal=np.array([20.0, 0.0, 1.5]), limits=Limits(),
-                bounds_min=np.array([-5.0, -10.0, 0.0]), bounds_max=np.array([30.0, 10.0, 3.0]),
-                collision_radius_m=0.2, twr_max=3.0, alpha_xy_max=200.0, alpha_z_max=20.0)
-
-
-def _obs(t, p=(0.0, 0.0, 1.5)):
-    return Observation(time_s=t, position=np.array(p), velocity=np.zeros(3), yaw=0.0,
-                       attitude=np.array([1.0, 0.0, 0.0, 0.0]), angular_velocity=np.zeros(3))
-
-
 def test_parameters_are_checked():
     nav = FastPlanner(latency_s=0.05, camera="d435")
     assert nav.name == "fast" and nav.rate_hz == 100.0 and nav.latency == 0.05
@@ -225,13 +214,13 @@ def test_parameters_are_checked():
 
 def test_a_plan_acts_only_after_its_latency():
     nav = FastPlanner(latency_s=0.2)
-    nav.reset(_task())
-    sp0 = nav.step(_obs(0.0))
+    nav.reset(open_task())
+    sp0 = nav.step(obs_at(0.0))
     assert nav.pending is not None and nav.traj is None  # planned, not yet in force
     assert sp0.row[SP_POS:SP_POS + 3] == pytest.approx([0.0, 0.0, 1.5])  # holds meanwhile
-    nav.step(_obs(0.19))
+    nav.step(obs_at(0.19))
     assert nav.traj is None
-    nav.step(_obs(0.2))
+    nav.step(obs_at(0.2))
     assert nav.traj is not None and nav.traj.t0 == pytest.approx(0.2)
     # planned from rest at the start toward the goal, within the limits after re-timing
     tr = nav.traj
@@ -240,25 +229,25 @@ def test_a_plan_acts_only_after_its_latency():
     assert np.abs(tr.pos.velocity_control_points()).max() < 4.0 * 1.1
     assert first_collision(tr.pos, 0.0, nav.map.occupied_inflated) is None
     nav2 = FastPlanner(latency_s=0.0, measured_latency=True)
-    nav2.reset(_task())
-    nav2.step(_obs(0.0))
+    nav2.reset(open_task())
+    nav2.step(obs_at(0.0))
     assert nav2.pending.t0 == pytest.approx(nav2.compute_s[0])
 
 
 def test_never_commands_nan():
     nav = FastPlanner(latency_s=0.2)
-    nav.reset(_task())
-    nav.step(_obs(0.0))
+    nav.reset(open_task())
+    nav.step(obs_at(0.0))
     nav.yaw = math.nan  # holding (the plan is pending) with a broken yaw
     with pytest.raises(FloatingPointError):
-        nav.step(_obs(0.01))
+        nav.step(obs_at(0.01))
     nav = FastPlanner(latency_s=0.0)
-    nav.reset(_task())
-    nav.step(_obs(0.0))
-    nav.step(_obs(0.01))
+    nav.reset(open_task())
+    nav.step(obs_at(0.0))
+    nav.step(obs_at(0.01))
     nav.traj.state = lambda t: (np.full(3, np.nan), np.zeros(3), np.zeros(3))
     with pytest.raises(FloatingPointError):
-        nav.step(_obs(0.02))
+        nav.step(obs_at(0.02))
 
 
 def test_gives_up_after_repeated_identical_failures():
@@ -266,12 +255,12 @@ def test_gives_up_after_repeated_identical_failures():
     from ft_sitl.navigation.kino_astar import KinoAstarParams
 
     nav = FastPlanner()
-    nav.reset(_task())
+    nav.reset(open_task())
     nav.kino_params = KinoAstarParams(max_vel=4.0, max_expansions=1)  # never finds a path
     t = 0.0
     with pytest.raises(GiveUp, match="no plan"):
         while t < 10.0:
-            nav.step(_obs(t))
+            nav.step(obs_at(t))
             t = round(t + 0.01, 2)
     # retried with back-off (0.05 s doubling to 1 s), 8 failures: ~3.6 s, not 90
     assert 3.0 < t < 4.0 and len(nav.compute_s) == 8

@@ -10,7 +10,6 @@ import trimesh
 from ft_sitl.autopilot.cascade import SP_POS
 from ft_sitl.missions.trial import TrialSpec, run_trial
 from ft_sitl.navigation.astar import OccupancyView
-from ft_sitl.navigation.base import Limits, Observation, Task
 from ft_sitl.navigation.bspline import UniformBSpline
 from ft_sitl.navigation.mapping import LocalMap
 from ft_sitl.navigation.pgo import (
@@ -33,6 +32,8 @@ from ft_sitl.navigation.topo import (
     shortcut_path,
 )
 from ft_sitl.scenarios.camera import CameraConfig, DepthCamera
+
+from .planner_util import obs_at, open_task
 
 AGILE = "0.98kg-EGO Planner DIY"
 RES = 0.1
@@ -236,18 +237,6 @@ def test_the_esdf_snapshot_reads_the_local_map_like_the_map():
 
 
 # ---- the navigator -----------------------------------------------------------------------
-def _task():
-    return Task(start=np.array([0.0, 0.0, 1.5]), start_yaw=0.0,
-                goal=np.array([20.0, 0.0, 1.5]), limits=Limits(),
-                bounds_min=np.array([-5.0, -10.0, 0.0]), bounds_max=np.array([30.0, 10.0, 3.0]),
-                collision_radius_m=0.2, twr_max=3.0, alpha_xy_max=200.0, alpha_z_max=20.0)
-
-
-def _obs(t, p=(0.0, 0.0, 1.5)):
-    return Observation(time_s=t, position=np.array(p), velocity=np.zeros(3), yaw=0.0,
-                       attitude=np.array([1.0, 0.0, 0.0, 0.0]), angular_velocity=np.zeros(3))
-
-
 def test_parameters_are_checked():
     nav = PgoPlanner(latency_s=0.02, camera="d435")
     assert nav.name == "pgo" and nav.rate_hz == 100.0 and nav.latency == 0.02
@@ -261,26 +250,26 @@ def test_parameters_are_checked():
 
 def test_a_plan_acts_only_after_its_latency_and_replans_every_half_second():
     nav = PgoPlanner(latency_s=0.2)
-    nav.reset(_task())
-    sp0 = nav.step(_obs(0.0))
+    nav.reset(open_task())
+    sp0 = nav.step(obs_at(0.0))
     assert nav.pending is not None and nav.traj is None  # planned, not yet in force
     assert sp0.row[SP_POS:SP_POS + 3] == pytest.approx([0.0, 0.0, 1.5])  # holds meanwhile
-    nav.step(_obs(0.19))
+    nav.step(obs_at(0.19))
     assert nav.traj is None
-    nav.step(_obs(0.2))
+    nav.step(obs_at(0.2))
     assert nav.traj is not None and nav.traj.t0 == pytest.approx(0.2)
     assert nav.replans == 1 and nav.last_plan.status == "free"
-    nav.step(_obs(0.69))
+    nav.step(obs_at(0.69))
     assert nav.replans == 1
-    nav.step(_obs(0.7))  # 0.5 s after the trajectory started
+    nav.step(obs_at(0.7))  # 0.5 s after the trajectory started
     assert nav.replans == 2 and nav.pending is not None
 
 
 def test_the_safety_check_replans_or_stops():
     nav = PgoPlanner(latency_s=0.0)
-    nav.reset(_task())
-    nav.step(_obs(0.0))
-    nav.step(_obs(0.01))
+    nav.reset(open_task())
+    nav.step(obs_at(0.0))
+    nav.step(obs_at(0.01))
     assert nav.traj is not None
 
     def wall_at(x):
@@ -288,13 +277,13 @@ def test_the_safety_check_replans_or_stops():
 
     nav.view = wall_at(3.0)  # ahead: replan, keep flying
     nav.next_check = 0.0
-    nav.step(_obs(0.05))
+    nav.step(obs_at(0.05))
     assert nav.stop_at is None and nav.stats["safety_replans"] == 1
     assert nav.replans == 2 and nav.pending is not None
-    nav.step(_obs(0.06))
+    nav.step(obs_at(0.06))
     nav.view = wall_at(0.3)  # within 0.5 m: emergency stop, hover there, plan from rest
     nav.next_check = 0.0
-    sp = nav.step(_obs(0.1, p=(0.1, 0.0, 1.5)))
+    sp = nav.step(obs_at(0.1, p=(0.1, 0.0, 1.5)))
     assert nav.stats["stops"] == 1 and nav.traj is None
     assert sp.row[SP_POS:SP_POS + 3] == pytest.approx([0.1, 0.0, 1.5])
     assert nav.replans == 3 and nav.pending is not None
@@ -304,11 +293,11 @@ def test_the_safety_check_replans_or_stops():
 
 def test_never_commands_nan():
     nav = PgoPlanner(latency_s=0.0)
-    nav.reset(_task())
-    nav.step(_obs(0.0))
+    nav.reset(open_task())
+    nav.step(obs_at(0.0))
     nav.yaw = math.nan
     with pytest.raises(FloatingPointError):
-        nav.step(_obs(0.01))
+        nav.step(obs_at(0.01))
 
 
 def test_flies_a_forest_configuration_to_the_goal():
