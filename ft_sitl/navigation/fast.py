@@ -128,12 +128,11 @@ class _Traj:
 
     def state(self, t: float):
         tau = min(max(t - self.t0, 0.0), self.pos.duration)
-        return self.pos.position(tau), self.pos.velocity(tau), self.pos.acceleration(tau)
+        return self.pos.pva(tau)
 
     def yaw_state(self, t: float) -> np.ndarray:
         tau = min(max(t - self.t0, 0.0), self.yaw.duration)
-        return np.array([self.yaw.position(tau)[0], self.yaw.velocity(tau)[0],
-                         self.yaw.acceleration(tau)[0]])
+        return np.array([v[0] for v in self.yaw.pva(tau)])
 
 
 def first_collision(pos, tau0: float, occupied, step_s: float = CHECK_STEP_S,

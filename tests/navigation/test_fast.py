@@ -149,6 +149,21 @@ def test_optimiser_pushes_control_points_out_of_the_obstacle_band(pillar_map):
 
 
 # --- time re-allocation and yaw ---------------------------------------------------------
+@pytest.mark.parametrize("dim", [1, 3])
+def test_knot_spline_pva_is_evaluate_at_one_time(dim):
+    rng = np.random.default_rng(dim)
+    for _ in range(10):
+        n = int(rng.integers(4, 14))
+        spline = KnotBSpline(rng.normal(size=(n, dim)), np.cumsum(rng.uniform(0.05, 0.6, n + 4)))
+        times = np.concatenate([rng.uniform(-0.5, spline.duration + 0.5, 30),
+                                [0.0, spline.duration], spline.knots[4:n] - spline.knots[3]])
+        for t in times:
+            got = spline.pva(float(t))
+            for order in range(3):
+                np.testing.assert_allclose(got[order], spline.evaluate(t, order),
+                                           rtol=1e-12, atol=1e-10)
+
+
 def test_time_reallocation_stretches_the_infeasible_spans_only():
     q = np.zeros((14, 3))
     q[:, 1] = np.cumsum(np.r_[0.0, [0.5] * 6, [1.0] * 3, [0.5] * 4])  # 4 m/s, then 8 m/s
