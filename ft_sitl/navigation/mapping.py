@@ -526,18 +526,36 @@ def _add_inflation(infl, nx, ny, nz, idx, radius, delta):
 
 @njit(cache=True)
 def _recount_box(logodds3, l_occ, radius, out3, x0, x1, y0, y1):
-    """out3[x0:x1, y0:y1, :] = number of occupied voxels within radius (Chebyshev)."""
+    """out3[x0:x1, y0:y1, :] = number of occupied voxels within radius (Chebyshev), as
+    three separable window sums (z, then y, then x) over the box grown by radius."""
     nx, ny, nz = logodds3.shape
-    for x in range(max(x0, 0), min(x1, nx)):
-        for y in range(max(y0, 0), min(y1, ny)):
+    x0, x1 = max(x0, 0), min(x1, nx)
+    y0, y1 = max(y0, 0), min(y1, ny)
+    if x1 <= x0 or y1 <= y0:
+        return
+    ax0, ax1 = max(x0 - radius, 0), min(x1 + radius, nx)
+    ay0, ay1 = max(y0 - radius, 0), min(y1 + radius, ny)
+    sx, sy = ax1 - ax0, ay1 - ay0
+    a = np.zeros((sx, sy, nz), np.int32)  # occupied voxels within radius along z
+    for i in range(sx):
+        for j in range(sy):
+            for z in range(nz):
+                if logodds3[ax0 + i, ay0 + j, z] > l_occ:
+                    for q in range(max(z - radius, 0), min(z + radius + 1, nz)):
+                        a[i, j, q] += 1
+    b = np.zeros((sx, y1 - y0, nz), np.int32)  # ... then along y
+    for i in range(sx):
+        for y in range(y0, y1):
+            for j in range(max(y - radius, ay0), min(y + radius + 1, ay1)):
+                for z in range(nz):
+                    b[i, y - y0, z] += a[i, j - ay0, z]
+    for x in range(x0, x1):  # ... then along x
+        for y in range(y1 - y0):
             for z in range(nz):
                 c = 0
-                for a in range(max(x - radius, 0), min(x + radius + 1, nx)):
-                    for b in range(max(y - radius, 0), min(y + radius + 1, ny)):
-                        for q in range(max(z - radius, 0), min(z + radius + 1, nz)):
-                            if logodds3[a, b, q] > l_occ:
-                                c += 1
-                out3[x, y, z] = c
+                for i in range(max(x - radius, ax0), min(x + radius + 1, ax1)):
+                    c += b[i - ax0, y, z]
+                out3[x, y0 + y, z] = c
 
 
 @njit(cache=True)
