@@ -7,8 +7,8 @@ default camera) and 320 x 240 (``subsampled(2)``), noise-free and with noise + d
 
 Reported, median of repeats (spread min..max): full-capture depth rays per second (every
 pixel cast, depth image and body/world point clouds built) and ms per frame; the raw cast
-alone with the two trimesh queries the camera could use (``intersects_location`` with
-``multiple_hits=False`` vs ``intersects_first`` + float64 plane distance, the one used);
+alone: trimesh's ``intersects_location`` (``multiple_hits=False``) and ``intersects_first``
+against the camera's own path (Embree's scene queried directly, float64 plane distance);
 and the CPU share (process CPU time / wall time) and OS thread count, to show whether
 Embree ran on more than one thread. The process is pinned to one CPU (``--no-pin`` to
 leave it free) and numpy's BLAS to one thread. Timings are never asserted.
@@ -155,7 +155,8 @@ def bench_cast_methods(cam: DepthCamera, pose_list, repeats: int) -> dict:
     out = {}
     for name, fn in [("intersects_location(multiple_hits=False)", location),
                      ("intersects_first only (no distance)", first_only),
-                     ("intersects_first + float64 plane distance (used)", first_plane)]:
+                     ("Embree scene queried directly + float64 plane distance (used)",
+                      first_plane)]:
         fn()
         t = timed(fn, repeats)
         out[name] = {**t, "rays_per_s": rays / t["median_s"],

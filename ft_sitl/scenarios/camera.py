@@ -45,12 +45,14 @@ for disparity error ``e`` px, focal length ``f`` px, baseline ``B`` m). ``NOISE_
 only from the ``numpy.random.Generator`` passed to ``capture`` (never a global RNG); the
 range cut applies to the *measured* (noisy) depth, so every finite depth lies in range.
 
-Ray casting: the intersector returns the first triangle each ray hits
-(``intersects_first``); the distance is then recomputed in float64 from that triangle's
-plane. Measured on a 51k-triangle forest scene at 640 x 480, this is ~1.5x faster than
-``intersects_location(..., multiple_hits=False)`` (57 vs 88 ms a frame; that query does extra
-per-ray bookkeeping) and gives the same float64 distances (to 1e-13 m). See
-``bench/bench_camera.py``: ~4.5 M rays/s for whole frames on one core.
+Ray casting: the first triangle each ray hits (Embree, through trimesh's scaled scene,
+queried directly with rays built in one compiled pass; trimesh's wrapper re-normalised and
+converted every ray, which cost as much as the query); the distance is then recomputed in
+float64 from that triangle's plane. Measured on a 51k-triangle forest scene at 640 x 480,
+this is ~2.3x faster than ``intersects_location(..., multiple_hits=False)`` and gives the
+same float64 distances (to 1e-13 m). Without noise, each ray stops just past
+``max_range_m`` (a surface beyond it is dropped anyway). See ``bench/bench_camera.py``:
+~6.4 M rays/s for whole frames on one core.
 
 The mesh must not be modified after the camera is built (its BVH and plane table are built
 once in the constructor); build a new camera for a new mesh.
