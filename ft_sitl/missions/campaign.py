@@ -58,7 +58,7 @@ from importlib import resources
 from pathlib import Path
 
 from ft_sitl import __version__
-from ft_sitl.missions.trial import TrialSpec, run_trial
+from ft_sitl.missions.trial import TrialSpec, run_trial, wall_budget_from_env
 from ft_sitl.navigation.base import Limits
 
 PRESETS = ("quick", "paper")
@@ -482,7 +482,7 @@ def run_chunk(specs: list[dict], transport: Transport | None = None
                 row = run_trial_wire(spec, speed_factor=transport.speed_factor,
                                      **worker_bus(transport.mqtt)).row
             else:
-                row = run_trial(spec).row
+                row = run_trial(spec, wall_budget_s=wall_budget_from_env()).row
             out.append((spec.trial_id, row, None))
         except KeyboardInterrupt:
             raise
@@ -689,6 +689,10 @@ def run_campaign(campaign: Campaign, out_dir: str | Path, *, workers: int = 1,
 
     from ft_sitl.missions.store import ResultStore
 
+    try:
+        wall_budget_from_env()  # a bad value is one clear error, not one per trial
+    except ValueError as exc:
+        raise CampaignError(str(exc)) from None
     specs = campaign.trial_specs()
     meta = {"spec": campaign.spec_dict(), "total_trials": len(specs),
             "code_version": __version__}

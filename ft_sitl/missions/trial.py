@@ -58,6 +58,32 @@ STABLE_POS_M = 0.3
 STABLE_SPEED_M_S = 0.3
 STABLE_FOR_S = 1.0
 TICK_S = 0.02
+#: wall-clock budget of one in-process trial (s): a navigator that hangs (or is hundreds of
+#: times slower than real time) fails its trial as a navigator error instead of stopping
+#: the campaign; far above any legitimate trial (the slowest take ~10 s here)
+TRIAL_WALL_BUDGET_S = 600.0
+WALL_BUDGET_ENV = "FT_SITL_TRIAL_WALL_BUDGET_S"
+
+
+def wall_budget_from_env() -> float | None:
+    """The trial wall-clock budget campaigns use: ``$FT_SITL_TRIAL_WALL_BUDGET_S`` seconds
+    ("none" for no limit), else :data:`TRIAL_WALL_BUDGET_S`. ValueError names the variable
+    when it is not a positive number or "none"."""
+    import os
+
+    raw = os.environ.get(WALL_BUDGET_ENV)
+    if raw is None or raw.strip() == "":
+        return TRIAL_WALL_BUDGET_S
+    if raw.strip().lower() == "none":
+        return None
+    try:
+        v = float(raw)
+    except ValueError:
+        v = math.nan
+    if not (math.isfinite(v) and v > 0):
+        raise ValueError(f"{WALL_BUDGET_ENV}={raw!r}: must be a positive number of seconds "
+                         f"or 'none'")
+    return v
 MAX_TILT_RAD = math.pi / 2
 
 
@@ -209,6 +235,56 @@ class _Fail(Exception):
         self.reason, self.detail = reason, detail
 
 
+class WallBudgetExceeded(BaseException):
+    """Raised into a trial that overran its wall-clock budget (a BaseException, so the
+    navigator's own ``except Exception`` does not swallow it)."""
+
+
+class _WallWatchdog:
+    """Interrupts the trial ``budget_s`` after it started: SIGALRM when the trial runs on
+    the main thread of a POSIX process (a navigator stuck inside one step), plus a check
+    between steps everywhere."""
+
+    def __init__(self, wall0: float, budget_s: float | None):
+        self.deadline = math.inf if budget_s is None else wall0 + budget_s
+        self.budget_s = budget_s
+        self._old = None
+
+    def __enter__(self):
+        import signal
+        import threading
+
+        if (self.budget_s is not None and hasattr(signal, "setitimer")
+                and threading.current_thread() is threading.main_thread()
+                and signal.getitimer(signal.ITIMER_REAL)[0] == 0.0):
+            # (an alarm someone else armed, e.g. a test timeout, is left alone: then only
+            # the check between steps applies)
+            def fire(signum, frame):
+                raise WallBudgetExceeded()
+            self._old = signal.signal(signal.SIGALRM, fire)
+            signal.setitimer(signal.ITIMER_REAL,
+                             max(self.deadline - time.perf_counter(), 1e-3))
+        return self
+
+    def __exit__(self, *exc):
+        if self._old is not None:
+            import signal
+
+            signal.setitimer(signal.ITIMER_REAL, 0.0)
+            signal.signal(signal.SIGALRM, self._old)
+            self._old = None
+        return False
+
+    def check(self) -> None:
+        if time.perf_counter() > self.deadline:
+            raise WallBudgetExceeded()
+
+    def fail(self, t_nav_s: float) -> _Fail:
+        return _Fail("navigator_error", f"the trial overran its wall-clock budget of "
+                                        f"{self.budget_s:g} s at {t_nav_s:.1f} s of "
+                                        f"navigation (a hung or far too slow navigator)")
+
+
 def trial_vehicle(spec: TrialSpec, sc, platform):
     """The trial's collision guard and its one-vehicle Fleet, on the takeoff point facing
     the goal, the speed cap as MPC_XY_VEL_MAX (in-process and over the wire alike)."""
@@ -223,9 +299,17 @@ def trial_vehicle(spec: TrialSpec, sc, platform):
     return guard, fleet
 
 
-def run_trial(spec: TrialSpec, *, record: bool = False, navigator=None) -> TrialOutcome:
+def run_trial(spec: TrialSpec, *, record: bool = False, navigator=None,
+              wall_budget_s: float | None = TRIAL_WALL_BUDGET_S) -> TrialOutcome:
     """Fly one trial; the row of the results table (and the trajectory when ``record``).
-    ``navigator`` overrides the registry lookup (an instance; tests)."""
+    ``navigator`` overrides the registry lookup (an instance; tests). A trial still running
+    ``wall_budget_s`` of wall-clock time after it started (None: no limit) ends as a
+    navigator error."""
+    if wall_budget_s is not None and not (isinstance(wall_budget_s, (int, float))
+                                          and not isinstance(wall_budget_s, bool)
+                                          and wall_budget_s > 0):
+        raise ValueError(f"wall_budget_s must be a positive number of seconds or None, got "
+                         f"{wall_budget_s!r}")
     from ft_sitl.navigation.registry import create
     wall0 = time.perf_counter()
     sc, platform = load_scenario_for(spec), platform_for(spec)
@@ -240,67 +324,76 @@ def run_trial(spec: TrialSpec, *, record: bool = False, navigator=None) -> Trial
     reason, detail = "success", ""
     # navigation-phase baselines (the approach may fail before they are taken)
     t_nav0_us, sat0, steps0, e0 = None, 0.0, 0, math.nan
+    watchdog = _WallWatchdog(wall0, wall_budget_s)
     try:
-        _approach(fleet, sc)
-        t_nav0_us = fleet.time_us
-        sat0 = float(fleet.sim.ctrl[0, C_SAT_STEPS])
-        steps0 = fleet.sim.steps
-        e0 = fleet.sim.energy_j(0)
-        n_events = len(fleet.events)
-        task = Task(start=sc.start.copy(), start_yaw=sc.start_yaw, goal=sc.goal.copy(),
-                    limits=spec.limits, bounds_min=sc.bounds_min.copy(),
-                    bounds_max=sc.bounds_max.copy(),
-                    collision_radius_m=platform.collision_radius_m, twr_max=ind.twr_max,
-                    alpha_xy_max=ind.alpha_xy_max_rad_s2, alpha_z_max=ind.alpha_z_max_rad_s2,
-                    rng=np.random.default_rng(np.random.SeedSequence(
-                        [spec.seed, spec.trial])))
-        camera = _camera(nav, sc)
-        cam_rng = np.random.default_rng(np.random.SeedSequence([spec.seed, spec.trial, 1]))
-        try:
-            t = time.perf_counter()
-            nav.reset(task)
-            m.planner_s += time.perf_counter() - t
-        except GiveUp as exc:
-            raise _Fail("timeout", f"navigator gave up: {exc}") from None
-        except KeyboardInterrupt:
-            raise
-        except BaseException as exc:  # noqa: BLE001 - even sys.exit() only fails the trial
-            raise _Fail("navigator_error", f"reset raised {type(exc).__name__}: {exc}") from None
-        period_us = _period_us(nav, fleet.sim.dt_us)
-        next_nav_us = t_nav0_us
-        next_cam_us = t_nav0_us
-        cam_period_us = round(1e6 / camera.config.rate_hz) if camera is not None else 0
-        judge = NavigationJudge(fleet, guard, spec, sc, m, n_events, traj if record else None)
-        tick_us = round(TICK_S * 1e6)
-        while True:
-            now = fleet.time_us
-            t_nav_us = now - t_nav0_us
-            if now >= next_nav_us:
-                s = fleet.state(0)
-                depth = None
-                if camera is not None and now >= next_cam_us:
-                    depth = camera.capture(t_nav_us, fleet.sim.position(0),
-                                           fleet.sim.attitude(0), rng=cam_rng)
-                    next_cam_us += cam_period_us
-                obs = Observation(time_s=t_nav_us * 1e-6, position=s.position,
-                                  velocity=s.velocity, yaw=s.yaw,
-                                  attitude=fleet.sim.attitude(0),
-                                  angular_velocity=fleet.sim.x[0, d.X_OMEGA:d.X_OMEGA + 3].copy(),
-                                  depth=depth)
-                sp = _ask(nav, obs, m)
-                fleet.offboard_setpoint(0, sp)
-                if cmd.main_mode != MAIN_OFFBOARD:  # PX4: a setpoint first, then the mode
-                    res = cmd.set_mode(MAIN_OFFBOARD)
-                    if res.name != "ACCEPTED" or cmd.main_mode != MAIN_OFFBOARD:
-                        raise _Fail("navigator_error", "the flight controller refused "
-                                                       "offboard mode")
+        with watchdog:
+            _approach(fleet, sc)
+            t_nav0_us = fleet.time_us
+            sat0 = float(fleet.sim.ctrl[0, C_SAT_STEPS])
+            steps0 = fleet.sim.steps
+            e0 = fleet.sim.energy_j(0)
+            n_events = len(fleet.events)
+            task = Task(start=sc.start.copy(), start_yaw=sc.start_yaw, goal=sc.goal.copy(),
+                        limits=spec.limits, bounds_min=sc.bounds_min.copy(),
+                        bounds_max=sc.bounds_max.copy(),
+                        collision_radius_m=platform.collision_radius_m, twr_max=ind.twr_max,
+                        alpha_xy_max=ind.alpha_xy_max_rad_s2, alpha_z_max=ind.alpha_z_max_rad_s2,
+                        rng=np.random.default_rng(np.random.SeedSequence(
+                            [spec.seed, spec.trial])))
+            camera = _camera(nav, sc)
+            cam_rng = np.random.default_rng(np.random.SeedSequence([spec.seed, spec.trial, 1]))
+            try:
+                t = time.perf_counter()
+                nav.reset(task)
+                m.planner_s += time.perf_counter() - t
+            except GiveUp as exc:
+                raise _Fail("timeout", f"navigator gave up: {exc}") from None
+            except (KeyboardInterrupt, WallBudgetExceeded):
+                raise
+            except BaseException as exc:  # noqa: BLE001 - even sys.exit() only fails the trial
+                raise _Fail("navigator_error",
+                            f"reset raised {type(exc).__name__}: {exc}") from None
+            period_us = _period_us(nav, fleet.sim.dt_us)
+            next_nav_us = t_nav0_us
+            next_cam_us = t_nav0_us
+            cam_period_us = round(1e6 / camera.config.rate_hz) if camera is not None else 0
+            judge = NavigationJudge(fleet, guard, spec, sc, m, n_events, traj if record else None)
+            tick_us = round(TICK_S * 1e6)
+            while True:
+                now = fleet.time_us
+                t_nav_us = now - t_nav0_us
+                if now >= next_nav_us:
+                    s = fleet.state(0)
+                    depth = None
+                    if camera is not None and now >= next_cam_us:
+                        depth = camera.capture(t_nav_us, fleet.sim.position(0),
+                                               fleet.sim.attitude(0), rng=cam_rng)
+                        next_cam_us += cam_period_us
+                    obs = Observation(time_s=t_nav_us * 1e-6, position=s.position,
+                                      velocity=s.velocity, yaw=s.yaw,
+                                      attitude=fleet.sim.attitude(0),
+                                      angular_velocity=fleet.sim.x[
+                                          0, d.X_OMEGA:d.X_OMEGA + 3].copy(),
+                                      depth=depth)
+                    sp = _ask(nav, obs, m)
                     fleet.offboard_setpoint(0, sp)
-                next_nav_us += period_us
-            # to the next navigator step or commander tick, at least one physics step
-            fleet.run_us(max(fleet.sim.dt_us, min(tick_us, next_nav_us - fleet.time_us)))
-            if judge.after_step():
-                break
+                    if cmd.main_mode != MAIN_OFFBOARD:  # PX4: a setpoint first, then the mode
+                        res = cmd.set_mode(MAIN_OFFBOARD)
+                        if res.name != "ACCEPTED" or cmd.main_mode != MAIN_OFFBOARD:
+                            raise _Fail("navigator_error", "the flight controller refused "
+                                                           "offboard mode")
+                        fleet.offboard_setpoint(0, sp)
+                    next_nav_us += period_us
+                # to the next navigator step or commander tick, at least one physics step
+                fleet.run_us(max(fleet.sim.dt_us, min(tick_us, next_nav_us - fleet.time_us)))
+                if judge.after_step():
+                    break
+                watchdog.check()
     except _Fail as f:
+        reason, detail = f.reason, f.detail
+    except WallBudgetExceeded:
+        t_nav_s = (fleet.time_us - t_nav0_us) * 1e-6 if t_nav0_us is not None else 0.0
+        f = watchdog.fail(t_nav_s)
         reason, detail = f.reason, f.detail
     finish_row(row, spec, fleet, m, reason, detail, (t_nav0_us, sat0, steps0, e0),
                _count(getattr(nav, "replans", 0)), wall0)
@@ -419,7 +512,7 @@ def _ask(nav, obs, m) -> Setpoint:
         sp = nav.step(obs)
     except GiveUp as exc:
         raise _Fail("timeout", f"navigator gave up: {exc}") from None
-    except KeyboardInterrupt:
+    except (KeyboardInterrupt, WallBudgetExceeded):
         raise
     except BaseException as exc:  # noqa: BLE001 - even sys.exit() only fails the trial
         raise _Fail("navigator_error", f"step raised {type(exc).__name__}: {exc}") from None

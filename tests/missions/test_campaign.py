@@ -343,6 +343,31 @@ def test_a_campaign_flies_an_entry_point_navigator(plugins, yard, tmp_path):
     assert all(r["reason"] == "timeout" for r in rows)
 
 
+def test_the_trial_wall_budget_comes_from_the_environment(plugins, yard, tmp_path,
+                                                          monkeypatch):
+    body = f"""\
+        trials = 1
+        platforms = ["{PLATFORM}"]
+        scenarios = [{{file = "{yard}"}}]
+        algorithms = [{{name = "t_hover", params = {{sleep_s = 30.0}}}}]
+        [limits]
+        timeout_s = 2.0
+        """
+    c = load_campaign(campaign_file(tmp_path, "c.toml", body))
+    monkeypatch.setenv("FT_SITL_TRIAL_WALL_BUDGET_S", "1.5")
+    t = time.perf_counter()
+    summary = run_campaign(c, tmp_path / "out", progress=False)
+    assert time.perf_counter() - t < 15.0  # its reset sleeps 30 s
+    assert (summary.ran, summary.errors) == (1, [])
+    row = read_jsonl(tmp_path / "out" / "trials.jsonl")[0]
+    assert row["reason"] == "navigator_error"
+    assert "wall-clock budget of 1.5 s" in row["detail"]
+    for bad in ("0", "-3", "soon", "nan"):
+        monkeypatch.setenv("FT_SITL_TRIAL_WALL_BUDGET_S", bad)
+        with pytest.raises(CampaignError, match=f"FT_SITL_TRIAL_WALL_BUDGET_S='{bad}'"):
+            run_campaign(c, tmp_path / f"bad{bad}", progress=False)
+
+
 # --- resume after SIGKILL --------------------------------------------------------------------
 RESUME = """\
 name = "resume"

@@ -334,6 +334,67 @@ def test_a_navigator_that_raises_is_a_navigator_error(yard, where):
     assert row["detail"] == f"{where} raised RuntimeError: boom: no map"
 
 
+class Stuck(Navigator):
+    """Steps normally until ``at_s``, then never returns (``spin``) or takes ``sleep_s``
+    of wall-clock time per step."""
+
+    name = "stuck"
+
+    def __init__(self, at_s=0.3, spin=True, sleep_s=0.0):
+        super().__init__()
+        self.at_s, self.spin, self.sleep_s = at_s, spin, sleep_s
+
+    def step(self, obs):
+        import time
+
+        if obs.time_s >= self.at_s:
+            if self.spin:
+                while True:  # a hung planner; even `except Exception` would not stop it
+                    try:
+                        pass
+                    except Exception:  # noqa: BLE001, S110
+                        pass
+            time.sleep(self.sleep_s)
+        return Setpoint.position(self.task.start)
+
+
+def test_a_hung_navigator_fails_its_trial_at_the_wall_clock_budget(yard):
+    import time
+
+    before = signal.getsignal(signal.SIGALRM)
+    t = time.perf_counter()
+    row = run_trial(yard_spec(yard), navigator=Stuck(), wall_budget_s=3.0).row
+    assert time.perf_counter() - t < 10.0
+    assert (row["reason"], row["success"]) == ("navigator_error", False)
+    assert "wall-clock budget of 3 s" in row["detail"] and "at 0.3 s" in row["detail"]
+    # the alarm is disarmed and the previous handler back
+    assert signal.getitimer(signal.ITIMER_REAL)[0] == 0.0
+    assert signal.getsignal(signal.SIGALRM) is before
+    # a normal trial after it is not cut short by a leftover alarm
+    spec = yard_spec(yard, limits=Limits(timeout_s=2.0))
+    assert run_trial(spec, navigator=Hover(), wall_budget_s=3.0).row["reason"] == "timeout"
+
+
+def test_a_far_too_slow_navigator_is_stopped_between_steps_off_the_main_thread(yard):
+    import threading
+
+    out = {}
+    th = threading.Thread(target=lambda: out.update(run_trial(
+        yard_spec(yard), navigator=Stuck(at_s=0.0, spin=False, sleep_s=0.02),
+        wall_budget_s=3.0).row))
+    th.start()
+    th.join(30.0)
+    assert not th.is_alive()
+    assert out["reason"] == "navigator_error" and "wall-clock budget of 3 s" in out["detail"]
+    assert out["nav_time_s"] < 10.0  # stopped long before the 90 s simulated timeout
+
+
+@pytest.mark.parametrize("bad", [0, -1.0, "600", True, float("nan")])
+def test_bad_wall_budgets_are_refused(yard, bad):
+    with pytest.raises(ValueError, match="wall_budget_s"):
+        run_trial(yard_spec(yard), navigator=Hover(), wall_budget_s=bad)
+
+
 @pytest.mark.parametrize("value, detail", [
     (None, "step returned NoneType, not a Setpoint"),
     ("forward", "step returned str, not a Setpoint"),
