@@ -630,17 +630,19 @@ def _edt_sq(sites3, want, out3):
                     dist = 0.0
                 else:
                     dist += 1.0
-                m = min(dist, out3[x, y, z])
+                m = min(dist, np.float64(out3[x, y, z]))
                 out3[x, y, z] = m * m
-    # passes 2 (along y) and 3 (along x), one (.., z) block at a time, transposed into buf so
-    # each line is contiguous; lines of all zeros or all inf are left as they are
-    buf = np.empty((nz, nmax))
+    # passes 2 (along y) and 3 (along x), one (.., z) block at a time, transposed into buf
+    # (out3's dtype: float32 holds these integer squared distances exactly) so each line is
+    # contiguous; each line is worked in float64
+    buf = np.empty((nz, nmax), out3.dtype)
+    line = np.empty(nmax)
     for x in range(nx):
         for y in range(ny):
             for z in range(nz):
                 buf[z, y] = out3[x, y, z]
         for z in range(nz):
-            _line_edt(buf[z], ny, g, v, hv, zb, inv2)
+            _line_edt(buf[z], line, ny, g, v, hv, zb, inv2)
         for y in range(ny):
             for z in range(nz):
                 out3[x, y, z] = buf[z, y]
@@ -649,27 +651,29 @@ def _edt_sq(sites3, want, out3):
             for z in range(nz):
                 buf[z, x] = out3[x, y, z]
         for z in range(nz):
-            _line_edt(buf[z], nx, g, v, hv, zb, inv2)
+            _line_edt(buf[z], line, nx, g, v, hv, zb, inv2)
         for x in range(nx):
             for z in range(nz):
                 out3[x, y, z] = buf[z, x]
 
 
 @njit(cache=True)
-def _line_edt(line, n, g, v, hv, zb, inv2):
-    """In-place 1-D pass over line[:n], skipped when it is all zeros or all inf."""
-    nonzero = False
-    finite = False
+def _line_edt(row, line, n, g, v, hv, zb, inv2):
+    """In-place 1-D pass over row[:n] (through the float64 line), skipped when the row is
+    constant (all zeros, all inf, or any one value: then every minimum is the point's own)."""
+    first = row[0]
+    same = True
+    for i in range(1, n):
+        if row[i] != first:
+            same = False
+            break
+    if same:
+        return
     for i in range(n):
-        a = line[i]
-        if a != 0.0:
-            nonzero = True
-        if a != np.inf:
-            finite = True
-    if nonzero and finite:
-        _envelope_1d(line, n, g, v, hv, zb, inv2)
-        for i in range(n):
-            line[i] = g[i]
+        line[i] = row[i]
+    _envelope_1d(line, n, g, v, hv, zb, inv2)
+    for i in range(n):
+        row[i] = g[i]
 
 
 @njit(cache=True)
@@ -684,20 +688,21 @@ def _planning_grid(infl3, k0, k_floor, k_ceil, out3):
 
 
 @njit(cache=True)
-def _signed_esdf(plan3, res, pos3, neg3):
-    """Fast-Planner's signed field into pos3: free -> distance to the nearest occupied
-    voxel centre; occupied -> res - distance to the nearest free voxel centre."""
+def _signed_esdf(plan3, res, pos3, neg3, out3):
+    """Fast-Planner's signed field into out3 (float64): free -> distance to the nearest
+    occupied voxel centre; occupied -> res - distance to the nearest free voxel centre.
+    pos3 / neg3: work arrays (float32: the squared voxel distances are exact in it)."""
     _edt_sq(plan3, 1, pos3)
     _edt_sq(plan3, 0, neg3)
     nx, ny, nz = plan3.shape
     for x in range(nx):
         for y in range(ny):
             for z in range(nz):
-                p = res * math.sqrt(pos3[x, y, z])
-                nd = neg3[x, y, z]
+                p = res * math.sqrt(np.float64(pos3[x, y, z]))
+                nd = np.float64(neg3[x, y, z])
                 if nd > 0.0:
                     p += res - res * math.sqrt(nd)
-                pos3[x, y, z] = p
+                out3[x, y, z] = p
 
 
 @njit(cache=True)
@@ -1222,8 +1227,8 @@ class LocalMap:
                 raise ValueError("the ESDF box does not overlap the window (by >= 2 voxels)")
         plan = np.ascontiguousarray(self.planning_grid()[x0:x1, y0:y1, z0:z1])
         pos = np.empty(plan.shape)
-        neg = np.empty(plan.shape)
-        _signed_esdf(plan, self.resolution_m, pos, neg)
+        _signed_esdf(plan, self.resolution_m, np.empty(plan.shape, np.float32),
+                     np.empty(plan.shape, np.float32), pos)
         self._esdf = pos
         self._esdf_origin = self._origin + np.array([x0, y0, z0])
         self._esdf_frame = self._frames
