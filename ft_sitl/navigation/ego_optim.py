@@ -93,6 +93,7 @@ from numba import njit
 
 from ft_sitl.navigation.astar import OccupancyView, search
 from ft_sitl.navigation.bspline import Feasibility, UniformBSpline
+from ft_sitl.navigation.lbfgs import dot_rows, search_direction, store_pair
 
 __all__ = [
     "Anchors", "EgoOptimizer", "EgoParams", "EgoResult", "EgoStatus", "anchors_for_segment",
@@ -313,15 +314,6 @@ _C1, _C2 = 1e-4, 0.9  # Armijo and weak-Wolfe curvature constants (EGO's ftol, w
 
 
 @njit(cache=True)
-def _fdot(a, b, lo, hi):
-    s = 0.0
-    for i in range(lo, hi):
-        for d in range(3):
-            s += a[i, d] * b[i, d]
-    return s
-
-
-@njit(cache=True)
 def _lbfgs_run(q, g, dvec, q0, g0, S, Y, rho, alpha, meta, fbox, lo, hi, max_iter, g_eps,
                check_smooth, mode, w, c0, dt, vmax, amax, idx, ap, av, ref, tan, along,
                across):
@@ -337,42 +329,19 @@ def _lbfgs_run(q, g, dvec, q0, g0, S, Y, rho, alpha, meta, fbox, lo, hi, max_ite
                               along, across)
         meta[1] += 1
         meta[4] = 1
-        if math.sqrt(_fdot(g, g, lo, hi)) <= g_eps * max(1.0, math.sqrt(_fdot(q, q, lo, hi))):
+        if math.sqrt(dot_rows(g, g, lo, hi)) <= g_eps * max(1.0, math.sqrt(dot_rows(q, q, lo, hi))):
             return _LB_CONVERGED
     while meta[0] < max_iter:
         count = meta[2]
         head = meta[3]
-        # two-loop recursion: dvec = -H g
-        for i in range(lo, hi):
-            for d in range(3):
-                dvec[i, d] = -g[i, d]
-        for c in range(count):
-            j = (head - 1 - c) % m
-            a = rho[j] * _fdot(S[j], dvec, lo, hi)
-            alpha[j] = a
-            for i in range(lo, hi):
-                for d in range(3):
-                    dvec[i, d] -= a * Y[j, i, d]
-        if count > 0:
-            j = (head - 1) % m
-            gamma = 1.0 / (rho[j] * _fdot(Y[j], Y[j], lo, hi))
-            for i in range(lo, hi):
-                for d in range(3):
-                    dvec[i, d] *= gamma
-        for c in range(count - 1, -1, -1):
-            j = (head - 1 - c) % m
-            b = rho[j] * _fdot(Y[j], dvec, lo, hi)
-            for i in range(lo, hi):
-                for d in range(3):
-                    dvec[i, d] += S[j, i, d] * (alpha[j] - b)
-        dg0 = _fdot(dvec, g, lo, hi)
+        dg0 = search_direction(g, dvec, S, Y, rho, alpha, count, head, lo, hi)
         if not dg0 < 0.0:  # not a descent direction: forget the memory
             meta[2] = 0
             count = 0
             for i in range(lo, hi):
                 for d in range(3):
                     dvec[i, d] = -g[i, d]
-            dg0 = -_fdot(g, g, lo, hi)
+            dg0 = -dot_rows(g, g, lo, hi)
         step = 1.0
         if count == 0:
             step = min(1.0, 1.0 / math.sqrt(-dg0))
@@ -394,7 +363,7 @@ def _lbfgs_run(q, g, dvec, q0, g0, S, Y, rho, alpha, meta, fbox, lo, hi, max_ite
             meta[1] += 1
             if not (f <= f0 + _C1 * step * dg0):
                 s_hi = step
-            elif _fdot(dvec, g, lo, hi) < _C2 * dg0:
+            elif dot_rows(dvec, g, lo, hi) < _C2 * dg0:
                 s_lo = step
             else:
                 ok = True
@@ -413,21 +382,15 @@ def _lbfgs_run(q, g, dvec, q0, g0, S, Y, rho, alpha, meta, fbox, lo, hi, max_ite
                     g[i, d] = g0[i, d]
             fbox[0] = f0
             return _LB_LINESEARCH
-        # memory update
         j = meta[3]
-        ys = 0.0
-        for i in range(lo, hi):
-            for d in range(3):
-                S[j, i, d] = q[i, d] - q0[i, d]
-                Y[j, i, d] = g[i, d] - g0[i, d]
-                ys += S[j, i, d] * Y[j, i, d]
+        ys, _ = store_pair(q, q0, g, g0, S, Y, j, lo, hi)
         if ys > 1e-16:
             rho[j] = 1.0 / ys
             meta[3] = (j + 1) % m
             meta[2] = min(meta[2] + 1, m)
         meta[0] += 1
-        gn = math.sqrt(_fdot(g, g, lo, hi))
-        if gn <= g_eps * max(1.0, math.sqrt(_fdot(q, q, lo, hi))):
+        gn = math.sqrt(dot_rows(g, g, lo, hi))
+        if gn <= g_eps * max(1.0, math.sqrt(dot_rows(q, q, lo, hi))):
             return _LB_CONVERGED
         if check_smooth > 0.0 and meta[0] > 3:
             scratch[:, :] = 0.0

@@ -76,6 +76,7 @@ import numpy as np
 from numba import njit
 
 from ft_sitl.navigation.bspline import UniformBSpline
+from ft_sitl.navigation.lbfgs import dot_rows, search_direction, store_pair
 from ft_sitl.navigation.mapping import _esdf_eval
 
 __all__ = [
@@ -273,15 +274,6 @@ _C1, _C2 = 1e-4, 0.9
 
 
 @njit(cache=True)
-def _dot(a, b, lo, hi):
-    s = 0.0
-    for i in range(lo, hi):
-        for k in range(3):
-            s += a[i, k] * b[i, k]
-    return s
-
-
-@njit(cache=True)
 def _lbfgs(q, lo, hi, memory, max_evals, xtol, w, ts, vmax, amax, d0, free_end, end_pt,
            field, origin, inv_res, out):
     """Minimise over rows ``lo:hi`` of ``q`` (in place; ``q`` ends at the best point
@@ -309,33 +301,11 @@ def _lbfgs(q, lo, hi, memory, max_evals, xtol, w, ts, vmax, amax, d0, free_end, 
     head = 0
     code = 0
     while evals < max_evals:
-        gg = _dot(g, g, lo, hi)
+        gg = dot_rows(g, g, lo, hi)
         if gg <= 1e-24:
             code = 2
             break
-        # two-loop recursion: d = -H g
-        for i in range(lo, hi):
-            for k in range(3):
-                d[i, k] = -g[i, k]
-        for c in range(count):
-            j = (head - 1 - c) % memory
-            alpha[j] = rho[j] * _dot(S[j], d, lo, hi)
-            for i in range(lo, hi):
-                for k in range(3):
-                    d[i, k] -= alpha[j] * Y[j, i, k]
-        if count > 0:
-            j = (head - 1) % memory
-            gamma = 1.0 / (rho[j] * _dot(Y[j], Y[j], lo, hi))
-            for i in range(lo, hi):
-                for k in range(3):
-                    d[i, k] *= gamma
-        for c in range(count - 1, -1, -1):
-            j = (head - 1 - c) % memory
-            b = rho[j] * _dot(Y[j], d, lo, hi)
-            for i in range(lo, hi):
-                for k in range(3):
-                    d[i, k] += S[j, i, k] * (alpha[j] - b)
-        dg = _dot(d, g, lo, hi)
+        dg = search_direction(g, d, S, Y, rho, alpha, count, head, lo, hi)
         if not dg < 0.0:  # not a descent direction: drop the memory
             count = 0
             for i in range(lo, hi):
@@ -368,7 +338,7 @@ def _lbfgs(q, lo, hi, memory, max_evals, xtol, w, ts, vmax, amax, d0, free_end, 
                         best[i, k] = q[i, k]
             if not (f <= f0 + _C1 * step * dg):
                 s_hi = step
-            elif _dot(d, g, lo, hi) < _C2 * dg:
+            elif dot_rows(d, g, lo, hi) < _C2 * dg:
                 s_lo = step
             else:
                 ok = True
@@ -380,21 +350,13 @@ def _lbfgs(q, lo, hi, memory, max_evals, xtol, w, ts, vmax, amax, d0, free_end, 
             code = 0 if evals >= max_evals else 3
             break
         iters += 1
-        # memory update
         j = head
-        ys = 0.0
-        ss = 0.0
-        for i in range(lo, hi):
-            for k in range(3):
-                S[j, i, k] = q[i, k] - q0[i, k]
-                Y[j, i, k] = g[i, k] - g0[i, k]
-                ys += S[j, i, k] * Y[j, i, k]
-                ss += S[j, i, k] * S[j, i, k]
+        ys, ss = store_pair(q, q0, g, g0, S, Y, j, lo, hi)
         if ys > 1e-16:
             rho[j] = 1.0 / ys
             head = (head + 1) % memory
             count = min(count + 1, memory)
-        if math.sqrt(ss) <= xtol * math.sqrt(_dot(q, q, lo, hi)):
+        if math.sqrt(ss) <= xtol * math.sqrt(dot_rows(q, q, lo, hi)):
             code = 1
             break
     for i in range(lo, hi):
