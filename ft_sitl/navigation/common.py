@@ -197,3 +197,26 @@ class ReplanningPlanner(Navigator):
         """Hover at stop_at (or where the vehicle is) while there is no trajectory."""
         hold = self.stop_at if self.stop_at is not None else obs.position
         return Setpoint.position(hold, yaw=yaw)
+
+
+class HorizonPlanner(ReplanningPlanner):
+    """EGO's and Fast-Planner's replanning rule: a plan reaches ``planning_horizon_m``
+    ahead; replan when the vehicle is ``replan_threshold_m`` along the current trajectory
+    unless the goal is within ``no_replan_threshold_m``; a collision less than
+    ``emergency_time_s`` ahead is an emergency."""
+
+    def __init__(self, max_acc_m_s2: float, planning_horizon_m: float,
+                 replan_threshold_m: float, no_replan_threshold_m: float,
+                 emergency_time_s: float, latency_s: float, measured_latency: bool,
+                 camera: str, camera_width: int | None, camera_height: int | None,
+                 camera_rate_hz: float | None):
+        super().__init__(max_acc_m_s2, latency_s, measured_latency, camera, camera_width,
+                         camera_height, camera_rate_hz,
+                         (("planning_horizon_m", planning_horizon_m, 2.0, 20.0),
+                          ("replan_threshold_m", replan_threshold_m, 0.2, 10.0),
+                          ("no_replan_threshold_m", no_replan_threshold_m, 0.0, 10.0),
+                          ("emergency_time_s", emergency_time_s, 0.0, 5.0)))
+        self.horizon = float(planning_horizon_m)
+        self.replan_threshold = float(replan_threshold_m)
+        self.no_replan_threshold = float(no_replan_threshold_m)
+        self.emergency_time = float(emergency_time_s)

@@ -51,7 +51,7 @@ import numpy as np
 from ft_sitl.autopilot.setpoints import Setpoint
 from ft_sitl.navigation.base import Observation, Task
 from ft_sitl.navigation.common import (  # noqa: F401 - camera_config re-exported
-    ReplanningPlanner,
+    HorizonPlanner,
     SplineTrajectory,
     camera_config,
     checked_setpoint,
@@ -83,7 +83,7 @@ def _resample(path: np.ndarray, spacing: float, min_points: int = 7) -> np.ndarr
     return np.column_stack([np.interp(s, cum, path[:, k]) for k in range(3)])
 
 
-class EgoPlanner(ReplanningPlanner):
+class EgoPlanner(HorizonPlanner):
     """EGO-Planner (Zhou et al. 2021): ESDF-free gradient-based local planning."""
 
     name = "ego"
@@ -94,16 +94,9 @@ class EgoPlanner(ReplanningPlanner):
                  measured_latency: bool = False, camera: str = "benchmark",
                  camera_width: int | None = None, camera_height: int | None = None,
                  camera_rate_hz: float | None = None):
-        super().__init__(max_acc_m_s2, latency_s, measured_latency, camera, camera_width,
-                         camera_height, camera_rate_hz,
-                         (("planning_horizon_m", planning_horizon_m, 2.0, 20.0),
-                          ("replan_threshold_m", replan_threshold_m, 0.2, 10.0),
-                          ("no_replan_threshold_m", no_replan_threshold_m, 0.0, 10.0),
-                          ("emergency_time_s", emergency_time_s, 0.0, 5.0)))
-        self.horizon = float(planning_horizon_m)
-        self.replan_threshold = float(replan_threshold_m)
-        self.no_replan_threshold = float(no_replan_threshold_m)
-        self.emergency_time = float(emergency_time_s)
+        super().__init__(max_acc_m_s2, planning_horizon_m, replan_threshold_m,
+                         no_replan_threshold_m, emergency_time_s, latency_s, measured_latency,
+                         camera, camera_width, camera_height, camera_rate_hz)
 
     # --- set-up ---------------------------------------------------------------------------
     def reset(self, task: Task) -> None:

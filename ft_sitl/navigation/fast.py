@@ -89,7 +89,7 @@ import numpy as np
 
 from ft_sitl.autopilot.setpoints import Setpoint
 from ft_sitl.navigation.base import Observation, Task
-from ft_sitl.navigation.common import ReplanningPlanner, checked_setpoint, wrap_angle
+from ft_sitl.navigation.common import HorizonPlanner, checked_setpoint, wrap_angle
 
 #: estimated time from state to command of one Fast-Planner replan in the original C++ on
 #: a desktop CPU: kinodynamic search a few ms, B-spline optimisation <= 300 evaluations
@@ -157,7 +157,7 @@ def first_collision(pos, tau0: float, occupied, step_s: float = CHECK_STEP_S,
     return float(t[hit[0]] - tau0) if hit.size else None
 
 
-class FastPlanner(ReplanningPlanner):
+class FastPlanner(HorizonPlanner):
     """Fast-Planner (Zhou et al. 2019): kinodynamic A* + ESDF B-spline optimisation."""
 
     name = "fast"
@@ -168,16 +168,9 @@ class FastPlanner(ReplanningPlanner):
                  measured_latency: bool = False, camera: str = "benchmark",
                  camera_width: int | None = None, camera_height: int | None = None,
                  camera_rate_hz: float | None = None):
-        super().__init__(max_acc_m_s2, latency_s, measured_latency, camera, camera_width,
-                         camera_height, camera_rate_hz,
-                         (("planning_horizon_m", planning_horizon_m, 2.0, 20.0),
-                          ("replan_threshold_m", replan_threshold_m, 0.2, 10.0),
-                          ("no_replan_threshold_m", no_replan_threshold_m, 0.0, 10.0),
-                          ("emergency_time_s", emergency_time_s, 0.0, 5.0)))
-        self.horizon = float(planning_horizon_m)
-        self.replan_threshold = float(replan_threshold_m)
-        self.no_replan_threshold = float(no_replan_threshold_m)
-        self.emergency_time = float(emergency_time_s)
+        super().__init__(max_acc_m_s2, planning_horizon_m, replan_threshold_m,
+                         no_replan_threshold_m, emergency_time_s, latency_s, measured_latency,
+                         camera, camera_width, camera_height, camera_rate_hz)
 
     # --- set-up ---------------------------------------------------------------------------
     def reset(self, task: Task) -> None:
