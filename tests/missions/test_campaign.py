@@ -355,9 +355,7 @@ def test_the_trial_wall_budget_comes_from_the_environment(plugins, yard, tmp_pat
         """
     c = load_campaign(campaign_file(tmp_path, "c.toml", body))
     monkeypatch.setenv("FT_SITL_TRIAL_WALL_BUDGET_S", "1.5")
-    t = time.perf_counter()
     summary = run_campaign(c, tmp_path / "out", progress=False)
-    assert time.perf_counter() - t < 15.0  # its reset sleeps 30 s
     assert (summary.ran, summary.errors) == (1, [])
     row = read_jsonl(tmp_path / "out" / "trials.jsonl")[0]
     assert row["reason"] == "navigator_error"
