@@ -8,7 +8,9 @@ default camera) and 320 x 240 (``subsampled(2)``), noise-free and with noise + d
 Reported, median of repeats (spread min..max): full-capture depth rays per second (every
 pixel cast, depth image and body/world point clouds built) and ms per frame; the raw cast
 alone: trimesh's ``intersects_location`` (``multiple_hits=False``) and ``intersects_first``
-against the camera's own path (Embree's scene queried directly, float64 plane distance);
+against the camera's own path (Embree's scene queried directly, one ray per call and 16 per
+call, float64 plane distance); the 640 x 480 and the planners' 160 x 120 captures also with
+one ray per call, in the same run;
 and the CPU share (process CPU time / wall time) and OS thread count, to show whether
 Embree ran on more than one thread. The process is pinned to one CPU (``--no-pin`` to
 leave it free) and numpy's BLAS to one thread. Timings are never asserted.
@@ -129,7 +131,8 @@ def bench_capture(cam: DepthCamera, pose_list, repeats: int, noisy: bool) -> dic
     }
 
 
-def bench_cast_methods(cam: DepthCamera, pose_list, repeats: int) -> dict:
+def bench_cast_methods(cam: DepthCamera, pose_list, repeats: int,
+                       single: DepthCamera) -> dict:
     """Raw cast, no image: the two trimesh queries the camera could be built on."""
     ray = cam._intersector
     jobs = []
@@ -151,11 +154,17 @@ def bench_cast_methods(cam: DepthCamera, pose_list, repeats: int) -> dict:
         for origin, dirs, _ in jobs:
             cam.cast(origin, dirs)
 
+    def first_plane_single():
+        for origin, dirs, _ in jobs:
+            single.cast(origin, dirs)
+
     rays = len(jobs) * cam.config.n_pixels
     out = {}
     for name, fn in [("intersects_location(multiple_hits=False)", location),
                      ("intersects_first only (no distance)", first_only),
-                     ("Embree scene queried directly + float64 plane distance (used)",
+                     ("Embree scene, one ray per call (embreex) + float64 plane distance",
+                      first_plane_single),
+                     ("Embree scene, 16 rays per call + float64 plane distance (used)",
                       first_plane)]:
         fn()
         t = timed(fn, repeats)
@@ -179,11 +188,12 @@ def print_markdown(res: dict, file=sys.stdout) -> None:
           f"triangles; {s['n_poses']} poses; camera build (BVH) {s['build_s'] * 1e3:.0f} ms",
           file=file)
     print(file=file)
-    print("| frame | noise | Mrays/s (median) | min..max | ms/frame | valid px | CPU share |",
-          file=file)
-    print("|---|---|---:|---:|---:|---:|---:|", file=file)
+    print("| frame | Embree rays per call | noise | Mrays/s (median) | min..max | ms/frame "
+          "| valid px | CPU share |", file=file)
+    print("|---|---:|---|---:|---:|---:|---:|---:|", file=file)
     for r in res["capture"]:
-        print(f"| {r['width']}x{r['height']} | {'k=0.001, 5% drop' if r['noisy'] else 'off'} "
+        print(f"| {r['width']}x{r['height']} | {16 if r['packets'] else 1} "
+              f"| {'k=0.001, 5% drop' if r['noisy'] else 'off'} "
               f"| {r['rays_per_s'] / 1e6:.2f} | {r['rays_per_s_min'] / 1e6:.2f}.."
               f"{r['rays_per_s_max'] / 1e6:.2f} | {r['ms_per_frame']:.1f} "
               f"| {r['valid_fraction']:.0%} | {r['cpu_share_median']:.2f} |", file=file)
@@ -228,12 +238,20 @@ def main(argv=None) -> int:
     noisy_cfg = CameraConfig(noise_k=0.001, dropout=0.05)
     cam_noisy = DepthCamera(noisy_cfg, mesh)
 
+    # the planners' 160 x 120 camera, Embree queried 16 rays per call (default) and one ray
+    # per call (embreex), timed in the same run
+    planners = CameraConfig().subsampled(4)
+    cam_q = DepthCamera(planners, mesh)
+    cam_q1 = DepthCamera(planners, mesh, packets=False)
+    cam_full1 = DepthCamera(CameraConfig(), mesh, packets=False)
+
     capture = []
-    for cam, noisy in [(cam_full, False), (cam_half, False), (cam_noisy, True)]:
+    for cam, noisy in [(cam_full, False), (cam_full1, False), (cam_half, False),
+                       (cam_q, False), (cam_q1, False), (cam_noisy, True)]:
         r = bench_capture(cam, pose_list, repeats, noisy)
         capture.append({"width": cam.config.width, "height": cam.config.height,
-                        "noisy": noisy, **r})
-    cast = bench_cast_methods(cam_full, pose_list, max(3, repeats // 3))
+                        "noisy": noisy, "packets": cam._packets is not None, **r})
+    cast = bench_cast_methods(cam_full, pose_list, max(3, repeats // 3), cam_full1)
     threads_after = n_threads()
     share_max = max([r["cpu_share_max"] for r in capture]
                     + [v["cpu_share_max"] for v in cast.values() if isinstance(v, dict)])

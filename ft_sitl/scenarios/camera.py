@@ -46,8 +46,9 @@ only from the ``numpy.random.Generator`` passed to ``capture`` (never a global R
 range cut applies to the *measured* (noisy) depth, so every finite depth lies in range.
 
 Ray casting: the first triangle each ray hits (Embree, through trimesh's scaled scene,
-queried directly with rays built in one compiled pass; trimesh's wrapper re-normalised and
-converted every ray, which cost as much as the query); the distance is then recomputed in
+queried directly with rays built in one compiled pass, 16 rays per call when Embree's C
+API loads; trimesh's wrapper re-normalised and converted every ray, which cost as much as
+the query); the distance is then recomputed in
 float64 from that triangle's plane. Measured on a 51k-triangle forest scene at 640 x 480,
 this is ~2.3x faster than ``intersects_location(..., multiple_hits=False)`` and gives the
 same float64 distances (to 1e-13 m). Without noise, each ray stops just past
@@ -337,10 +338,14 @@ class DepthCamera:
     ``config`` None means the defaults. Builds the intersector once (Embree when ``embreex``
     imports, else trimesh's pure-numpy triangle intersector, with a warning: same results,
     far slower). Embree's BVH build may use worker threads; its ray queries run on the
-    calling thread.
+    calling thread. ``packets`` (default) queries Embree 16 rays per call through its C API
+    (:mod:`ft_sitl.scenarios.embree_packets`): the same first-hit triangles as ``embreex``'s
+    one-ray-per-call query, ~1.3x faster; False, or when that library cannot be loaded,
+    uses ``embreex``.
     """
 
-    def __init__(self, config: CameraConfig | None, mesh: trimesh.Trimesh):
+    def __init__(self, config: CameraConfig | None, mesh: trimesh.Trimesh, *,
+                 packets: bool = True):
         if not isinstance(mesh, trimesh.Trimesh):
             raise TypeError(f"mesh must be a trimesh.Trimesh, got {type(mesh).__name__}")
         self.config = config = CameraConfig() if config is None else config
@@ -388,12 +393,24 @@ class DepthCamera:
 
             self._intersector = ray_triangle.RayMeshIntersector(mesh)
         self._tfar32 = None
+        #: trimesh's scaled Embree scene (None without Embree), fetched once: trimesh's
+        #: cached property re-hashes the mesh on every access
+        self._wrap = self._intersector._scene if self.uses_embree else None
+        #: the same scene queried in packets of 16 rays (None: embreex's single rays)
+        self._packets = None
         if self.uses_embree:
-            scale = float(self._intersector._scene.scale)
+            wrap = self._wrap
+            scale = float(wrap.scale)
             self._tfar32 = (config.max_range_m / self.cos_axis * scale * 1.001 + 1e-6).astype(
                 np.float32)
-        # build the BVH now rather than in the first frame
-        self._intersector.intersects_first(np.zeros((1, 3)), np.array([[0.0, 0.0, 1.0]]))
+            if packets:
+                from ft_sitl.scenarios.embree_packets import packet_scene
+
+                v32 = ((np.array(mesh.vertices, dtype=np.float64) - wrap.origin)
+                       * wrap.scale).astype(np.float32)
+                self._packets = packet_scene(v32, np.asarray(mesh.faces))
+        if self._packets is None:  # build the BVH now rather than in the first frame
+            self._intersector.intersects_first(np.zeros((1, 3)), np.array([[0.0, 0.0, 1.0]]))
 
         self._t0_us: int | None = None
         self.last_capture_us: int | None = None
@@ -422,7 +439,7 @@ class DepthCamera:
     def _embree(self):
         """trimesh's scaled Embree scene (queried directly: its wrapper re-normalises and
         converts every ray, which cost as much as the query), or None without Embree."""
-        return getattr(self._intersector, "_scene", None) if self.uses_embree else None
+        return self._wrap
 
     def _first_hits(self, origin: np.ndarray, dirs_world: np.ndarray, dirs32, org32,
                     tfar32=None):
@@ -432,6 +449,8 @@ class DepthCamera:
         if wrap is None:
             return self._intersector.intersects_first(
                 np.broadcast_to(origin, dirs_world.shape), dirs_world)
+        if self._packets is not None:
+            return self._packets.first_hits(org32, dirs32, tfar32)
         if tfar32 is None:
             return wrap.scene.run(org32, dirs32)
         return wrap.scene.run(org32, dirs32, dists=tfar32.copy())

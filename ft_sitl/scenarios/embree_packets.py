@@ -1,0 +1,213 @@
+"""First-hit ray queries in packets of 16 through Embree 4's C API.
+
+``embreex`` (the binding trimesh uses) exposes only Embree's single-ray query
+(``rtcIntersect1``, one call per ray). A depth camera's rays leave one point through
+neighbouring pixels, the coherent case Embree's packet traversal (``rtcIntersect16``) is
+built for. This module binds the few functions it needs with ``ctypes`` from the Embree
+library that the ``embreex`` wheel ships, builds the same scene trimesh builds (the same
+float32 vertices, shifted and scaled as trimesh does, the same triangle order, the robust
+scene flag) and traverses runs of 16 pixels of a row per call from a compiled loop.
+
+Every ray's first-hit triangle is the one the single-ray query reports for the same float32
+ray: the packet kernels run the same intersection test per lane. ``tests/scenarios``
+checks this triangle by triangle against ``embreex`` on scenario meshes; ``bench_camera``
+times both (the packets are ~1.3x faster on 160 x 120 frames).
+
+:func:`packet_scene` returns None when the library or one of its functions cannot be
+loaded; callers then use ``embreex``'s single-ray query.
+"""
+
+from __future__ import annotations
+
+import ctypes
+import glob
+import os
+
+import numpy as np
+from numba import njit
+
+__all__ = ["PacketScene", "packet_scene"]
+
+_U64 = ctypes.c_uint64
+# rtcore_common.h / rtcore_buffer.h / rtcore_scene.h constants
+_BUFFER_TYPE_INDEX, _BUFFER_TYPE_VERTEX = 0, 1
+_FORMAT_UINT3, _FORMAT_FLOAT3 = 0x5003, 0x9003
+_GEOMETRY_TYPE_TRIANGLE = 0
+_SCENE_FLAG_ROBUST = 1 << 2  # embreex's EmbreeScene(robust=True), trimesh's default
+_INVALID_ID = 0xFFFFFFFF
+
+# RTCRayHit16 (rtcore_ray.h), in 4-byte words: twelve ray arrays of 16 (org_x, org_y,
+# org_z, tnear, dir_x, dir_y, dir_z, time, tfar, mask, id, flags), then the hit (Ng_x,
+# Ng_y, Ng_z, u, v, primID, geomID, instID[levels][16], ...). 64-byte aligned.
+_W = 16
+_OX, _OY, _OZ, _TNEAR, _DX, _DY, _DZ, _TIME, _TFAR, _MASK, _ID, _FLAGS = (
+    k * _W for k in range(12))
+_PRIM, _GEOM, _INST = 17 * _W, 18 * _W, 19 * _W
+_PACKET_BYTES = 4096  # > the struct with any instance level count Embree is built with
+
+_LIB = None
+_LIB_TRIED = False
+_DEVICE = None
+
+
+def _library():
+    """The Embree 4 library of the embreex wheel with the functions used, or None."""
+    global _LIB, _LIB_TRIED
+    if _LIB_TRIED:
+        return _LIB
+    _LIB_TRIED = True
+    try:
+        import embreex
+
+        here = os.path.dirname(embreex.__file__)
+        paths = sorted(glob.glob(os.path.join(here, "..", "embreex.libs", "libembree4*"))) \
+            + sorted(glob.glob(os.path.join(here, "libembree4*")))
+        if not paths:
+            return None
+        lib = ctypes.CDLL(paths[0])
+        sig = {
+            "rtcNewDevice": (_U64, [ctypes.c_char_p]),
+            "rtcNewScene": (_U64, [_U64]),
+            "rtcSetSceneFlags": (None, [_U64, ctypes.c_int]),
+            "rtcNewGeometry": (_U64, [_U64, ctypes.c_int]),
+            "rtcSetNewGeometryBuffer": (_U64, [_U64, ctypes.c_int, ctypes.c_uint,
+                                               ctypes.c_int, ctypes.c_size_t,
+                                               ctypes.c_size_t]),
+            "rtcCommitGeometry": (None, [_U64]),
+            "rtcAttachGeometry": (ctypes.c_uint, [_U64, _U64]),
+            "rtcReleaseGeometry": (None, [_U64]),
+            "rtcCommitScene": (None, [_U64]),
+            "rtcReleaseScene": (None, [_U64]),
+            "rtcGetDeviceError": (ctypes.c_int, [_U64]),
+            # pointers passed as 64-bit integers (the same registers on x86-64 / arm64):
+            # numba calls it with array addresses
+            "rtcIntersect16": (None, [_U64, _U64, _U64, _U64]),
+        }
+        for name, (res, args) in sig.items():
+            fn = getattr(lib, name)
+            fn.restype, fn.argtypes = res, args
+    except (ImportError, OSError, AttributeError):
+        return None
+    _LIB = lib
+    return lib
+
+
+def _device(lib):
+    global _DEVICE
+    if _DEVICE is None:
+        dev = lib.rtcNewDevice(None)
+        _DEVICE = dev or 0
+    return _DEVICE or None
+
+
+class PacketScene:
+    """An Embree scene over float32 ``vertices`` (V, 3) and ``faces`` (F, 3), queried in
+    packets of 16 rays. Build with :func:`packet_scene`."""
+
+    def __init__(self, lib, device, vertices32: np.ndarray, faces: np.ndarray):
+        self._lib = lib
+        scene = lib.rtcNewScene(device)
+        if not scene:
+            raise OSError("rtcNewScene failed")
+        self._scene = scene
+        lib.rtcSetSceneFlags(scene, _SCENE_FLAG_ROBUST)
+        geom = lib.rtcNewGeometry(device, _GEOMETRY_TYPE_TRIANGLE)
+        if not geom:
+            raise OSError("rtcNewGeometry failed")
+        v = np.ascontiguousarray(vertices32, dtype=np.float32)
+        f = np.ascontiguousarray(faces, dtype=np.uint32)
+        for kind, fmt, arr in ((_BUFFER_TYPE_VERTEX, _FORMAT_FLOAT3, v),
+                               (_BUFFER_TYPE_INDEX, _FORMAT_UINT3, f)):
+            ptr = lib.rtcSetNewGeometryBuffer(geom, kind, 0, fmt, 12, len(arr))
+            if not ptr:
+                lib.rtcReleaseGeometry(geom)
+                raise OSError(f"rtcSetNewGeometryBuffer failed (Embree error "
+                              f"{lib.rtcGetDeviceError(device)})")
+            ctypes.memmove(ptr, arr.ctypes.data, arr.nbytes)
+        lib.rtcCommitGeometry(geom)
+        lib.rtcAttachGeometry(scene, geom)
+        lib.rtcReleaseGeometry(geom)
+        lib.rtcCommitScene(scene)
+        err = lib.rtcGetDeviceError(device)
+        if err:
+            raise OSError(f"Embree scene build failed (error {err})")
+
+    def __del__(self):
+        scene, self._scene = getattr(self, "_scene", 0), 0
+        if scene:
+            self._lib.rtcReleaseScene(scene)
+
+    def first_hits(self, org32: np.ndarray, dirs32: np.ndarray, tfar32: np.ndarray | None,
+                   out: np.ndarray | None = None) -> np.ndarray:
+        """Index of the first triangle each ray hits (-1: none) for float32 origins and
+        directions (N, 3) in the scene's units; ``tfar32`` (N,) the rays' lengths (None:
+        unbounded, as embreex's default 1e37)."""
+        n = len(dirs32)
+        if tfar32 is None:
+            tfar32 = np.full(n, 1e37, np.float32)
+        if out is None:
+            out = np.empty(n, np.int64)
+        raw = np.zeros(_PACKET_BYTES + 128, np.uint8)  # per call: no state shared by threads
+        off = (-raw.ctypes.data) % 64
+        buf = raw[off:off + _PACKET_BYTES]
+        valid = raw[off + _PACKET_BYTES - 64: off + _PACKET_BYTES]  # unused tail, aligned
+        bf, bu, vi = buf.view(np.float32), buf.view(np.uint32), valid.view(np.int32)
+        _run16(self._scene, bf, bu, buf.ctypes.data, vi, valid.ctypes.data,
+               np.ascontiguousarray(org32, np.float32), np.ascontiguousarray(dirs32, np.float32),
+               np.ascontiguousarray(tfar32, np.float32), out)
+        return out
+
+
+def packet_scene(vertices32: np.ndarray, faces: np.ndarray) -> PacketScene | None:
+    """A :class:`PacketScene`, or None when Embree 4 cannot be loaded or built."""
+    lib = _library()
+    if lib is None:
+        return None
+    dev = _device(lib)
+    if dev is None:
+        return None
+    try:
+        return PacketScene(lib, dev, vertices32, faces)
+    except OSError:
+        return None
+
+
+def _intersect16():
+    lib = _library()
+    return lib.rtcIntersect16
+
+
+@njit
+def _run16(scene, bf, bu, buf_addr, valid, valid_addr, org32, dirs32, tfar32, out):
+    """Runs of 16 consecutive rays per rtcIntersect16 call (a row segment of an image)."""
+    n = dirs32.shape[0]
+    for p in range(0, n, _W):
+        m = min(_W, n - p)
+        for lane in range(_W):
+            if lane < m:
+                k = p + lane
+                valid[lane] = -1
+                bf[_OX + lane] = org32[k, 0]
+                bf[_OY + lane] = org32[k, 1]
+                bf[_OZ + lane] = org32[k, 2]
+                bf[_TNEAR + lane] = 0.0
+                bf[_DX + lane] = dirs32[k, 0]
+                bf[_DY + lane] = dirs32[k, 1]
+                bf[_DZ + lane] = dirs32[k, 2]
+                bf[_TIME + lane] = 0.0
+                bf[_TFAR + lane] = tfar32[k]
+                bu[_MASK + lane] = _INVALID_ID
+                bu[_ID + lane] = 0
+                bu[_FLAGS + lane] = 0
+                bu[_PRIM + lane] = _INVALID_ID
+                bu[_GEOM + lane] = _INVALID_ID
+                bu[_INST + lane] = _INVALID_ID
+            else:
+                valid[lane] = 0
+        _RTC_INTERSECT16(valid_addr, scene, buf_addr, 0)
+        for lane in range(m):
+            pid = bu[_PRIM + lane]
+            out[p + lane] = -1 if pid == _INVALID_ID else np.int64(pid)
+
+
+_RTC_INTERSECT16 = _intersect16() if _library() is not None else None
