@@ -198,6 +198,7 @@ class Simulation:
         self._meta = np.zeros(M_N)
         self._meta[M_H] = 1.0
         self._k_done = np.zeros(n, dtype=np.int64)
+        self._no_rec = np.empty((0, n, self.x.shape[1]))
 
     # --- configuration ------------------------------------------------------------
     def refresh_gains(self) -> None:
@@ -238,7 +239,10 @@ class Simulation:
     def step(self, n_steps: int = 1, record_every: int = 0) -> np.ndarray | None:
         if n_steps < 0:
             raise ValueError("n_steps must be >= 0")
-        rec = np.empty((n_steps // record_every if record_every else 0, self.n, self.x.shape[1]))
+        if record_every:
+            rec = np.empty((n_steps // record_every, self.n, self.x.shape[1]))
+        else:  # nothing recorded: one empty array for every call
+            rec = self._no_rec
         k_done = self._k_done
         k_done[:] = 0
         while True:
@@ -247,9 +251,10 @@ class Simulation:
                 self.plant.prm, self.plant.alloc, self.plant.env, self.plant.status,
                 self.w_cmd, rec, record_every, k_done, self._gd, self._grid, self._meta,
             )
-            tripped = np.flatnonzero(self._gd[:, G_TRIP] != 0.0)
-            if not len(tripped):
+            trip = self._gd[:, G_TRIP]
+            if not trip.any():
                 break
+            tripped = np.flatnonzero(trip != 0.0)
             for i in tripped:  # the guard resolves each stopped vehicle, then all resume
                 k = int(k_done[i])
                 self.guard.resolve(self, int(i), self.time_us + k * self.dt_us)

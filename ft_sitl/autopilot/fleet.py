@@ -8,6 +8,7 @@ from a setpoint to the first physics step that uses it is one physics step.
 
 from __future__ import annotations
 
+import math
 from collections.abc import Sequence
 
 import numpy as np
@@ -18,7 +19,6 @@ from ft_sitl.autopilot.setpoints import Setpoint
 from ft_sitl.lockstep import Simulation
 from ft_sitl.physics import dynamics as d
 from ft_sitl.physics.platform import Platform
-from ft_sitl.physics.quaternion import qto_euler, tilt_angle
 
 COMMANDER_HZ = 50
 
@@ -108,13 +108,16 @@ class Fleet:
 
     def state(self, i: int) -> VehicleState:
         x = self.sim.x[i]
-        q = x[d.X_QUAT : d.X_QUAT + 4]
+        # yaw and tilt as qto_euler()[2] and tilt_angle() compute them (the same operations,
+        # bit for bit), in plain floats: two compiled calls cost more than the arithmetic
+        w, qx, qy, qz = x[d.X_QUAT : d.X_QUAT + 4].tolist()
+        c = 1.0 - 2.0 * (qx * qx + qy * qy)
         return VehicleState(
             position=x[d.X_POS : d.X_POS + 3].copy(),
             velocity=x[d.X_VEL : d.X_VEL + 3].copy(),
-            yaw=float(qto_euler(q)[2]),
+            yaw=math.atan2(2.0 * (w * qz + qx * qy), 1.0 - 2.0 * (qy * qy + qz * qz)),
             on_ground=self.sim.on_ground(i),
-            tilt=float(tilt_angle(q)),
+            tilt=math.acos(min(1.0, max(-1.0, c))),
         )
 
     def refresh_params(self) -> None:

@@ -317,4 +317,5 @@ class CollisionGuard:
         anchor (no query; -inf when unknown)."""
         g = self._sim._gd[i]
         p = self._sim.x[i, d.X_POS:d.X_POS + 3]
-        return float(g[ls.G_ANCHOR] - np.linalg.norm(p - g[ls.G_OX:ls.G_OZ + 1]))
+        r = p - g[ls.G_OX:ls.G_OZ + 1]
+        return float(g[ls.G_ANCHOR] - math.sqrt(r.dot(r)))  # np.linalg.norm's arithmetic
