@@ -503,17 +503,25 @@ class DepthCamera:
         n_pix = cfg.n_pixels
         dirs_world = np.empty((n_pix, 3))
         wrap = self._embree()
-        if wrap is not None:
+        # without noise a surface beyond max_range is dropped anyway: Embree stops the ray
+        # just past it (0.1 % margin), which saves traversal in open scenes
+        if self._packets is not None:  # rotation, query and plane lengths in one pass
+            length = np.empty(n_pix)
+            self._packets.fan_lengths(self.dirs_optical, r_wo, origin,
+                                      np.asarray(wrap.origin, np.float64).reshape(3),
+                                      float(wrap.scale), None if noisy else self._tfar32,
+                                      self._normals, self._plane_c, _GRAZING_COS, dirs_world,
+                                      length)
+            z = length * self.cos_axis
+        elif wrap is not None:
             dirs32, org32 = np.empty((n_pix, 3), np.float32), np.empty((n_pix, 3), np.float32)
             _rotate_rays(self.dirs_optical, r_wo, origin, dirs_world, dirs32, org32,
                          np.asarray(wrap.origin, np.float64).reshape(3), float(wrap.scale))
+            z = self._lengths(origin, dirs_world, dirs32, org32,
+                              None if noisy else self._tfar32) * self.cos_axis
         else:
-            dirs32 = org32 = None
             np.matmul(self.dirs_optical, r_wo.T, out=dirs_world)
-        # without noise a surface beyond max_range is dropped anyway: Embree stops the ray
-        # just past it (0.1 % margin), which saves traversal in open scenes
-        tfar32 = self._tfar32 if (dirs32 is not None and not noisy) else None
-        z = self._lengths(origin, dirs_world, dirs32, org32, tfar32) * self.cos_axis
+            z = self._lengths(origin, dirs_world, None, None) * self.cos_axis
 
         if noisy:
             valid = np.isfinite(z)

@@ -147,15 +147,38 @@ class PacketScene:
             tfar32 = np.full(n, 1e37, np.float32)
         if out is None:
             out = np.empty(n, np.int64)
-        raw = np.zeros(_PACKET_BYTES + 128, np.uint8)  # per call: no state shared by threads
-        off = (-raw.ctypes.data) % 64
-        buf = raw[off:off + _PACKET_BYTES]
-        valid = raw[off + _PACKET_BYTES - 64: off + _PACKET_BYTES]  # unused tail, aligned
-        bf, bu, vi = buf.view(np.float32), buf.view(np.uint32), valid.view(np.int32)
-        _run16(self._scene, bf, bu, buf.ctypes.data, vi, valid.ctypes.data,
+        buf, valid = _packet_buffers()
+        _run16(self._scene, buf.view(np.float32), buf.view(np.uint32), buf.ctypes.data,
+               valid.view(np.int32), valid.ctypes.data,
                np.ascontiguousarray(org32, np.float32), np.ascontiguousarray(dirs32, np.float32),
                np.ascontiguousarray(tfar32, np.float32), out)
         return out
+
+    def fan_lengths(self, dirs_local: np.ndarray, rot: np.ndarray, origin: np.ndarray,
+                    shift: np.ndarray, scale: float, tfar32: np.ndarray | None,
+                    normals: np.ndarray, plane_c: np.ndarray, grazing: float,
+                    dirs_world: np.ndarray, out: np.ndarray) -> None:
+        """Rays from one ``origin`` (world, float64) along ``rot @ dirs_local[k]``: their
+        world directions into ``dirs_world`` (N, 3) and the float64 length to the hit
+        triangle's plane into ``out`` (N,) (inf: no hit, or a grazing one), in one pass. The
+        same arithmetic as rotating the rays, querying with their float32 copies (origin
+        shifted by ``shift`` and scaled by ``scale``, the scene's units) and recomputing each
+        length from the plane (``normals``, ``plane_c``), done separately."""
+        buf, valid = _packet_buffers()
+        n = len(dirs_local)
+        if tfar32 is None:
+            tfar32 = np.full(n, 1e37, np.float32)
+        _fan16(self._scene, buf.view(np.float32), buf.view(np.uint32), buf.ctypes.data,
+               valid.view(np.int32), valid.ctypes.data, dirs_local, rot, origin, shift,
+               float(scale), tfar32, normals, plane_c, float(grazing), dirs_world, out)
+
+
+def _packet_buffers():
+    """A 64-byte-aligned RTCRayHit16 and valid mask, fresh per call (no state shared
+    between threads)."""
+    raw = np.zeros(_PACKET_BYTES + 128, np.uint8)
+    off = (-raw.ctypes.data) % 64
+    return raw[off:off + _PACKET_BYTES - 64], raw[off + _PACKET_BYTES - 64:off + _PACKET_BYTES]
 
 
 def packet_scene(vertices32: np.ndarray, faces: np.ndarray) -> PacketScene | None:
@@ -208,6 +231,56 @@ def _run16(scene, bf, bu, buf_addr, valid, valid_addr, org32, dirs32, tfar32, ou
         for lane in range(m):
             pid = bu[_PRIM + lane]
             out[p + lane] = -1 if pid == _INVALID_ID else np.int64(pid)
+
+
+
+@njit
+def _fan16(scene, bf, bu, buf_addr, valid, valid_addr, dirs_local, rot, origin, shift, scale,
+           tfar32, normals, plane_c, grazing, dirs_world, out):
+    """PacketScene.fan_lengths: rotate, query 16 rays per call, plane length per ray."""
+    n = dirs_local.shape[0]
+    ox = np.float32((origin[0] - shift[0]) * scale)
+    oy = np.float32((origin[1] - shift[1]) * scale)
+    oz = np.float32((origin[2] - shift[2]) * scale)
+    for p in range(0, n, _W):
+        m = min(_W, n - p)
+        for lane in range(_W):
+            if lane < m:
+                k = p + lane
+                x, y, z = dirs_local[k, 0], dirs_local[k, 1], dirs_local[k, 2]
+                for a in range(3):
+                    dirs_world[k, a] = rot[a, 0] * x + rot[a, 1] * y + rot[a, 2] * z
+                valid[lane] = -1
+                bf[_OX + lane] = ox
+                bf[_OY + lane] = oy
+                bf[_OZ + lane] = oz
+                bf[_TNEAR + lane] = 0.0
+                bf[_DX + lane] = np.float32(dirs_world[k, 0])
+                bf[_DY + lane] = np.float32(dirs_world[k, 1])
+                bf[_DZ + lane] = np.float32(dirs_world[k, 2])
+                bf[_TIME + lane] = 0.0
+                bf[_TFAR + lane] = tfar32[k]
+                bu[_MASK + lane] = _INVALID_ID
+                bu[_ID + lane] = 0
+                bu[_FLAGS + lane] = 0
+                bu[_PRIM + lane] = _INVALID_ID
+                bu[_GEOM + lane] = _INVALID_ID
+                bu[_INST + lane] = _INVALID_ID
+            else:
+                valid[lane] = 0
+        _RTC_INTERSECT16(valid_addr, scene, buf_addr, 0)
+        for lane in range(m):
+            k = p + lane
+            pid = bu[_PRIM + lane]
+            out[k] = np.inf
+            if pid != _INVALID_ID:
+                t = np.int64(pid)
+                nd = (normals[t, 0] * dirs_world[k, 0] + normals[t, 1] * dirs_world[k, 1]
+                      + normals[t, 2] * dirs_world[k, 2])
+                if abs(nd) > grazing:
+                    num = plane_c[t] - (normals[t, 0] * origin[0] + normals[t, 1] * origin[1]
+                                        + normals[t, 2] * origin[2])
+                    out[k] = num / nd
 
 
 _RTC_INTERSECT16 = _intersect16() if _library() is not None else None
