@@ -190,9 +190,29 @@ def packet_scene(vertices32: np.ndarray, faces: np.ndarray) -> PacketScene | Non
     if dev is None:
         return None
     try:
-        return PacketScene(lib, dev, vertices32, faces)
+        scene = PacketScene(lib, dev, vertices32, faces)
     except OSError:
         return None
+    _compile(scene)
+    return scene
+
+
+_COMPILED = False
+
+
+def _compile(scene: PacketScene) -> None:
+    """Compile the kernels now (once per process; they call Embree through a ctypes
+    pointer, which numba cannot cache on disk): ~2 s that would otherwise stall the first
+    frame, e.g. of a bridge running in real time."""
+    global _COMPILED
+    if _COMPILED:
+        return
+    one = np.zeros((1, 3), np.float32)
+    scene.first_hits(one, one, None)
+    scene.fan_lengths(np.array([[0.0, 0.0, 1.0]]), np.eye(3), np.zeros(3), np.zeros(3), 1.0,
+                      None, np.zeros((1, 3)), np.zeros(1), 1e-9, np.empty((1, 3)),
+                      np.empty(1))
+    _COMPILED = True
 
 
 def _intersect16():
