@@ -221,38 +221,41 @@ def _intersect16():
 
 
 @njit
+def _set_lane(bf, bu, lane, ox, oy, oz, dx, dy, dz, tfar):
+    """One ray of the packet: origin, direction, [0, tfar], no hit yet."""
+    bf[_OX + lane] = ox
+    bf[_OY + lane] = oy
+    bf[_OZ + lane] = oz
+    bf[_TNEAR + lane] = 0.0
+    bf[_DX + lane] = dx
+    bf[_DY + lane] = dy
+    bf[_DZ + lane] = dz
+    bf[_TIME + lane] = 0.0
+    bf[_TFAR + lane] = tfar
+    bu[_MASK + lane] = _INVALID_ID
+    bu[_ID + lane] = 0
+    bu[_FLAGS + lane] = 0
+    bu[_PRIM + lane] = _INVALID_ID
+    bu[_GEOM + lane] = _INVALID_ID
+    bu[_INST + lane] = _INVALID_ID
+
+
+@njit
 def _run16(scene, bf, bu, buf_addr, valid, valid_addr, org32, dirs32, tfar32, out):
     """Runs of 16 consecutive rays per rtcIntersect16 call (a row segment of an image)."""
     n = dirs32.shape[0]
     for p in range(0, n, _W):
         m = min(_W, n - p)
         for lane in range(_W):
+            valid[lane] = -1 if lane < m else 0
             if lane < m:
                 k = p + lane
-                valid[lane] = -1
-                bf[_OX + lane] = org32[k, 0]
-                bf[_OY + lane] = org32[k, 1]
-                bf[_OZ + lane] = org32[k, 2]
-                bf[_TNEAR + lane] = 0.0
-                bf[_DX + lane] = dirs32[k, 0]
-                bf[_DY + lane] = dirs32[k, 1]
-                bf[_DZ + lane] = dirs32[k, 2]
-                bf[_TIME + lane] = 0.0
-                bf[_TFAR + lane] = tfar32[k]
-                bu[_MASK + lane] = _INVALID_ID
-                bu[_ID + lane] = 0
-                bu[_FLAGS + lane] = 0
-                bu[_PRIM + lane] = _INVALID_ID
-                bu[_GEOM + lane] = _INVALID_ID
-                bu[_INST + lane] = _INVALID_ID
-            else:
-                valid[lane] = 0
+                _set_lane(bf, bu, lane, org32[k, 0], org32[k, 1], org32[k, 2], dirs32[k, 0],
+                          dirs32[k, 1], dirs32[k, 2], tfar32[k])
         _RTC_INTERSECT16(valid_addr, scene, buf_addr, 0)
         for lane in range(m):
             pid = bu[_PRIM + lane]
             out[p + lane] = -1 if pid == _INVALID_ID else np.int64(pid)
-
-
 
 @njit
 def _fan16(scene, bf, bu, buf_addr, valid, valid_addr, dirs_local, rot, origin, shift, scale,
@@ -271,21 +274,9 @@ def _fan16(scene, bf, bu, buf_addr, valid, valid_addr, dirs_local, rot, origin, 
                 for a in range(3):
                     dirs_world[k, a] = rot[a, 0] * x + rot[a, 1] * y + rot[a, 2] * z
                 valid[lane] = -1
-                bf[_OX + lane] = ox
-                bf[_OY + lane] = oy
-                bf[_OZ + lane] = oz
-                bf[_TNEAR + lane] = 0.0
-                bf[_DX + lane] = np.float32(dirs_world[k, 0])
-                bf[_DY + lane] = np.float32(dirs_world[k, 1])
-                bf[_DZ + lane] = np.float32(dirs_world[k, 2])
-                bf[_TIME + lane] = 0.0
-                bf[_TFAR + lane] = tfar32[k]
-                bu[_MASK + lane] = _INVALID_ID
-                bu[_ID + lane] = 0
-                bu[_FLAGS + lane] = 0
-                bu[_PRIM + lane] = _INVALID_ID
-                bu[_GEOM + lane] = _INVALID_ID
-                bu[_INST + lane] = _INVALID_ID
+                _set_lane(bf, bu, lane, ox, oy, oz, np.float32(dirs_world[k, 0]),
+                          np.float32(dirs_world[k, 1]), np.float32(dirs_world[k, 2]),
+                          tfar32[k])
             else:
                 valid[lane] = 0
         _RTC_INTERSECT16(valid_addr, scene, buf_addr, 0)
