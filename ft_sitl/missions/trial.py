@@ -364,7 +364,7 @@ def run_trial(spec: TrialSpec, *, record: bool = False, navigator=None,
                 now = fleet.time_us
                 t_nav_us = now - t_nav0_us
                 if now >= next_nav_us:
-                    s = fleet.state(0)
+                    s = judge.state_at(now)
                     depth = None
                     if camera is not None and now >= next_cam_us:
                         depth = camera.capture(t_nav_us, fleet.sim.position(0),
@@ -607,14 +607,24 @@ class NavigationJudge:
         self.traj = traj
         self.t_nav0_us = fleet.time_us
         self.t_sample_us = fleet.time_us
-        self.prev = fleet.state(0).position.copy()
+        self._state = fleet.state(0)
+        self._state_us = fleet.time_us
+        self.prev = self._state.position.copy()
         self.entered_us = None
         self.timeout_us = round(spec.limits.timeout_s * 1e6)
         self.hold_us = round(spec.limits.hold_s * 1e6)
 
+    def state_at(self, time_us: int):
+        """The vehicle's state at ``time_us``: the one the last check read when the
+        simulation has not moved since (it is used read-only here), else a fresh one."""
+        if time_us == self._state_us:
+            return self._state
+        return self.fleet.state(0)
+
     def after_step(self) -> bool:
         fleet, spec, m = self.fleet, self.spec, self.m
         s = fleet.state(0)
+        self._state, self._state_us = s, fleet.time_us
         m.sample(fleet, self.guard, self.prev, s, (fleet.time_us - self.t_sample_us) * 1e-6)
         self.t_sample_us = fleet.time_us
         self.prev = s.position.copy()

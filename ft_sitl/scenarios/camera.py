@@ -246,6 +246,24 @@ class DepthFrame:
         """(H, W) bool: pixels with a depth."""
         return np.isfinite(self.depth)
 
+    def __getattr__(self, name: str):
+        # DepthCamera.capture leaves the point clouds to the first reader (the planners'
+        # maps read only the image): computed then, from the frame's float64 depths
+        if name in _CLOUD_FIELDS:
+            make = self.__dict__.pop("_make_cloud", None)
+            if make is not None:
+                self.__dict__.update(zip(_CLOUD_FIELDS, make()))
+                return self.__dict__[name]
+        raise AttributeError(f"{type(self).__name__!r} object has no attribute {name!r}")
+
+    def __getstate__(self):  # pickling / copying: the clouds, not the function making them
+        for name in _CLOUD_FIELDS:
+            getattr(self, name)
+        return self.__dict__
+
+
+_CLOUD_FIELDS = ("points_body", "points_world", "pixels")
+
 
 # --- camera -----------------------------------------------------------------------------------
 def _rotmat(q) -> np.ndarray:
@@ -311,8 +329,8 @@ def _hit_lengths(tri, dirs_world, origin, normals, plane_c, grazing, out):
 
 
 @njit(cache=True)
-def _cloud(z, lo, hi, width, rays_z1, r_bo, mount, r_wb, p_wb, depth, pb, pw, pix):
-    """Range cut, the float32 depth image and the valid pixels' points; returns their count."""
+def _depth_image(z, lo, hi, depth):
+    """The float32 depth image (NaN outside [lo, hi]); returns the number of valid pixels."""
     n = 0
     for k in range(z.shape[0]):
         zk = z[k]
@@ -320,6 +338,18 @@ def _cloud(z, lo, hi, width, rays_z1, r_bo, mount, r_wb, p_wb, depth, pb, pw, pi
             depth[k] = np.nan
             continue
         depth[k] = np.float32(zk)
+        n += 1
+    return n
+
+
+@njit(cache=True)
+def _cloud(z, lo, hi, width, rays_z1, r_bo, mount, r_wb, p_wb, pb, pw, pix):
+    """The valid pixels' points (body and world) and (row, col), from the float64 depths."""
+    n = 0
+    for k in range(z.shape[0]):
+        zk = z[k]
+        if not (zk >= lo and zk <= hi):
+            continue
         x, y, w = rays_z1[k, 0] * zk, rays_z1[k, 1] * zk, rays_z1[k, 2] * zk
         for a in range(3):
             pb[n, a] = r_bo[a, 0] * x + r_bo[a, 1] * y + r_bo[a, 2] * w + mount[a]
@@ -533,22 +563,26 @@ class DepthCamera:
                 z[idx[rng.random(idx.size) < cfg.dropout]] = np.inf
 
         depth = np.empty(n_pix, dtype=np.float32)
-        pb, pw = np.empty((n_pix, 3)), np.empty((n_pix, 3))
-        pix = np.empty((n_pix, 2), np.int32)
-        n = _cloud(z, float(cfg.min_range_m), float(cfg.max_range_m), cfg.width, self.rays_z1,
-                   self.r_body_optical, self.mount_body, r_wb, p_wb, depth, pb, pw, pix)
-        points_body, points_world, pixels = pb[:n].copy(), pw[:n].copy(), pix[:n].copy()
+        lo, hi = float(cfg.min_range_m), float(cfg.max_range_m)
+        n = _depth_image(z, lo, hi, depth)
+
+        def make_cloud():
+            pb, pw = np.empty((n, 3)), np.empty((n, 3))
+            pix = np.empty((n, 2), np.int32)
+            _cloud(z, lo, hi, cfg.width, self.rays_z1, self.r_body_optical, self.mount_body,
+                   r_wb, p_wb, pb, pw, pix)
+            return pb, pw, pix
 
         self._schedule(t_us)
         qn = np.asarray(q_world_body, dtype=np.float64)
-        return DepthFrame(
+        frame = DepthFrame.__new__(DepthFrame)  # the clouds on first access (__getattr__)
+        frame.__dict__.update(
             t_us=t_us,
             depth=depth.reshape(cfg.height, cfg.width),
-            points_body=points_body,
-            points_world=points_world,
-            pixels=pixels,
             p_world_body=p_wb.copy(),
             q_world_body=qn / np.linalg.norm(qn),
             p_world_camera=origin,
             r_world_optical=r_wo,
+            _make_cloud=make_cloud,
         )
+        return frame

@@ -369,3 +369,23 @@ def test_packet_queries_hit_the_same_triangles_as_single_rays(family):
     dirs /= np.linalg.norm(dirs, axis=1)[:, None]
     np.testing.assert_array_equal(single.cast(sc.start, dirs), packets.cast(sc.start, dirs))
     assert hits > 10_000  # the frames saw the scene (~5 % of their pixels at least)
+
+
+def test_point_clouds_are_made_on_first_access_and_survive_copies(wall_cam):
+    """capture() leaves the clouds to their first reader: the same points as computed from
+    the image, and a pickled or copied frame carries them, not the function making them."""
+    import copy
+    import pickle
+
+    f = wall_cam.capture(0, [0.0, 0.0, 0.0], q_yaw(0.2))
+    assert "points_world" not in f.__dict__  # not made yet
+    v, u = np.nonzero(f.valid)
+    assert np.array_equal(f.pixels, np.stack([v, u], axis=1))
+    z = f.depth[v, u].astype(np.float64)
+    assert np.allclose(f.points_world[:, 0], 3.0, atol=1e-9)  # the wall's face
+    assert len(f.points_body) == len(z) > 1000
+    g = pickle.loads(pickle.dumps(wall_cam.capture(1, [0.0, 0.0, 0.0], q_yaw(0.2))))
+    np.testing.assert_array_equal(g.points_world, f.points_world)
+    h = copy.deepcopy(wall_cam.capture(2, [0.0, 0.0, 0.0], q_yaw(0.2)))
+    np.testing.assert_array_equal(h.points_body, f.points_body)
+    assert "_make_cloud" not in h.__dict__
