@@ -509,10 +509,33 @@ class SerialExecutor(Executor):
             yield chunk, fn(chunk)
 
 
-def _worker_init() -> None:
+def _worker_init(parent_pid: int | None = None) -> None:
     import signal
 
     signal.signal(signal.SIGINT, signal.SIG_IGN)  # the parent handles Ctrl-C
+    _die_with_parent(parent_pid)
+
+
+def _die_with_parent(parent_pid: int | None) -> None:
+    """On Linux, have the kernel send this worker SIGTERM when the campaign process dies
+    (killed, say, by SIGTERM or SIGKILL, with no chance to stop its pool): orphaned workers
+    would otherwise fly their queued trials to no one for minutes."""
+    import sys
+
+    if not sys.platform.startswith("linux"):
+        return
+    import ctypes
+    import signal
+
+    try:
+        libc = ctypes.CDLL(None, use_errno=True)
+        pr_set_pdeathsig = 1
+        if libc.prctl(pr_set_pdeathsig, int(signal.SIGTERM), 0, 0, 0) != 0:
+            return
+    except (OSError, AttributeError):
+        return
+    if parent_pid is not None and os.getppid() != parent_pid:  # died before the prctl
+        os.kill(os.getpid(), signal.SIGTERM)
 
 
 class ProcessExecutor(Executor):
@@ -533,7 +556,7 @@ class ProcessExecutor(Executor):
             os.environ.setdefault(var, "1")
 
         return ProcessPoolExecutor(self.workers, mp_context=mp.get_context("spawn"),
-                                   initializer=_worker_init)
+                                   initializer=_worker_init, initargs=(os.getpid(),))
 
     def imap(self, fn, chunks):
         pending = list(chunks)

@@ -6,7 +6,9 @@ the installed script. The campaigns fly the conftest ``yard``: four short trials
 
 import csv
 import json
+import os
 import shutil
+import sys
 
 import numpy as np
 import pandas as pd
@@ -301,3 +303,62 @@ def test_rerun_without_the_navigator_is_bad_input(capsys, done, tmp_path):
     except Exception as exc:  # noqa: BLE001 - the bug: report it as a failure
         pytest.fail(f"main raised {type(exc).__name__}: {exc}")
     assert rc == 2 and "unknown navigator 'not_installed'" in err
+
+
+def _children(pid: int) -> list[int]:
+    """Live (not zombie) processes whose parent is pid."""
+    out = []
+    for d in os.listdir("/proc"):
+        if not d.isdigit():
+            continue
+        try:
+            stat = open(f"/proc/{d}/stat").read()
+        except OSError:
+            continue
+        fields = stat[stat.rindex(")") + 2:].split()
+        if int(fields[1]) == pid and fields[0] != "Z":
+            out.append(int(d))
+    return out
+
+
+def _alive(pid: int) -> bool:
+    try:
+        stat = open(f"/proc/{pid}/stat").read()
+    except OSError:
+        return False
+    return stat[stat.rindex(")") + 2:].split()[0] != "Z"
+
+
+@pytest.mark.skipif(not sys.platform.startswith("linux"), reason="PR_SET_PDEATHSIG is Linux")
+def test_workers_stop_when_the_campaign_process_is_killed(tmp_path):
+    """SIGKILL leaves the campaign process no chance to stop its pool: the workers must not
+    go on flying queued trials for no one (the kernel's parent-death signal ends them)."""
+    import signal
+    import subprocess
+    import time
+
+    from tests.missions.conftest import EXE
+
+    proc = subprocess.Popen([EXE, "campaign", "run", "quick", "--out", str(tmp_path / "o"),
+                             "--workers", "2", "--quiet", "--no-report"],
+                            stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+    workers: list[int] = []
+    try:
+        deadline = time.monotonic() + 120
+        while len(workers) < 2 and time.monotonic() < deadline and proc.poll() is None:
+            time.sleep(0.2)
+            workers = [c for c in _children(proc.pid)
+                       if b"resource_tracker" not in open(f"/proc/{c}/cmdline", "rb").read()]
+        assert len(workers) >= 2, "the campaign never started its two workers"
+        os.kill(proc.pid, signal.SIGKILL)
+        proc.wait()
+        deadline = time.monotonic() + 60
+        while any(_alive(w) for w in workers) and time.monotonic() < deadline:
+            time.sleep(0.2)
+        assert not any(_alive(w) for w in workers), "workers outlived the campaign process"
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+        for w in workers:
+            if _alive(w):
+                os.kill(w, signal.SIGKILL)
