@@ -10,10 +10,17 @@ from __future__ import annotations
 import argparse
 import json
 import math
+import os
 import sys
 from pathlib import Path
 
 from ft_sitl import __version__
+
+# One BLAS / OpenMP thread, as in the campaign's worker processes, set before numpy loads:
+# multi-threaded BLAS sums in another order, so a trial run here (`campaign run --workers 1`,
+# `trial rerun`) would differ in the last bits from the same trial run by a worker.
+for _var in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS"):
+    os.environ.setdefault(_var, "1")
 
 EXIT_BAD_INPUT = 2
 
