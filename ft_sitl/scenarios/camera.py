@@ -314,18 +314,25 @@ def _rotate_rays(dirs_optical, r_wo, origin, dirs_world, dirs32, org32, shift, s
 
 
 @njit(cache=True)
+def plane_length(t, dirs_world, k, origin, normals, plane_c, grazing):
+    """Length of ray k (unit ``dirs_world[k]`` from ``origin``) to triangle t's plane
+    (float64); inf for a miss (t < 0) or a grazing hit."""
+    if t < 0:
+        return np.inf
+    nd = (normals[t, 0] * dirs_world[k, 0] + normals[t, 1] * dirs_world[k, 1]
+          + normals[t, 2] * dirs_world[k, 2])
+    if not abs(nd) > grazing:
+        return np.inf
+    num = plane_c[t] - (normals[t, 0] * origin[0] + normals[t, 1] * origin[1]
+                        + normals[t, 2] * origin[2])
+    return num / nd
+
+
+@njit(cache=True)
 def _hit_lengths(tri, dirs_world, origin, normals, plane_c, grazing, out):
     """Ray length to the hit triangle's plane (float64); inf on a miss or a grazing hit."""
     for k in range(tri.shape[0]):
-        t = tri[k]
-        out[k] = np.inf
-        if t >= 0:
-            nd = (normals[t, 0] * dirs_world[k, 0] + normals[t, 1] * dirs_world[k, 1]
-                  + normals[t, 2] * dirs_world[k, 2])
-            if abs(nd) > grazing:
-                num = plane_c[t] - (normals[t, 0] * origin[0] + normals[t, 1] * origin[1]
-                                    + normals[t, 2] * origin[2])
-                out[k] = num / nd
+        out[k] = plane_length(tri[k], dirs_world, k, origin, normals, plane_c, grazing)
 
 
 @njit(cache=True)

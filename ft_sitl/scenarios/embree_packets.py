@@ -26,6 +26,8 @@ import os
 import numpy as np
 from numba import njit
 
+from ft_sitl.scenarios.camera import plane_length
+
 __all__ = ["PacketScene", "packet_scene"]
 
 _U64 = ctypes.c_uint64
@@ -281,17 +283,10 @@ def _fan16(scene, bf, bu, buf_addr, valid, valid_addr, dirs_local, rot, origin, 
                 valid[lane] = 0
         _RTC_INTERSECT16(valid_addr, scene, buf_addr, 0)
         for lane in range(m):
-            k = p + lane
             pid = bu[_PRIM + lane]
-            out[k] = np.inf
-            if pid != _INVALID_ID:
-                t = np.int64(pid)
-                nd = (normals[t, 0] * dirs_world[k, 0] + normals[t, 1] * dirs_world[k, 1]
-                      + normals[t, 2] * dirs_world[k, 2])
-                if abs(nd) > grazing:
-                    num = plane_c[t] - (normals[t, 0] * origin[0] + normals[t, 1] * origin[1]
-                                        + normals[t, 2] * origin[2])
-                    out[k] = num / nd
+            t = np.int64(-1) if pid == _INVALID_ID else np.int64(pid)
+            out[p + lane] = plane_length(t, dirs_world, p + lane, origin, normals, plane_c,
+                                         grazing)
 
 
 _RTC_INTERSECT16 = _intersect16() if _library() is not None else None
