@@ -1,6 +1,7 @@
 """NavRL: the checkpoint reader, the numpy policy, the lidar, the ORCA shield, the navigator's
 deployment logic and real trials with the authors' released weights."""
 
+import json
 import math
 import os
 import pickle
@@ -356,3 +357,28 @@ def test_real_forest_trial_succeeds_near_one_metre_per_second(with_checkpoint):
     assert row["reason"] == "success", row["detail"]
     assert 0.7 < row["mean_speed_m_s"] < 1.1  # the deployment's 1 m/s cap, not 4 m/s
     assert row["planner_calls"] > 0 and row["min_clearance_m"] > 0.0
+
+
+def test_rerun_by_the_command_matches_the_worker_row_bit_for_bit(navrl_checkpoint, tmp_path):
+    """A NavRL trial flown by a campaign worker (one BLAS thread) and again by `ft-sitl trial
+    rerun` started with no BLAS thread variables: the same row to the last bit. (With a
+    multi-threaded BLAS this trial's path and energy differed in the last bits.)"""
+    exe = Path(sys.executable).parent / "ft-sitl"
+    env = {k: v for k, v in os.environ.items()
+           if k not in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS")}
+    env["FT_SITL_NAVRL_CHECKPOINT"] = str(navrl_checkpoint)
+    camp = tmp_path / "c.toml"
+    camp.write_text('name = "blas"\nalgorithms = ["navrl"]\nplatforms = ["4.20kg-UAV 13"]\n'
+                    'scenarios = ["random_angle_cylinder"]\nindices = [1]\ntrials = 1\n'
+                    'seed = 0\n')
+    out = tmp_path / "o"
+    run = subprocess.run([str(exe), "campaign", "run", str(camp), "--out", str(out),
+                          "--workers", "2", "--quiet", "--no-report"], env=env,
+                         capture_output=True, text=True, timeout=600)
+    assert run.returncode == 0, run.stderr
+    row = json.loads((out / "trials.jsonl").read_text().splitlines()[0])
+    assert row["reason"] == "success" and row["nav_time_s"] > 20.0  # a long policy flight
+    rerun = subprocess.run([str(exe), "trial", "rerun", str(out), row["trial_id"]], env=env,
+                           capture_output=True, text=True, timeout=600)
+    assert rerun.returncode == 0, rerun.stderr
+    assert "identical to the stored result" in rerun.stdout, rerun.stdout
