@@ -102,6 +102,23 @@ MIN_SEGMENTS = 4
 ORDER = 3
 
 
+def esdf_centre(local_map, point, half_extent_m: float) -> np.ndarray:
+    """Where PGO centres its ESDF box of ``half_extent_m``: ``point`` (the segment's
+    middle), unless that box would not overlap the map's window by the 2 voxels
+    :meth:`LocalMap.update_esdf` needs (a segment far beyond the window); then ``point``
+    moved onto the window's edge. The test is update_esdf's own voxel arithmetic, so every
+    box that worked before stays where it was."""
+    p = np.asarray(point, dtype=float).reshape(3)
+    ci = np.floor(p[:2] * (1.0 / local_map.resolution_m)).astype(np.int64) \
+        - local_map.origin_index[:2]
+    nh = int(round(half_extent_m / local_map.resolution_m))
+    n = np.array(local_map.shape[:2])
+    lo, hi = np.clip(ci - nh, 0, n), np.clip(ci + nh + 1, 0, n)
+    if np.all(hi - lo >= 2):
+        return p
+    return np.clip(p, local_map.window_min_m, local_map.window_max_m)
+
+
 @dataclass(frozen=True)
 class PgoParams:
     """Fast-Planner's ``BsplineOptimizer`` weights (topo launch) and limits."""
@@ -670,9 +687,13 @@ class PgoPlanner(ReplanningPlanner):
         derivs = ref.derivs(t_eff, t_eff + duration)
         init = UniformBSpline.fit(points, dt, *derivs)
         # the ESDF over a box around the segment's middle that holds the segment and the
-        # topological sampling box around any stretch of it (+-(L/2 + 1) along, 3.5 across)
-        grid = EsdfGrid.from_map(self.map, self.bounds, points[len(points) // 2],
-                                 0.5 * self.segment_len + 2.0)
+        # topological sampling box around any stretch of it (+-(L/2 + 1) along, 3.5 across);
+        # a box off the map's window (a segment far from the vehicle) has no field at all:
+        # it is moved onto the window's edge
+        half = 0.5 * self.segment_len + 2.0
+        grid = EsdfGrid.from_map(self.map, self.bounds,
+                                 esdf_centre(self.map, points[len(points) // 2], half),
+                                 half)
         plan = plan_segment(init, lambda n: ref.by_duration(t_eff, duration, n), derivs, grid,
                             self.rng, self.params, self.topo_params)
         self.last_plan = plan

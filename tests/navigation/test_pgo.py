@@ -15,6 +15,7 @@ from ft_sitl.navigation.mapping import LocalMap
 from ft_sitl.navigation.pgo import (
     PgoParams,
     PgoPlanner,
+    esdf_centre,
     first_collision_time,
     guide_phase,
     jerk_cost,
@@ -235,6 +236,29 @@ def test_the_esdf_snapshot_reads_the_local_map_like_the_map():
     assert m.occupied_inflated(pts).any()
     np.testing.assert_array_equal(grid.occupied(pts), m.occupied_inflated(pts))
 
+
+
+def test_the_esdf_box_of_a_segment_beyond_the_window_is_moved_onto_it():
+    # A replan whose segment lies beyond the window (seen in the paper campaign: Urban
+    # configuration 3, 52 s into a flight) raised "the ESDF box does not overlap the
+    # window", which failed the trial as a navigator error.
+    m = LocalMap(None, 3.0, center_m=(0.0, 0.0))
+    lo, hi = m.window_min_m, m.window_max_m
+    inside = np.array([0.5, -1.0, 1.5])
+    np.testing.assert_array_equal(esdf_centre(m, inside, 5.5), inside)
+    # a box centred off the window but still overlapping it stays where it was
+    near = np.array([hi[0] + 3.0, 0.0, 1.5])
+    np.testing.assert_array_equal(esdf_centre(m, near, 5.5), near)
+    EsdfGrid.from_map(m, None, near, 5.5)
+    far = np.array([hi[0] + 9.0, lo[1] - 7.0, 1.5])
+    with pytest.raises(ValueError, match="does not overlap"):
+        EsdfGrid.from_map(m, None, far, 5.5)
+    c = esdf_centre(m, far, 5.5)
+    assert c[0] == pytest.approx(hi[0]) and c[1] == pytest.approx(lo[1]) and c[2] == 1.5
+    grid = EsdfGrid.from_map(m, None, c, 5.5)
+    assert grid.field.shape[0] >= 2 and grid.field.shape[1] >= 2
+    d, _ = grid.evaluate(np.array([[hi[0] - 1.0, lo[1] + 1.0, 1.5]]))
+    assert np.isfinite(d).all()
 
 # ---- the navigator -----------------------------------------------------------------------
 def test_parameters_are_checked():
