@@ -1218,11 +1218,7 @@ class LocalMap:
                 c = np.asarray(center_m, dtype=np.float64).reshape(-1)[:2]
                 if c.shape != (2,) or not np.all(np.isfinite(c)):
                     raise ValueError(f"center_m must be finite (x, y), got {center_m!r}")
-            ci = np.floor(c * self._inv_res).astype(np.int64) - self._origin[:2]
-            nh = int(round(h * self._inv_res))
-            lo, hi = ci - nh, ci + nh + 1  # 2 nh + 1 voxels centred on c's voxel
-            x0, y0 = (int(v) for v in np.clip(lo, 0, [nx, ny]))
-            x1, y1 = (int(v) for v in np.clip(hi, 0, [nx, ny]))
+            x0, x1, y0, y1 = self._esdf_box_xy(c, h)
             if x1 - x0 < 2 or y1 - y0 < 2:
                 raise ValueError("the ESDF box does not overlap the window (by >= 2 voxels)")
         plan = np.ascontiguousarray(self.planning_grid()[x0:x1, y0:y1, z0:z1])
@@ -1233,6 +1229,24 @@ class LocalMap:
         self._esdf_origin = self._origin + np.array([x0, y0, z0])
         self._esdf_frame = self._frames
         return pos
+
+    def _esdf_box_xy(self, c, h: float) -> tuple[int, int, int, int]:
+        """Window voxel range x0, x1, y0, y1 of the horizontal ESDF box of half extent h
+        (m) centred on the voxel of c (x, y), clipped to the window."""
+        nx, ny = self.shape[:2]
+        ci = np.floor(np.asarray(c, dtype=np.float64)[:2] * self._inv_res).astype(np.int64) \
+            - self._origin[:2]
+        nh = int(round(h * self._inv_res))
+        lo, hi = ci - nh, ci + nh + 1  # 2 nh + 1 voxels centred on c's voxel
+        x0, y0 = (int(v) for v in np.clip(lo, 0, [nx, ny]))
+        x1, y1 = (int(v) for v in np.clip(hi, 0, [nx, ny]))
+        return x0, x1, y0, y1
+
+    def esdf_box_overlaps(self, center_m, half_extent_m: float) -> bool:
+        """Whether :meth:`update_esdf` can take the box ``center_m (x, y) +-
+        half_extent_m``: it overlaps the window by at least 2 voxels each way."""
+        x0, x1, y0, y1 = self._esdf_box_xy(center_m, float(half_extent_m))
+        return x1 - x0 >= 2 and y1 - y0 >= 2
 
     @property
     def esdf_origin_index(self) -> np.ndarray | None:

@@ -104,17 +104,10 @@ ORDER = 3
 
 def esdf_centre(local_map, point, half_extent_m: float) -> np.ndarray:
     """Where PGO centres its ESDF box of ``half_extent_m``: ``point`` (the segment's
-    middle), unless that box would not overlap the map's window by the 2 voxels
-    :meth:`LocalMap.update_esdf` needs (a segment far beyond the window); then ``point``
-    moved onto the window's edge. The test is update_esdf's own voxel arithmetic, so every
-    box that worked before stays where it was."""
+    middle), or, when that box would miss the map's window (a segment far beyond it),
+    ``point`` moved onto the window's edge."""
     p = np.asarray(point, dtype=float).reshape(3)
-    ci = np.floor(p[:2] * (1.0 / local_map.resolution_m)).astype(np.int64) \
-        - local_map.origin_index[:2]
-    nh = int(round(half_extent_m / local_map.resolution_m))
-    n = np.array(local_map.shape[:2])
-    lo, hi = np.clip(ci - nh, 0, n), np.clip(ci + nh + 1, 0, n)
-    if np.all(hi - lo >= 2):
+    if local_map.esdf_box_overlaps(p, half_extent_m):
         return p
     return np.clip(p, local_map.window_min_m, local_map.window_max_m)
 
