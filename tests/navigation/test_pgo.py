@@ -237,7 +237,6 @@ def test_the_esdf_snapshot_reads_the_local_map_like_the_map():
     np.testing.assert_array_equal(grid.occupied(pts), m.occupied_inflated(pts))
 
 
-
 def test_the_esdf_box_of_a_segment_beyond_the_window_is_moved_onto_it():
     # A replan whose segment lies beyond the window (seen in the paper campaign: Urban
     # configuration 3, 52 s into a flight) raised "the ESDF box does not overlap the
@@ -259,6 +258,7 @@ def test_the_esdf_box_of_a_segment_beyond_the_window_is_moved_onto_it():
     assert grid.field.shape[0] >= 2 and grid.field.shape[1] >= 2
     d, _ = grid.evaluate(np.array([[hi[0] - 1.0, lo[1] + 1.0, 1.5]]))
     assert np.isfinite(d).all()
+
 
 # ---- the navigator -----------------------------------------------------------------------
 def test_parameters_are_checked():
