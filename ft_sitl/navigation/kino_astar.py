@@ -640,11 +640,13 @@ def _insert(nid, x, g, f, u, tau, par, vox, closed, slot, hk, hv, heap, hpos, cn
                 break
         if hit:
             continue
-        h, _ = _obvp(ch[j], goal, w, p[_P_VMAX])
         uu = ch_u[j, 0] ** 2 + ch_u[j, 1] ** 2 + ch_u[j, 2] ** 2
         gj = g[nid] + (uu + w) * ch_tau[j]
-        fj = gj + p[_P_LAMBDA] * h
         e = _hash_find(hk, hv, ch_key[j], mask)
+        if 0 <= e < first_new and not gj < g[e]:
+            continue  # decided by g alone: the heuristic is not needed
+        h, _ = _obvp(ch[j], goal, w, p[_P_VMAX])
+        fj = gj + p[_P_LAMBDA] * h
         if e < 0:
             if cnt[_C_NODES] >= cnt[_C_MAXNODES]:
                 return _NODE_CAP
