@@ -509,11 +509,15 @@ class SerialExecutor(Executor):
             yield chunk, fn(chunk)
 
 
-def _worker_init(parent_pid: int | None = None) -> None:
+def _worker_init(parent_pid: int | None = None, grid_dir: str | None = None) -> None:
     import signal
 
     signal.signal(signal.SIGINT, signal.SIG_IGN)  # the parent handles Ctrl-C
     _die_with_parent(parent_pid)
+    if grid_dir is not None:
+        from ft_sitl.missions.trial import set_grid_dir
+
+        set_grid_dir(grid_dir)
 
 
 def _die_with_parent(parent_pid: int | None) -> None:
@@ -546,9 +550,14 @@ class ProcessExecutor(Executor):
     def __init__(self, workers: int):
         self.workers = workers
         self._pool = None
+        self._grid_dir: str | None = None  # the workers' shared distance grids
 
     def _new_pool(self):
         import multiprocessing as mp
+        import tempfile
+
+        if self._grid_dir is None:
+            self._grid_dir = tempfile.mkdtemp(prefix="ft-sitl-grids-")
 
         # workers inherit the environment: one BLAS/OpenMP thread each (set before their
         # numpy loads; small solves are far slower with idle BLAS threads spinning)
@@ -556,7 +565,8 @@ class ProcessExecutor(Executor):
             os.environ.setdefault(var, "1")
 
         return ProcessPoolExecutor(self.workers, mp_context=mp.get_context("spawn"),
-                                   initializer=_worker_init, initargs=(os.getpid(),))
+                                   initializer=_worker_init,
+                                   initargs=(os.getpid(), self._grid_dir))
 
     def imap(self, fn, chunks):
         pending = list(chunks)
@@ -601,6 +611,11 @@ class ProcessExecutor(Executor):
         if self._pool is not None:
             self._pool.shutdown(wait=False, cancel_futures=True)
             self._pool = None
+        if self._grid_dir is not None:
+            import shutil
+
+            shutil.rmtree(self._grid_dir, ignore_errors=True)
+            self._grid_dir = None
 
 
 def _died(d: dict):

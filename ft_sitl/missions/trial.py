@@ -38,6 +38,7 @@ import datetime
 import hashlib
 import json
 import math
+import os
 import time
 from dataclasses import dataclass, field
 
@@ -201,14 +202,64 @@ def _scenario_key(sc) -> tuple:
     return (sc.name, sc.mesh_digest(), tuple(sc.bounds_min), tuple(sc.bounds_max))
 
 
+#: a directory where campaign workers share distance grids (None: each process builds its
+#: own); set in each worker by the campaign's process pool (:func:`set_grid_dir`)
+_GRID_DIR: str | None = None
+
+
+def set_grid_dir(path: str | None) -> None:
+    """Share distance grids through ``path``: the first process to need a scenario's grid
+    builds it and saves it there, the others load it (a grid is deterministic, so every
+    process gets the same array it would have built)."""
+    global _GRID_DIR
+    _GRID_DIR = path
+
+
+def _distance_grid(scenario, key: tuple):
+    from ft_sitl.scenarios.guard import DistanceGrid
+
+    def build():
+        return DistanceGrid.build(scenario.mesh, scenario.bounds_min, scenario.bounds_max)
+
+    if _GRID_DIR is None:
+        return build()
+    try:
+        import fcntl
+    except ImportError:  # no advisory locks (Windows): build here
+        return build()
+    name = hashlib.sha256(repr(key).encode()).hexdigest()[:32]
+    path = os.path.join(_GRID_DIR, name + ".npz")
+    try:
+        lock = open(os.path.join(_GRID_DIR, name + ".lock"), "a")
+    except OSError:  # the directory is gone (the campaign ended): build here
+        return build()
+    with lock:
+        fcntl.flock(lock, fcntl.LOCK_EX)  # one process builds, the others wait and load
+        if os.path.exists(path):
+            try:
+                with np.load(path) as z:
+                    return DistanceGrid(z["data"], z["origin"], float(z["pitch"]))
+            except (OSError, ValueError, KeyError):
+                pass  # unreadable: build it again
+        grid = build()
+        tmp = f"{path}.{os.getpid()}.tmp.npz"
+        try:
+            np.savez(tmp, data=grid.data, origin=grid.origin, pitch=grid.pitch)
+            os.replace(tmp, path)
+        except OSError:
+            pass  # sharing is an optimisation only
+        return grid
+
+
 def _world_and_grid(scenario):
     from ft_sitl.scenarios.collision import CollisionWorld
-    from ft_sitl.scenarios.guard import DistanceGrid
+
+    key = _scenario_key(scenario)
 
     def make():
         return (CollisionWorld(scenario.mesh, scenario.bounds_min, scenario.bounds_max),
-                DistanceGrid.build(scenario.mesh, scenario.bounds_min, scenario.bounds_max))
-    return _cached(_GRIDS, _scenario_key(scenario), make)
+                _distance_grid(scenario, key))
+    return _cached(_GRIDS, key, make)
 
 
 def platform_for(spec: TrialSpec):

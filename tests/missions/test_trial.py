@@ -538,3 +538,35 @@ def test_bad_spec_fields_are_refused_by_name(field, value):
 def test_bad_spec_documents_are_refused(doc, message):
     with pytest.raises(TrialSpecError, match=message):
         TrialSpec.from_dict(doc)
+
+
+def test_campaign_workers_share_one_build_of_a_scenario_distance_grid(tmp_path, yard,
+                                                                      monkeypatch):
+    from ft_sitl.missions import trial as trial_mod
+    from ft_sitl.scenarios.guard import DistanceGrid
+    from ft_sitl.scenarios.io import load_scenario
+
+    sc = load_scenario(str(yard))
+    built = DistanceGrid.build(sc.mesh, sc.bounds_min, sc.bounds_max)
+    key = trial_mod._scenario_key(sc)
+    monkeypatch.setattr(trial_mod, "_GRID_DIR", str(tmp_path))
+    first = trial_mod._distance_grid(sc, key)  # builds it and leaves it for the others
+    saved = list(tmp_path.glob("*.npz"))
+    assert len(saved) == 1
+
+    def no_build(*args, **kwargs):
+        raise AssertionError("a shared grid must be loaded, not built again")
+
+    monkeypatch.setattr(DistanceGrid, "build", no_build)
+    loaded = trial_mod._distance_grid(sc, key)
+    for grid in (first, loaded):
+        assert np.array_equal(grid.data, built.data) and grid.data.dtype == np.float32
+        assert np.array_equal(grid.origin, built.origin) and grid.pitch == built.pitch
+
+    saved[0].write_bytes(b"not a grid")  # unreadable: built again and replaced
+    monkeypatch.undo()
+    monkeypatch.setattr(trial_mod, "_GRID_DIR", str(tmp_path))
+    again = trial_mod._distance_grid(sc, key)
+    assert np.array_equal(again.data, built.data)
+    with np.load(saved[0]) as z:
+        assert np.array_equal(z["data"], built.data)
