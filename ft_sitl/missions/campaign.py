@@ -66,6 +66,10 @@ TOP_KEYS = ("name", "trials", "seed", "scenario_seed", "platforms", "platform_fi
             "scenarios", "indices", "physics_hz", "algorithms", "limits", "weights",
             "description")
 CHUNK_MAX = 40
+#: the workers' shared distance grids, inside the output directory while a run lasts (a
+#: killed run leaves at most trial.GRID_CACHE_KEEP grids there; the next run reuses them
+#: and removes the directory when it ends)
+GRID_CACHE_DIR = ".grid-cache"
 
 
 class CampaignError(ValueError):
@@ -547,17 +551,24 @@ class ProcessExecutor(Executor):
     killer) takes only its chunk down: that chunk is retried one trial per process, and a
     trial that kills its process again is recorded as a navigator error."""
 
-    def __init__(self, workers: int):
+    def __init__(self, workers: int, grid_dir: str | Path | None = None):
         self.workers = workers
         self._pool = None
-        self._grid_dir: str | None = None  # the workers' shared distance grids
+        # where the workers share distance grids (removed by close(); a temporary
+        # directory when not given)
+        self._grid_dir_arg = grid_dir
+        self._grid_dir: str | None = None
 
     def _new_pool(self):
         import multiprocessing as mp
         import tempfile
 
         if self._grid_dir is None:
-            self._grid_dir = tempfile.mkdtemp(prefix="ft-sitl-grids-")
+            if self._grid_dir_arg is None:
+                self._grid_dir = tempfile.mkdtemp(prefix="ft-sitl-grids-")
+            else:
+                self._grid_dir = str(self._grid_dir_arg)
+                os.makedirs(self._grid_dir, exist_ok=True)
 
         # workers inherit the environment: one BLAS/OpenMP thread each (set before their
         # numpy loads; small solves are far slower with idle BLAS threads spinning)
@@ -740,7 +751,8 @@ def run_campaign(campaign: Campaign, out_dir: str | Path, *, workers: int = 1,
     skipped = len(specs) - len(todo)
     if limit is not None:
         todo = todo[:limit]
-    ex = executor or (SerialExecutor() if workers <= 1 else ProcessExecutor(workers))
+    ex = executor or (SerialExecutor() if workers <= 1 else
+                      ProcessExecutor(workers, Path(out_dir) / GRID_CACHE_DIR))
     errors: list[tuple[str, str]] = []
     t0 = time.perf_counter()
     started = time.strftime("%Y-%m-%dT%H:%M:%SZ", time.gmtime())

@@ -205,6 +205,9 @@ def _scenario_key(sc) -> tuple:
 #: a directory where campaign workers share distance grids (None: each process builds its
 #: own); set in each worker by the campaign's process pool (:func:`set_grid_dir`)
 _GRID_DIR: str | None = None
+#: shared grids kept on disk (the newest; up to ~30 MB each): a campaign's chunks come
+#: scenario by scenario, so an older grid is rarely asked for again (it is rebuilt if so)
+GRID_CACHE_KEEP = 8
 
 
 def set_grid_dir(path: str | None) -> None:
@@ -246,9 +249,27 @@ def _distance_grid(scenario, key: tuple):
         try:
             np.savez(tmp, data=grid.data, origin=grid.origin, pitch=grid.pitch)
             os.replace(tmp, path)
+            _prune_grids(_GRID_DIR)
         except OSError:
             pass  # sharing is an optimisation only
         return grid
+
+
+def _prune_grids(directory: str) -> None:
+    """Delete all but the GRID_CACHE_KEEP newest shared grids (their lock files stay: a
+    process may be waiting on one)."""
+    saved = []
+    for name in os.listdir(directory):
+        if name.endswith(".npz") and ".tmp." not in name:
+            try:
+                saved.append((os.stat(os.path.join(directory, name)).st_mtime_ns, name))
+            except OSError:
+                continue
+    for _, name in sorted(saved)[:-GRID_CACHE_KEEP]:
+        try:
+            os.remove(os.path.join(directory, name))
+        except OSError:
+            pass
 
 
 def _world_and_grid(scenario):

@@ -18,7 +18,12 @@ import time
 import pandas as pd
 import pytest
 
-from ft_sitl.missions.campaign import CampaignError, load_campaign, run_campaign
+from ft_sitl.missions.campaign import (
+    GRID_CACHE_DIR,
+    CampaignError,
+    load_campaign,
+    run_campaign,
+)
 from ft_sitl.missions.results import COLUMNS
 from ft_sitl.missions.store import ResultStore, StoreError
 from ft_sitl.missions.trial import platform_for
@@ -419,6 +424,7 @@ def test_a_killed_campaign_resumes_to_the_uninterrupted_result(tmp_path, cli_env
     assert proc.stdout.startswith(f"{N_RESUME - len(done_before)} trials run, "
                                   f"{len(done_before)} already done, {N_RESUME} in the "
                                   "campaign;")
+    assert not (out / GRID_CACHE_DIR).exists()  # the workers' shared grids are gone
     rows = read_jsonl(trials)  # the torn line is gone, every line complete
     ids = [r["trial_id"] for r in rows]
     assert len(ids) == len(set(ids)) == N_RESUME

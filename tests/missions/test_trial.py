@@ -29,7 +29,7 @@ from ft_sitl.missions.trial import (
 )
 from ft_sitl.navigation.base import GiveUp, Limits, Navigator
 from ft_sitl.scenarios.solvability import scenario_path
-from tests.missions.conftest import PLATFORM, YARD_GOAL, YARD_START
+from tests.missions.conftest import PLATFORM, YARD_GOAL, YARD_START, write_yard
 
 # columns that depend on the wall clock, not on the spec
 WALL_CLOCK = ("wall_time_s", "planner_time_s", "finished_utc")
@@ -570,3 +570,10 @@ def test_campaign_workers_share_one_build_of_a_scenario_distance_grid(tmp_path, 
     assert np.array_equal(again.data, built.data)
     with np.load(saved[0]) as z:
         assert np.array_equal(z["data"], built.data)
+
+    # only the newest GRID_CACHE_KEEP grids stay on disk
+    monkeypatch.setattr(trial_mod, "GRID_CACHE_KEEP", 1)
+    other = load_scenario(str(write_yard(tmp_path / "other", "other",
+                                         wall=((1.0, 5.0, 0.0), (9.0, 5.5, 2.0)))))
+    trial_mod._distance_grid(other, trial_mod._scenario_key(other))
+    assert len(list(tmp_path.glob("*.npz"))) == 1 and not saved[0].exists()
