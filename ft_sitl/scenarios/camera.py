@@ -378,11 +378,15 @@ class DepthCamera:
     calling thread. ``packets`` (default) queries Embree 16 rays per call through its C API
     (:mod:`ft_sitl.scenarios.embree_packets`): the same first-hit triangles as ``embreex``'s
     one-ray-per-call query, ~1.3x faster; False, or when that library cannot be loaded,
-    uses ``embreex``.
+    uses ``embreex``. ``instances`` (default, with packets): each connected piece of the
+    mesh is an Embree instance in its own principal-axes frame, 7-32 % faster per frame on
+    the scenario families; about 2 pixels in a million (rays through an edge or grazing a
+    silhouette) then differ from the one-scene query (:class:`~ft_sitl.scenarios.
+    embree_packets.PacketScene`).
     """
 
     def __init__(self, config: CameraConfig | None, mesh: trimesh.Trimesh, *,
-                 packets: bool = True):
+                 packets: bool = True, instances: bool = True):
         if not isinstance(mesh, trimesh.Trimesh):
             raise TypeError(f"mesh must be a trimesh.Trimesh, got {type(mesh).__name__}")
         self.config = config = CameraConfig() if config is None else config
@@ -445,7 +449,7 @@ class DepthCamera:
 
                 v32 = ((np.array(mesh.vertices, dtype=np.float64) - wrap.origin)
                        * wrap.scale).astype(np.float32)
-                self._packets = packet_scene(v32, np.asarray(mesh.faces))
+                self._packets = packet_scene(v32, np.asarray(mesh.faces), instances)
         if self._packets is None:  # build the BVH now rather than in the first frame
             self._intersector.intersects_first(np.zeros((1, 3)), np.array([[0.0, 0.0, 1.0]]))
 

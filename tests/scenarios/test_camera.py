@@ -349,7 +349,7 @@ def test_packet_queries_hit_the_same_triangles_as_single_rays(family):
 
     sc = build_scenario(family, 3)
     cfg = camera_config("benchmark", None, None, None)
-    packets = DepthCamera(cfg, sc.mesh)
+    packets = DepthCamera(cfg, sc.mesh, instances=False)
     single = DepthCamera(cfg, sc.mesh, packets=False)
     if packets._packets is None:
         pytest.fail("Embree's C API did not load from the embreex wheel")
@@ -369,6 +369,42 @@ def test_packet_queries_hit_the_same_triangles_as_single_rays(family):
     dirs /= np.linalg.norm(dirs, axis=1)[:, None]
     np.testing.assert_array_equal(single.cast(sc.start, dirs), packets.cast(sc.start, dirs))
     assert hits > 10_000  # the frames saw the scene (~5 % of their pixels at least)
+
+
+@pytest.mark.parametrize("family", ["forest", "random_angle_cylinder", "perlin"])
+def test_one_instance_per_piece_sees_the_same_surfaces(family):
+    """The default packet scene (each connected piece an Embree instance in its own
+    principal-axes frame) against the one-scene query: every piece is its own instance, and
+    all but a handful of pixels in a million (rays through an edge or grazing a silhouette,
+    tested in the piece's frame) are bit-identical."""
+    from ft_sitl.navigation.common import camera_config
+    from ft_sitl.scenarios.families import build_scenario
+
+    sc = build_scenario(family, 3)
+    cfg = camera_config("benchmark", None, None, None)
+    inst = DepthCamera(cfg, sc.mesh)
+    plain = DepthCamera(cfg, sc.mesh, instances=False)
+    if inst._packets is None:
+        pytest.fail("Embree's C API did not load from the embreex wheel")
+    assert len(inst._packets.offset) == len(sc.piece_names) > 1
+    assert len(plain._packets.offset) == 1
+    rng = np.random.default_rng(3)
+    lo, hi = np.asarray(sc.bounds_min), np.asarray(sc.bounds_max)
+    differ = seen = 0
+    for k in range(60):
+        p = lo + rng.random(3) * (hi - lo)
+        q = rng.normal(0.0, 0.3, 4)
+        q[0] += 1.0
+        a, b = plain.capture(k, p, q).depth, inst.capture(k, p, q).depth
+        differ += int(np.sum(~((a == b) | (np.isnan(a) & np.isnan(b)))))
+        seen += int(np.isfinite(a).sum())
+    assert seen > 20_000
+    assert differ <= 60 * a.size * 1e-5  # at most 10 in a million
+    dirs = rng.normal(size=(1001, 3))
+    dirs /= np.linalg.norm(dirs, axis=1)[:, None]
+    la, lb = plain.cast(sc.start, dirs), inst.cast(sc.start, dirs)
+    assert np.isfinite(la).sum() > 10
+    assert np.sum(~((la == lb) | (np.isinf(la) & np.isinf(lb)))) <= 1
 
 
 def test_point_clouds_are_made_on_first_access_and_survive_copies(wall_cam):
