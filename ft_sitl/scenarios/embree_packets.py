@@ -8,10 +8,13 @@ library that the ``embreex`` wheel ships, builds the same scene trimesh builds (
 float32 vertices, shifted and scaled as trimesh does, the same triangle order, the robust
 scene flag) and traverses runs of 16 pixels of a row per call from a compiled loop.
 
-Every ray's first-hit triangle is the one the single-ray query reports for the same float32
-ray: the packet kernels run the same intersection test per lane. ``tests/scenarios``
-checks this triangle by triangle against ``embreex`` on scenario meshes; ``bench_camera``
-times both (the packets are ~1.3x faster on 160 x 120 frames).
+With one scene over all triangles (``instances=False``) every ray's first-hit triangle is
+the one the single-ray query reports for the same float32 ray: the packet kernels run the
+same intersection test per lane. ``tests/scenarios`` checks this triangle by triangle
+against ``embreex`` on scenario meshes; ``bench_camera`` times both (the packets are ~1.3x
+faster on 160 x 120 frames). By default each connected piece of the mesh is an instance in
+its own principal-axes frame (:class:`PacketScene`): faster still, and the same first hits
+but for rays through edges and silhouettes (``bench_camera_families``).
 
 :func:`packet_scene` returns None when the library or one of its functions cannot be
 loaded; callers then use ``embreex``'s single-ray query.
