@@ -41,6 +41,10 @@ _GEOMETRY_TYPE_TRIANGLE = 0
 _GEOMETRY_TYPE_INSTANCE = 121
 _FORMAT_FLOAT3X4_COLUMN_MAJOR = 0x9234
 _SCENE_FLAG_ROBUST = 1 << 2  # embreex's EmbreeScene(robust=True), trimesh's default
+#: instances only for meshes of at most this many connected pieces ...
+MAX_INSTANCES = 10_000
+#: ... of at least this many triangles on average (Perlin's blobs have 12)
+MIN_PIECE_FACES = 4
 _INVALID_ID = 0xFFFFFFFF
 
 # RTCRayHit16 (rtcore_ray.h), in 4-byte words: twelve ray arrays of 16 (org_x, org_y,
@@ -117,10 +121,13 @@ class PacketScene:
     ``instances`` (default): every connected piece of the mesh (a tree, a cylinder, a wall)
     becomes an Embree instance of its own small scene, built in the piece's principal-axes
     frame. A slanted cylinder's triangles then sit in tight boxes (in world axes a long
-    sliver's box is most of the cylinder's), and no leaf mixes pieces: 7-32 % faster
-    queries on the scenario families, 3x on slanted cylinders alone (bench/bench_camera.py,
-    docs/benchmarks.md). The hit test then runs on the ray mapped into the piece's frame
-    (float32), so a ray through a shared edge or grazing a silhouette can report the
+    sliver's box is most of the cylinder's), and no leaf mixes pieces: frames 15-35 %
+    faster on the scenario families, 3.3x in Random-Angle Cylinder
+    (bench/bench_camera_families.py, docs/benchmarks.md). A mesh that falls apart into
+    more than :data:`MAX_INSTANCES` pieces, or into pieces of fewer than
+    :data:`MIN_PIECE_FACES` triangles on average (a triangle soup), is built as one scene.
+    With instances the hit test runs on the ray mapped into the piece's frame (float32),
+    so a ray through a shared edge or grazing a silhouette can report the
     neighbouring triangle or miss where the world-frame test hits: about 2 pixels in a
     million differ from the plain scene. False: one scene over all triangles, the same
     first hits as ``embreex``'s one-ray query."""
@@ -136,48 +143,56 @@ class PacketScene:
         lib.rtcSetSceneFlags(scene, _SCENE_FLAG_ROBUST)
         v = np.ascontiguousarray(vertices32, dtype=np.float32)
         f = np.ascontiguousarray(faces, dtype=np.uint32)
-        if not instances:
+        pieces = _pieces(f, len(v)) if instances else []
+        if len(pieces) > MAX_INSTANCES or len(f) < MIN_PIECE_FACES * len(pieces):
+            pieces = []  # a triangle soup, or too many pieces: one scene
+        #: global face of (instance, primitive): face_of[offset[instance] + prim]; a hit
+        #: outside any instance (instance id invalid) is the face itself
+        if not pieces:
             self._attach_triangles(device, scene, v, f)
-            #: global face of (instance, primitive): face_of[offset[instance] + prim]; a hit
-            #: outside any instance (instance id invalid) is the face itself
             self.face_of = np.zeros(0, np.int64)
             self.offset = np.zeros(1, np.int64)
         else:
-            pieces = _pieces(f, len(v))
             self.face_of = np.concatenate(pieces).astype(np.int64)
             self.offset = np.zeros(len(pieces), np.int64)
             at = 0
             for faces_k in pieces:
                 used, local_f = np.unique(f[faces_k], return_inverse=True)
-                pv = v[used].astype(np.float64)
-                centre, axes = _principal_frame(pv)
-                local_v = ((pv - centre) @ axes).astype(np.float32)
-                sub = lib.rtcNewScene(device)
-                if not sub:
-                    raise OSError("rtcNewScene failed")
-                self._subscenes.append(sub)
-                lib.rtcSetSceneFlags(sub, _SCENE_FLAG_ROBUST)
-                self._attach_triangles(device, sub, local_v,
-                                       local_f.reshape(-1, 3).astype(np.uint32))
-                lib.rtcCommitScene(sub)
-                geom = lib.rtcNewGeometry(device, _GEOMETRY_TYPE_INSTANCE)
-                if not geom:
-                    raise OSError("rtcNewGeometry (instance) failed")
-                lib.rtcSetGeometryInstancedScene(geom, sub)
-                xfm = np.concatenate([axes.T.ravel(), centre]).astype(np.float32)
-                lib.rtcSetGeometryTransform(geom, 0, _FORMAT_FLOAT3X4_COLUMN_MAJOR,
-                                            xfm.ctypes.data)
-                lib.rtcCommitGeometry(geom)
-                gid = lib.rtcAttachGeometry(scene, geom)
-                lib.rtcReleaseGeometry(geom)
-                if gid != len(self._subscenes) - 1:
-                    raise OSError(f"Embree numbered instance {len(self._subscenes) - 1} {gid}")
+                gid = self._attach_instance(device, scene, v[used].astype(np.float64),
+                                            local_f.reshape(-1, 3).astype(np.uint32))
                 self.offset[gid] = at
                 at += len(faces_k)
         lib.rtcCommitScene(scene)
         err = lib.rtcGetDeviceError(device)
         if err:
             raise OSError(f"Embree scene build failed (error {err})")
+
+    def _attach_instance(self, device, scene, points: np.ndarray, faces: np.ndarray) -> int:
+        """One piece (its vertices in world units, its faces indexing them) as an instance
+        of a scene built in the piece's principal-axes frame; returns its id in ``scene``
+        (the instance count so far)."""
+        lib = self._lib
+        centre, axes = _principal_frame(points)
+        sub = lib.rtcNewScene(device)
+        if not sub:
+            raise OSError("rtcNewScene failed")
+        self._subscenes.append(sub)
+        lib.rtcSetSceneFlags(sub, _SCENE_FLAG_ROBUST)
+        self._attach_triangles(device, sub, ((points - centre) @ axes).astype(np.float32), faces)
+        lib.rtcCommitScene(sub)
+        geom = lib.rtcNewGeometry(device, _GEOMETRY_TYPE_INSTANCE)
+        if not geom:
+            raise OSError("rtcNewGeometry (instance) failed")
+        lib.rtcSetGeometryInstancedScene(geom, sub)
+        # local -> world: the axes as the matrix's columns, then the translation
+        xfm = np.concatenate([axes.T.ravel(), centre]).astype(np.float32)
+        lib.rtcSetGeometryTransform(geom, 0, _FORMAT_FLOAT3X4_COLUMN_MAJOR, xfm.ctypes.data)
+        lib.rtcCommitGeometry(geom)
+        gid = lib.rtcAttachGeometry(scene, geom)
+        lib.rtcReleaseGeometry(geom)
+        if gid != len(self._subscenes) - 1:
+            raise OSError(f"Embree numbered instance {len(self._subscenes) - 1} as {gid}")
+        return int(gid)
 
     def _attach_triangles(self, device, scene, v: np.ndarray, f: np.ndarray) -> None:
         lib = self._lib

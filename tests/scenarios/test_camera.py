@@ -407,6 +407,27 @@ def test_one_instance_per_piece_sees_the_same_surfaces(family):
     assert np.sum(~((la == lb) | (np.isinf(la) & np.isinf(lb)))) <= 1
 
 
+def test_a_triangle_soup_is_one_scene():
+    """A mesh whose triangles share no vertices would make one instance per triangle: it is
+    built as one scene, and renders as the one-scene camera does."""
+    box = trimesh.creation.box(bounds=[[2.0, -1.0, -1.0], [3.0, 1.0, 1.0]])
+    soup = trimesh.Trimesh(box.triangles.reshape(-1, 3),
+                           np.arange(3 * len(box.faces)).reshape(-1, 3), process=False)
+    cfg = CameraConfig(width=64, height=48, fx=40.0, fy=40.0)
+    cam, plain = DepthCamera(cfg, soup), DepthCamera(cfg, soup, instances=False)
+    if cam._packets is None:
+        pytest.fail("Embree's C API did not load from the embreex wheel")
+    assert len(cam._packets.offset) == 1 and len(cam._packets.face_of) == 0
+    a, b = cam.capture(0, [0.0, 0.0, 0.0], q_yaw(0.1)), plain.capture(0, [0.0, 0.0, 0.0],
+                                                                       q_yaw(0.1))
+    assert a.valid.sum() > 500
+    np.testing.assert_array_equal(a.depth, b.depth)
+    solid = DepthCamera(cfg, box)  # the same box with shared vertices: one instance
+    assert len(solid._packets.offset) == 1 and len(solid._packets.face_of) == 12
+    np.testing.assert_allclose(solid.capture(0, [0.0, 0.0, 0.0], q_yaw(0.1)).depth, a.depth,
+                               atol=1e-5)
+
+
 def test_point_clouds_are_made_on_first_access_and_survive_copies(wall_cam):
     """capture() leaves the clouds to their first reader: the same points as computed from
     the image, and a pickled or copied frame carries them, not the function making them."""
