@@ -267,19 +267,14 @@ def _packet_buffers():
 def _pieces(faces: np.ndarray, n_vertices: int) -> list[np.ndarray]:
     """The faces of each connected piece (faces sharing a vertex), in face order, pieces
     ordered by their first face."""
-    from scipy.sparse import coo_matrix
-    from scipy.sparse.csgraph import connected_components
+    from trimesh.graph import connected_component_labels
 
     f = faces.astype(np.int64)
-    rows = np.concatenate([f[:, 0], f[:, 1]])
-    cols = np.concatenate([f[:, 1], f[:, 2]])
-    graph = coo_matrix((np.ones(len(rows), np.int8), (rows, cols)),
-                       shape=(n_vertices, n_vertices))
-    _, label = connected_components(graph, directed=False)
+    label = connected_component_labels(f[:, [0, 1, 1, 2]].reshape(-1, 2),
+                                       node_count=n_vertices)
     face_label = label[f[:, 0]]
     order = np.argsort(face_label, kind="stable")
-    cuts = np.flatnonzero(np.diff(face_label[order])) + 1
-    groups = np.split(order, cuts)
+    groups = np.split(order, np.flatnonzero(np.diff(face_label[order])) + 1)
     groups.sort(key=lambda g: int(g[0]))
     return groups
 
