@@ -1,8 +1,12 @@
+import os
 from pathlib import Path
 
 import pytest
 
-SHARED = Path(__file__).resolve().parents[1].parent / "shared"
+# The team's shared material (the paper's tables, the NavRL checkpoint) sits beside the
+# repository as ../shared; FT_SITL_SHARED points a clone elsewhere at it.
+SHARED_ENV = "FT_SITL_SHARED"
+SHARED = Path(os.environ.get(SHARED_ENV) or Path(__file__).resolve().parents[1].parent / "shared")
 TABLE1 = SHARED / "spec" / "platforms_table1.csv"
 
 
@@ -12,7 +16,8 @@ def table1_rows():
     import csv
 
     if not TABLE1.exists():
-        pytest.fail(f"{TABLE1} is missing: the tests check the catalog against the paper's table")
+        pytest.fail(f"{TABLE1} is missing: the tests check the catalog against the paper's "
+                    f"table (set {SHARED_ENV} to the directory holding spec/)")
     with open(TABLE1, newline="", encoding="utf-8") as fh:
         return list(csv.DictReader(fh))
 
@@ -25,5 +30,6 @@ def navrl_checkpoint() -> Path:
     """The NavRL authors' released checkpoint, as test data (ft-sitl does not ship it)."""
     if not NAVRL_CHECKPOINT.is_file():
         pytest.fail(f"{NAVRL_CHECKPOINT} is missing: the NavRL tests read the released "
-                    "checkpoint from the team's shared data")
+                    f"checkpoint from the team's shared data (set {SHARED_ENV} to the directory "
+                    "holding data/navrl/)")
     return NAVRL_CHECKPOINT
