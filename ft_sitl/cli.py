@@ -10,17 +10,10 @@ from __future__ import annotations
 import argparse
 import json
 import math
-import os
 import sys
 from pathlib import Path
 
 from ft_sitl import __version__
-
-# One BLAS / OpenMP thread, as in the campaign's worker processes, set before numpy loads:
-# multi-threaded BLAS sums in another order, so a trial run here (`campaign run --workers 1`,
-# `trial rerun`) would differ in the last bits from the same trial run by a worker.
-for _var in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS"):
-    os.environ.setdefault(_var, "1")
 
 EXIT_BAD_INPUT = 2
 
@@ -290,9 +283,9 @@ def cmd_sitl(args) -> int:
     import ipaddress
     import signal
 
-    from ft_sitl.autopilot.fleet import Fleet
     from ft_sitl.frames import PX4_SITL_HOME, GeoReference
     from ft_sitl.mavlink.server import SitlServer
+    from ft_sitl.autopilot.fleet import Fleet
 
     if not 1 <= args.instances <= 64:
         raise CliError(f"--instances: {args.instances} must be within 1..64")

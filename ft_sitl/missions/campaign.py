@@ -570,11 +570,8 @@ class ProcessExecutor(Executor):
                 self._grid_dir = str(self._grid_dir_arg)
                 os.makedirs(self._grid_dir, exist_ok=True)
 
-        # workers inherit the environment: one BLAS/OpenMP thread each (set before their
-        # numpy loads; small solves are far slower with idle BLAS threads spinning)
-        for var in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS"):
-            os.environ.setdefault(var, "1")
-
+        # workers inherit the environment, with ft_sitl.numeric_env's BLAS settings (one
+        # thread, pinned kernels) set on this process's import of ft_sitl
         return ProcessPoolExecutor(self.workers, mp_context=mp.get_context("spawn"),
                                    initializer=_worker_init,
                                    initargs=(os.getpid(), self._grid_dir))

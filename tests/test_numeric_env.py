@@ -1,0 +1,43 @@
+"""The BLAS settings trial results depend on (ft_sitl.numeric_env): pinned on import."""
+
+import json
+import os
+import subprocess
+import sys
+
+from ft_sitl import numeric_env
+
+PROBE = ("import json, ft_sitl, numpy, threadpoolctl; "
+         "print(json.dumps([(i['internal_api'], i.get('architecture'), i['num_threads']) "
+         "for i in threadpoolctl.threadpool_info()]))")
+
+
+def test_pin_sets_only_what_is_unset():
+    env = {"OMP_NUM_THREADS": "4"}
+    done = numeric_env.pin(env, flags={"avx2", "fma", "sse4_2"})
+    assert env == {"OMP_NUM_THREADS": "4", "OPENBLAS_NUM_THREADS": "1",
+                   "MKL_NUM_THREADS": "1", "OPENBLAS_CORETYPE": "Haswell"}
+    assert "OMP_NUM_THREADS" not in done
+    env = {"OPENBLAS_CORETYPE": "Zen"}
+    numeric_env.pin(env, flags={"avx2", "fma"})
+    assert env["OPENBLAS_CORETYPE"] == "Zen"
+
+
+def test_no_kernel_pinned_without_avx2():
+    env: dict = {}
+    numeric_env.pin(env, flags={"sse4_2"})
+    assert "OPENBLAS_CORETYPE" not in env
+
+
+def test_a_fresh_import_runs_one_thread_of_the_pinned_kernels():
+    env = {k: v for k, v in os.environ.items()
+           if k not in numeric_env.THREAD_VARS + (numeric_env.CORETYPE_VAR,)}
+    out = subprocess.run([sys.executable, "-c", PROBE], env=env, capture_output=True,
+                         text=True, timeout=120)
+    assert out.returncode == 0, out.stderr
+    pools = json.loads(out.stdout)
+    blas = [p for p in pools if p[0] == "openblas"]
+    assert blas, pools
+    assert all(p[2] == 1 for p in blas)
+    if {"avx2", "fma"} <= numeric_env.cpu_flags():
+        assert all(p[1] == numeric_env.OPENBLAS_CORE for p in blas), blas
