@@ -1,11 +1,12 @@
-"""Where numba keeps compiled kernels, keyed by the kernels' source.
+"""Where numba keeps compiled kernels, keyed by the package's source.
 
 numba invalidates a cached function only when its own file changes, not when a kernel it
-calls from another module does: run_steps (lockstep.py) inlines the controller
-(cascade.py) and the plant (dynamics.py), and would keep stale machine code after an
-edit of either (likewise fast_optim.py calling mapping.py's ESDF kernel). So every
-kernel caches into one directory named after a hash of all kernel sources; any edit
-starts a fresh cache. Set NUMBA_CACHE_DIR to move the root.
+calls from another module does: run_steps (sim/lockstep.py) inlines the controller
+(cascade.py), the plant (dynamics.py) and the guard (sim/guard.py), and EGO's and Fast's
+optimisers call navigation/lbfgs.py; an edit of a callee would leave stale machine code in
+use. So every kernel caches into one directory named after a hash of every module of the
+package (a hand-kept list of kernel modules missed lbfgs.py once): any edit starts a fresh
+cache. Set NUMBA_CACHE_DIR to move the root.
 """
 
 from __future__ import annotations
@@ -14,35 +15,26 @@ import hashlib
 import os
 from pathlib import Path
 
-_KERNEL_MODULES = (
-    "__init__.py",  # G is frozen into the kernels
-    "physics/quaternion.py",
-    "physics/dynamics.py",
-    "autopilot/cascade.py",
-    "lockstep.py",
-    # the planners' kernels: fast_optim calls mapping's ESDF kernel across modules
-    "navigation/mapping.py",
-    "navigation/astar.py",
-    "navigation/ego_optim.py",
-    "navigation/fast_optim.py",
-    "navigation/kino_astar.py",
-    "navigation/topo.py",
-    "navigation/pgo.py",
-)
+
+def source_hash(pkg: Path) -> str:
+    """SHA-256 over every ``.py`` file under ``pkg``: its path relative to ``pkg`` and its
+    bytes, in sorted order (a moved module changes the key too)."""
+    h = hashlib.sha256()
+    for path in sorted(pkg.rglob("*.py")):
+        h.update(path.relative_to(pkg).as_posix().encode() + b"\0")
+        h.update(path.read_bytes())
+    return h.hexdigest()
 
 
 def configure() -> Path:
     import numba
 
-    pkg = Path(__file__).resolve().parent
-    h = hashlib.sha256()
-    for rel in _KERNEL_MODULES:
-        h.update((pkg / rel).read_bytes())
+    digest = source_hash(Path(__file__).resolve().parent)
     user_root = os.environ.get("NUMBA_CACHE_DIR")
     root = (os.path.join(user_root, "ft-sitl") if user_root else os.path.join(
         os.environ.get("XDG_CACHE_HOME") or os.path.expanduser("~/.cache"), "ft-sitl", "numba"
     ))
-    path = Path(root) / h.hexdigest()[:16]
+    path = Path(root) / digest[:16]
     numba.config.CACHE_DIR = str(path)
     _prune(Path(root), keep=path)
     return path

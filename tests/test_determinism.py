@@ -1,4 +1,5 @@
-"""The BLAS settings trial results depend on (ft_sitl.numeric_env): pinned on import."""
+"""What trial results depend on besides the spec: the BLAS settings (ft_sitl.numeric_env)
+and numba's cache key (ft_sitl._jit_cache)."""
 
 import json
 import os
@@ -41,3 +42,26 @@ def test_a_fresh_import_runs_one_thread_of_the_pinned_kernels():
     assert all(p[2] == 1 for p in blas)
     if {"avx2", "fma"} <= numeric_env.cpu_flags():
         assert all(p[1] == numeric_env.OPENBLAS_CORE for p in blas), blas
+
+
+def test_jit_cache_key_covers_every_module(tmp_path):
+    """numba's cache is keyed on every module of the package: an edit of a module whose
+    kernels others call (navigation/lbfgs.py, missed by a hand-kept list once) or a moved
+    module gives a new cache directory."""
+    import shutil
+    from pathlib import Path
+
+    import ft_sitl
+    from ft_sitl._jit_cache import source_hash
+
+    pkg = tmp_path / "ft_sitl"
+    shutil.copytree(Path(ft_sitl.__file__).parent, pkg,
+                    ignore=shutil.ignore_patterns("__pycache__"))
+    before = source_hash(pkg)
+    assert source_hash(pkg) == before
+    lbfgs = pkg / "navigation" / "lbfgs.py"
+    lbfgs.write_text(lbfgs.read_text() + "\n# an edit\n")
+    edited = source_hash(pkg)
+    assert edited != before
+    lbfgs.rename(pkg / "navigation" / "lbfgs2.py")
+    assert source_hash(pkg) != edited
