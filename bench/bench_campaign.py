@@ -38,8 +38,8 @@ from benchutil import machine_info  # noqa: E402
 
 from ft_sitl.missions.campaign import load_campaign, run_campaign  # noqa: E402
 from ft_sitl.missions.store import load_rows  # noqa: E402
+from ft_sitl.scenarios.distance_grid import DistanceGrid  # noqa: E402
 from ft_sitl.scenarios.families import build_scenario  # noqa: E402
-from ft_sitl.scenarios.guard import DistanceGrid  # noqa: E402
 
 PAPER_TRIALS = 2520
 PAPER_CONFIGS = 70

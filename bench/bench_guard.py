@@ -9,7 +9,7 @@ tight turns of Maze, Narrow-Gap and Sudden-Drop; a position setpoint with the ca
 velocity as feed-forward), for 10 simulated seconds, commanded every 20 ms (the setpoints
 are computed before timing). A vehicle that touches an obstacle anyway crashes as in a
 trial (motors off, no further checks: a trial ends there) and is counted. The same flight
-is run without and with a CollisionGuard attached (``ft_sitl.scenarios.guard``: free ball,
+is run without and with a CollisionGuard attached (``ft_sitl.sim.guard``: free ball,
 anchor and distance grid in the compiled loop, python-fcl only near obstacles),
 alternating, several repeats, in one process pinned to one CPU.
 
@@ -41,12 +41,13 @@ import numpy as np  # noqa: E402
 from benchutil import machine_info, pin_to_one_cpu  # noqa: E402
 
 from ft_sitl.autopilot.setpoints import Setpoint  # noqa: E402
-from ft_sitl.lockstep import G_BOUNDS, G_ON, Simulation  # noqa: E402
 from ft_sitl.physics.catalog import catalog  # noqa: E402
 from ft_sitl.scenarios.collision import CollisionWorld  # noqa: E402
+from ft_sitl.scenarios.distance_grid import DistanceGrid  # noqa: E402
 from ft_sitl.scenarios.families import FAMILIES, build_scenario  # noqa: E402
-from ft_sitl.scenarios.guard import CollisionGuard, DistanceGrid  # noqa: E402
 from ft_sitl.scenarios.solvability import scenario_path  # noqa: E402
+from ft_sitl.sim.guard import G_BOUNDS, G_ON, CollisionGuard, GuardEventKind  # noqa: E402  # noqa: E402
+from ft_sitl.sim.lockstep import Simulation  # noqa: E402
 
 PLATFORM = "0.98kg-EGO Planner DIY"
 PATH_RADIUS_M = 0.6
@@ -99,17 +100,15 @@ def fly(platform, starts, rows, guard: CollisionGuard | None):
     if guard is not None:
         guard.events.clear()
         guard.trips = guard.queries = 0
-        guard.attach(sim)
-
         def crash(ev):
             # as in a trial, a collision ends that vehicle's flight: motors off, and no
             # more checks (what a crashed vehicle costs while it falls and rests against
             # the obstacle is not flight; the unguarded run flies it on, same physics cost)
-            if ev.kind == "collision":
+            if ev.kind == GuardEventKind.COLLISION:
                 crashed[ev.vehicle] = True
                 sim.sp[ev.vehicle] = Setpoint.off().row
-                sim._gd[ev.vehicle, [G_ON, G_BOUNDS]] = 0.0
-        guard.handler = crash
+                guard.rows[ev.vehicle, [G_ON, G_BOUNDS]] = 0.0
+        sim.attach_guard(guard, crash)
     off = Setpoint.off().row
     c0 = time.process_time()
     for c in range(len(rows)):

@@ -41,9 +41,9 @@ from benchutil import machine_info, pin_to_one_cpu, timed  # noqa: E402
 from numba import njit  # noqa: E402
 
 from ft_sitl.autopilot.setpoints import Setpoint  # noqa: E402
-from ft_sitl.lockstep import Simulation  # noqa: E402
 from ft_sitl.physics import dynamics as d  # noqa: E402
 from ft_sitl.physics.catalog import catalog, get_platform  # noqa: E402
+from ft_sitl.sim.lockstep import Simulation  # noqa: E402
 
 ROOT = Path(__file__).resolve().parents[1]
 DEFAULT_PLOT = ROOT / "docs" / "img" / "bench_physics.png"

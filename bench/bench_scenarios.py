@@ -30,8 +30,8 @@ from pathlib import Path  # noqa: E402
 from benchutil import machine_info, pin_to_one_cpu  # noqa: E402
 
 from ft_sitl.scenarios.collision import CollisionWorld  # noqa: E402
+from ft_sitl.scenarios.distance_grid import DistanceGrid  # noqa: E402
 from ft_sitl.scenarios.families import FAMILIES, build_scenario  # noqa: E402
-from ft_sitl.scenarios.guard import DistanceGrid  # noqa: E402
 from ft_sitl.scenarios.render import render_scenario  # noqa: E402
 
 

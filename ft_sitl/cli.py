@@ -285,7 +285,7 @@ def cmd_sitl(args) -> int:
 
     from ft_sitl.frames import PX4_SITL_HOME, GeoReference
     from ft_sitl.mavlink.server import SitlServer
-    from ft_sitl.autopilot.fleet import Fleet
+    from ft_sitl.sim.fleet import Fleet
 
     if not 1 <= args.instances <= 64:
         raise CliError(f"--instances: {args.instances} must be within 1..64")

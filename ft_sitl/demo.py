@@ -13,9 +13,9 @@ from dataclasses import asdict, dataclass
 import numpy as np
 
 from ft_sitl.autopilot.setpoints import Setpoint
-from ft_sitl.lockstep import Recording, Simulation
 from ft_sitl.physics.platform import Platform
 from ft_sitl.physics.quaternion import tilt_angle
+from ft_sitl.sim.lockstep import Recording, Simulation
 
 
 @dataclass

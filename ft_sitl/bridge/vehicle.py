@@ -26,10 +26,11 @@ import numpy as np
 
 from ft_sitl import G, frames
 from ft_sitl.autopilot.setpoints import Setpoint
-from ft_sitl.lockstep import Simulation
 from ft_sitl.physics import dynamics as d
 from ft_sitl.physics.layouts import get_layout
 from ft_sitl.physics.quaternion import qrotate_inv
+from ft_sitl.sim.guard import CollisionGuard, GuardEventKind
+from ft_sitl.sim.lockstep import Simulation
 
 
 @dataclass(frozen=True)
@@ -57,19 +58,13 @@ class BridgeVehicle:
         self.crash: Crash | None = None
         self.events: list = []
         if scenario is not None:
-            from ft_sitl.scenarios.guard import CollisionGuard
-
             self.guard = CollisionGuard.for_scenario(scenario, [platform.collision_radius_m])
-            self.guard.attach(self.sim)
-            self.guard.handler = self._on_guard_event
+            self.sim.attach_guard(self.guard, self._on_guard_event)
         self.reset()
 
     def reset(self) -> None:
         """Back on the spawn point at rest, motors off, crash cleared (an autopilot restart)."""
-        self.sim.place(0, self.spawn, self.spawn_yaw)
-        self.sim.plant.status[0, d.S_CONTACT] = 1.0
-        if self.guard is not None:
-            self.guard.reset(0)
+        self.sim.place(0, self.spawn, self.spawn_yaw, on_ground=True)
         self.crash = None
         self._u = np.zeros(self.n_motors)
         self.sim.set_setpoint(0, Setpoint.motors(self._u))
@@ -78,7 +73,7 @@ class BridgeVehicle:
 
     def _on_guard_event(self, ev) -> None:
         self.events.append(ev)
-        if ev.kind == "collision" and self.crash is None:
+        if ev.kind == GuardEventKind.COLLISION and self.crash is None:
             self.crash = Crash(int(ev.time_us), str(ev.what), float(ev.speed_m_s))
             self.sim.set_setpoint(0, Setpoint.motors(np.zeros(self.n_motors)))
 

@@ -19,11 +19,11 @@ from pymavlink.dialects.v20 import common as mav
 from ft_sitl import frames
 from ft_sitl.autopilot import commander as cm
 from ft_sitl.autopilot.commander import MissionItem, Result
-from ft_sitl.autopilot.fleet import Fleet
 from ft_sitl.autopilot.params import PARAMS, ParamError
 from ft_sitl.autopilot.setpoints import Setpoint, SetpointError
 from ft_sitl.physics import dynamics as d
 from ft_sitl.physics.quaternion import qto_euler
+from ft_sitl.sim.fleet import Fleet
 
 COMPID = mav.MAV_COMP_ID_AUTOPILOT1
 FORCE_MAGIC = 21196

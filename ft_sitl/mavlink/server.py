@@ -25,8 +25,8 @@ from pathlib import Path
 from pymavlink.dialects.v20 import common as mav
 
 from ft_sitl import frames
-from ft_sitl.autopilot.fleet import Fleet
 from ft_sitl.mavlink.agent import Outgoing, VehicleAgent
+from ft_sitl.sim.fleet import Fleet
 
 API_LISTEN_BASE = 14580
 API_REMOTE_BASE = 14540

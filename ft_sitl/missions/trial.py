@@ -1,7 +1,7 @@
 """One trial of the FLYINGTRUST protocol, in-process and in lockstep.
 
 ``run_trial(spec)`` flies one :class:`TrialSpec` with the same flight-controller code the
-MAVLink layer serves (a :class:`~ft_sitl.autopilot.fleet.Fleet` with its commander, cascade
+MAVLink layer serves (a :class:`~ft_sitl.sim.fleet.Fleet` with its commander, cascade
 and plant, and the scenario's collision guard) and returns the trial's row of the results
 table (:mod:`ft_sitl.missions.results`).
 
@@ -49,11 +49,11 @@ from ft_sitl import __version__
 from ft_sitl.autopilot import cascade as cs
 from ft_sitl.autopilot.cascade import C_SAT_STEPS
 from ft_sitl.autopilot.commander import MAIN_OFFBOARD
-from ft_sitl.autopilot.fleet import Fleet
 from ft_sitl.autopilot.params import ParamSet
 from ft_sitl.autopilot.setpoints import Setpoint
 from ft_sitl.navigation.base import GiveUp, Limits, Observation, Task
 from ft_sitl.physics import dynamics as d
+from ft_sitl.sim.fleet import Fleet
 
 APPROACH_TIMEOUT_S = 30.0
 STABLE_POS_M = 0.3
@@ -219,7 +219,7 @@ def set_grid_dir(path: str | None) -> None:
 
 
 def _distance_grid(scenario, key: tuple):
-    from ft_sitl.scenarios.guard import DistanceGrid
+    from ft_sitl.scenarios.distance_grid import DistanceGrid
 
     def build():
         return DistanceGrid.build(scenario.mesh, scenario.bounds_min, scenario.bounds_max)
@@ -361,7 +361,7 @@ class _WallWatchdog:
 def trial_vehicle(spec: TrialSpec, sc, platform):
     """The trial's collision guard and its one-vehicle Fleet, on the takeoff point facing
     the goal, the speed cap as MPC_XY_VEL_MAX (in-process and over the wire alike)."""
-    from ft_sitl.scenarios.guard import CollisionGuard
+    from ft_sitl.sim.guard import CollisionGuard
 
     world, grid = _world_and_grid(sc)
     guard = CollisionGuard(world, [platform.collision_radius_m], grid=grid,

@@ -7,9 +7,9 @@ import pytest
 
 from ft_sitl.autopilot.params import ParamError, ParamSet
 from ft_sitl.autopilot.setpoints import Setpoint, SetpointError
-from ft_sitl.lockstep import Simulation
 from ft_sitl.physics.catalog import catalog
 from ft_sitl.physics.quaternion import tilt_angle
+from ft_sitl.sim.lockstep import Simulation
 
 PLATFORMS = list(catalog().values())
 

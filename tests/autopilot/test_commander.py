@@ -7,10 +7,10 @@ import pytest
 
 from ft_sitl.autopilot import commander as cm
 from ft_sitl.autopilot.commander import LandedState, MissionItem, Result
-from ft_sitl.autopilot.fleet import Fleet
 from ft_sitl.autopilot.params import ParamSet
 from ft_sitl.autopilot.setpoints import Setpoint
 from ft_sitl.physics.catalog import catalog
+from ft_sitl.sim.fleet import Fleet
 
 P = catalog()["0.98kg-EGO Planner DIY"]
 

@@ -5,9 +5,9 @@ import threading
 from contextlib import contextmanager
 
 from ft_sitl import frames
-from ft_sitl.autopilot.fleet import Fleet
 from ft_sitl.mavlink.server import SitlServer
 from ft_sitl.physics.catalog import get_platform
+from ft_sitl.sim.fleet import Fleet
 
 PLATFORM = "0.98kg-EGO Planner DIY"
 

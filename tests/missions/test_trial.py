@@ -543,7 +543,7 @@ def test_bad_spec_documents_are_refused(doc, message):
 def test_campaign_workers_share_one_build_of_a_scenario_distance_grid(tmp_path, yard,
                                                                       monkeypatch):
     from ft_sitl.missions import trial as trial_mod
-    from ft_sitl.scenarios.guard import DistanceGrid
+    from ft_sitl.scenarios.distance_grid import DistanceGrid
     from ft_sitl.scenarios.io import load_scenario
 
     sc = load_scenario(str(yard))

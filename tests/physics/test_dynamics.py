@@ -8,9 +8,9 @@ import pytest
 from ft_sitl import G
 from ft_sitl.autopilot.params import ParamSet
 from ft_sitl.autopilot.setpoints import Setpoint
-from ft_sitl.lockstep import Simulation
 from ft_sitl.physics import dynamics as d
 from ft_sitl.physics.catalog import catalog
+from ft_sitl.sim.lockstep import Simulation
 
 PLATFORMS = list(catalog().values())
 

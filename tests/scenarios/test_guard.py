@@ -1,4 +1,4 @@
-"""Collision checking inside the physics loop (ft_sitl.scenarios.guard + lockstep kernel)."""
+"""Collision checking inside the physics loop (ft_sitl.sim.guard + lockstep kernel)."""
 
 import math
 
@@ -7,15 +7,16 @@ import pytest
 import trimesh
 
 from ft_sitl.autopilot.commander import MAIN_OFFBOARD, Severity
-from ft_sitl.autopilot.fleet import Fleet
 from ft_sitl.autopilot.setpoints import Setpoint
-from ft_sitl.lockstep import Simulation
 from ft_sitl.physics import dynamics as d
 from ft_sitl.physics.catalog import get_platform
 from ft_sitl.scenarios.collision import CollisionMonitor, CollisionWorld
+from ft_sitl.scenarios.distance_grid import DistanceGrid
 from ft_sitl.scenarios.families import build_scenario
-from ft_sitl.scenarios.guard import CollisionGuard, DistanceGrid
 from ft_sitl.scenarios.scenario import Scenario
+from ft_sitl.sim.fleet import Fleet
+from ft_sitl.sim.guard import CollisionGuard
+from ft_sitl.sim.lockstep import Simulation
 
 PLATFORM = "0.98kg-EGO Planner DIY"
 R = 0.25
@@ -84,7 +85,7 @@ def test_thin_wall_crossed_at_speed_is_never_missed(speed, physics_hz):
     world = wall_world()
     sim, guard = guarded_sim(world, physics_hz=physics_hz)
     sim.start_hovering(0, [0.0, 0.0, 2.0])
-    guard.attach(sim)
+    sim.attach_guard(guard)
     sim.set_setpoint(0, Setpoint.velocity([speed, 0.0, 0.0]))
     rec = sim.run(4.0, record_hz=physics_hz)
     hits = [e for e in guard.events if e.kind == "collision"]
@@ -103,7 +104,7 @@ def test_flying_past_close_by_is_not_a_collision():
     sim, guard = guarded_sim(world)
     # along the wall at 0.1 m of clearance of the sphere
     sim.start_hovering(0, [5.0 - R - 0.1, -8.0, 2.0])
-    guard.attach(sim)
+    sim.attach_guard(guard)
     sim.set_setpoint(0, Setpoint.trajectory(velocity=[0.0, 4.0, 0.0],
                                             position=[5.0 - R - 0.1, math.nan, 2.0]))
     rec = sim.run(5.0, record_hz=100)
@@ -138,7 +139,7 @@ def test_guard_matches_the_monitor_on_recorded_flights():
         sim.start_hovering(0, start)
         guard = CollisionGuard(world, [R], grid=grid, names=sc.obstacle_name,
                                check_volume=False)
-        guard.attach(sim)
+        sim.attach_guard(guard)
         sim.set_setpoint(0, sp)
         sim.run(8.0)
         hits = [e for e in guard.events if e.kind == "collision"]
@@ -158,7 +159,7 @@ def test_volume_events_on_the_centre():
     world = wall_world()
     sim, guard = guarded_sim(world)
     sim.start_hovering(0, [0.0, 0.0, 4.0])
-    guard.attach(sim)
+    sim.attach_guard(guard)
     sim.set_setpoint(0, Setpoint.position([0.0, 0.0, 6.0]))
     sim.run(4.0)
     sim.set_setpoint(0, Setpoint.position([0.0, 0.0, 3.0]))
@@ -175,7 +176,7 @@ def test_no_grid_and_no_obstacles():
     world = wall_world()
     sim, guard = guarded_sim(world, grid=False)  # every check exact: slower, same answer
     sim.start_hovering(0, [0.0, 0.0, 2.0])
-    guard.attach(sim)
+    sim.attach_guard(guard)
     sim.set_setpoint(0, Setpoint.velocity([4.0, 0.0, 0.0]))
     sim.run(3.0)
     assert [e.kind for e in guard.events] == ["collision"]
@@ -183,7 +184,7 @@ def test_no_grid_and_no_obstacles():
     sim2 = Simulation([get_platform(PLATFORM)])
     sim2.start_hovering(0, [0.0, 0.0, 2.0])
     g2 = CollisionGuard(empty, [R])
-    g2.attach(sim2)
+    sim2.attach_guard(g2)
     sim2.set_setpoint(0, Setpoint.velocity([4.0, 0.0, 0.0]))
     sim2.run(5.0)
     assert sim2.position(0)[0] > 10.0

@@ -21,89 +21,8 @@ from ft_sitl.autopilot.setpoints import Setpoint
 from ft_sitl.physics import dynamics as d
 from ft_sitl.physics.platform import Platform
 from ft_sitl.physics.quaternion import qfrom_euler, qto_euler
-
-# --- collision guard rows (one per vehicle; see ft_sitl.scenarios.guard) -------------------
-# G_ON: check obstacles (0/1); G_R: collision radius (m); G_ANCHOR: lower bound of the
-# obstacle clearance (sphere surface, m) at the anchor point G_O*; G_B*, G_RR: the free
-# ball (centre, radius squared; < 0: none): while the centre stays inside it no obstacle can
-# be touched and the flight volume is not crossed, so the kernel does nothing else;
-# G_A*: position before the step that tripped; G_LBA: clearance bound there;
-# G_OUT: 1 while the centre is outside the flight volume (checked when G_BOUNDS is 1);
-# G_TRIP: why the kernel stopped this vehicle (1 obstacles, 2 bounds, bit set).
-(G_ON, G_R, G_ANCHOR, G_OX, G_OY, G_OZ, G_BX, G_BY, G_BZ, G_RR, G_AX, G_AY, G_AZ, G_LBA,
- G_OUT, G_BOUNDS, G_TRIP) = range(17)
-G_N = 17
-# guard meta row: distance grid origin (3), pitch, grid shape (3), flight volume lo x/y,
-# hi x/y/z, margin (m)
-(M_OX, M_OY, M_OZ, M_H, M_NX, M_NY, M_NZ, M_LOX, M_LOY, M_HIX, M_HIY, M_HIZ,
- M_MARGIN) = range(13)
-M_N = 13
-
-
-@njit(cache=True)
-def grid_lower_bound(grid, meta, qx, qy, qz):
-    """Lower bound of the distance from (qx, qy, qz) to the obstacles from the voxel grid
-    (-inf outside it)."""
-    h = meta[M_H]
-    fx = (qx - meta[M_OX]) / h
-    fy = (qy - meta[M_OY]) / h
-    fz = (qz - meta[M_OZ]) / h
-    if not (fx >= 0.0 and fy >= 0.0 and fz >= 0.0 and fx < meta[M_NX] and fy < meta[M_NY]
-            and fz < meta[M_NZ]):
-        return -np.inf
-    ix, iy, iz = int(fx), int(fy), int(fz)
-    cx = (fx - ix - 0.5) * h
-    cy = (fy - iy - 0.5) * h
-    cz = (fz - iz - 0.5) * h
-    return grid[ix, iy, iz] - np.sqrt(cx * cx + cy * cy + cz * cz)
-
-
-@njit(cache=True)
-def guard_step(g, grid, meta, px, py, pz, qx, qy, qz):
-    """The full check after the step (px, py, pz) -> (qx, qy, qz) that left the free ball.
-    Sets a new free ball around q; returns the trip bits (0: the step is proven free and
-    in the same in/out state as before)."""
-    trip = 0
-    free = np.inf
-    if g[G_ON] > 0.0:
-        margin = meta[M_MARGIN]
-        ox, oy, oz = g[G_OX], g[G_OY], g[G_OZ]
-        lb_p = g[G_ANCHOR] - np.sqrt((px - ox) ** 2 + (py - oy) ** 2 + (pz - oz) ** 2)
-        lb_q = g[G_ANCHOR] - np.sqrt((qx - ox) ** 2 + (qy - oy) ** 2 + (qz - oz) ** 2)
-        if not lb_q > 2.0 * margin:  # the anchor no longer covers q: try the grid
-            seg = np.sqrt((qx - px) ** 2 + (qy - py) ** 2 + (qz - pz) ** 2)
-            lb = grid_lower_bound(grid, meta, qx, qy, qz) - g[G_R]
-            # clearance >= max(lb_p - s, lb - (seg - s)) > margin all along the step
-            if lb > margin and lb_p + lb - seg > margin:
-                g[G_ANCHOR] = lb
-                g[G_OX] = qx
-                g[G_OY] = qy
-                g[G_OZ] = qz
-                lb_q = lb
-            else:
-                g[G_LBA] = lb_p
-                trip |= 1
-        free = lb_q - margin
-    if g[G_BOUNDS] > 0.0:
-        d_in = min(qx - meta[M_LOX], meta[M_HIX] - qx, qy - meta[M_LOY], meta[M_HIY] - qy,
-                   meta[M_HIZ] - qz)
-        out = 1.0 if d_in < 0.0 else 0.0
-        if out != g[G_OUT]:
-            trip |= 2
-        # how far the centre is from crossing a plane (inside) or from getting back in
-        free = min(free, d_in if d_in >= 0.0 else max(meta[M_LOX] - qx, qx - meta[M_HIX],
-                                                       meta[M_LOY] - qy, qy - meta[M_HIY],
-                                                       qz - meta[M_HIZ]))
-    g[G_BX] = qx
-    g[G_BY] = qy
-    g[G_BZ] = qz
-    g[G_RR] = free * free if free > 0.0 else -1.0
-    if trip:
-        g[G_AX] = px
-        g[G_AY] = py
-        g[G_AZ] = pz
-        g[G_TRIP] = trip
-    return trip
+from ft_sitl.scenarios.distance_grid import GM_H
+from ft_sitl.sim.guard import G_BOUNDS, G_BX, G_BY, G_BZ, G_N, G_ON, G_RR, G_TRIP, M_N, guard_step
 
 
 @njit(cache=True)
@@ -190,13 +109,13 @@ class Simulation:
         self.refresh_gains()
         self.time_us = 0
         self.steps = 0
-        # collision guard: rows, grid and meta from an attached CollisionGuard; unguarded
-        # vehicles have G_ON = G_BOUNDS = 0
+        # collision guard (attach_guard): the kernel reads its rows, grid and meta; without
+        # one, these unguarded rows (G_ON = G_BOUNDS = 0)
         self.guard = None
         self._gd = np.zeros((n, G_N))
         self._grid = np.zeros((1, 1, 1), dtype=np.float32)
         self._meta = np.zeros(M_N)
-        self._meta[M_H] = 1.0
+        self._meta[GM_H] = 1.0
         self._k_done = np.zeros(n, dtype=np.int64)
         self._no_rec = np.empty((0, n, self.x.shape[1]))
 
@@ -206,6 +125,16 @@ class Simulation:
         for i, (p, ps) in enumerate(zip(self.platforms, self.params)):
             self.gains[i] = build_gains(p, ps, self.dt)
 
+    def attach_guard(self, guard, handler=None) -> None:
+        """Check every physics step of every vehicle with ``guard`` (a
+        :class:`~ft_sitl.sim.guard.CollisionGuard` with one radius per vehicle);
+        ``handler(event)`` is called for each of its events while the simulation steps.
+        The one place a guard is wired: :meth:`place` resets its rows from then on."""
+        guard.bind(self)
+        guard.handler = handler
+        self.guard = guard
+        self._gd, self._grid, self._meta = guard.rows, guard.grid_data, guard.meta
+
     @property
     def n(self) -> int:
         return len(self.platforms)
@@ -214,8 +143,11 @@ class Simulation:
     def x(self) -> np.ndarray:
         return self.plant.x
 
-    def place(self, i: int, position, yaw: float = 0.0, *, ground_z: float | None = None):
-        """Put vehicle i at rest at a position (ENU, m) and heading (rad)."""
+    def place(self, i: int, position, yaw: float = 0.0, *, ground_z: float | None = None,
+              on_ground: bool = False):
+        """Put vehicle i at rest at a position (ENU, m) and heading (rad); ``on_ground``:
+        standing on the floor (in ground contact from the first step). An attached guard
+        forgets the vehicle's history."""
         x = self.plant.x[i]
         x[:] = 0.0
         x[d.X_POS : d.X_POS + 3] = position
@@ -225,6 +157,10 @@ class Simulation:
             self.plant.env[i, d.E_GROUND_Z] = ground_z
         self.ctrl[i] = 0.0
         self.plant.status[i] = 0.0
+        if on_ground:
+            self.plant.status[i, d.S_CONTACT] = 1.0
+        if self.guard is not None:
+            self.guard.reset(i)
 
     def start_hovering(self, i: int, position, yaw: float = 0.0) -> None:
         """Put vehicle i in the air at hover (rotors at hover speed) holding position."""

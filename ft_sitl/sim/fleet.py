@@ -13,12 +13,13 @@ from collections.abc import Sequence
 
 import numpy as np
 
-from ft_sitl.autopilot.commander import MAIN_OFFBOARD, Commander, VehicleState
+from ft_sitl.autopilot.commander import MAIN_OFFBOARD, Commander, Severity, VehicleState
 from ft_sitl.autopilot.params import ParamSet
 from ft_sitl.autopilot.setpoints import Setpoint
-from ft_sitl.lockstep import Simulation
 from ft_sitl.physics import dynamics as d
 from ft_sitl.physics.platform import Platform
+from ft_sitl.sim.guard import CollisionGuard, GuardEventKind
+from ft_sitl.sim.lockstep import Simulation
 
 COMMANDER_HZ = 50
 
@@ -49,26 +50,20 @@ class Fleet:
         self.spawn_yaw = [float(y) for y in spawn_yaw] if spawn_yaw is not None else [0.0] * n
         self.scenario = scenario
         if guard is None and scenario is not None:
-            from ft_sitl.scenarios.guard import CollisionGuard
-
             guard = CollisionGuard.for_scenario(scenario,
                                                 [p.collision_radius_m for p in platforms])
         self.guard = guard
         if guard is not None:
-            guard.attach(self.sim)
-            guard.handler = self._on_guard_event
+            self.sim.attach_guard(guard, self._on_guard_event)
         for i in range(n):
             self._place(i)
         self.steps_per_tick = max(1, round(1.0 / (COMMANDER_HZ * self.sim.dt)))
         self._tick_all()
 
     def _place(self, i: int) -> None:
-        self.sim.place(i, self.spawn[i], self.spawn_yaw[i])
-        self.sim.plant.status[i, d.S_CONTACT] = 1.0
+        self.sim.place(i, self.spawn[i], self.spawn_yaw[i], on_ground=True)
         self.commanders[i].set_home(self.spawn[i].copy())
         self.commanders[i].home_yaw = self.spawn_yaw[i]
-        if self.guard is not None:
-            self.guard.reset(i)
 
     def respawn(self, i: int) -> None:
         """Put vehicle i back on its spawn point at rest, disarmed, crash cleared (what a
@@ -80,17 +75,15 @@ class Fleet:
         self.sim.sp[i] = Setpoint.off().row
 
     def _on_guard_event(self, ev) -> None:
-        from ft_sitl.autopilot.commander import Severity
-
         cmd = self.commanders[ev.vehicle]
         cmd.time_us = ev.time_us
-        if ev.kind == "collision":
+        if ev.kind == GuardEventKind.COLLISION:
             cmd.crash(ev.what, ev.speed_m_s)
             self.sim.sp[ev.vehicle] = Setpoint.off().row  # motors off from the next step
-        elif ev.kind == "left_volume":
+        elif ev.kind == GuardEventKind.LEFT_VOLUME:
             where = "above the ceiling" if ev.what == "ceiling" else f"past the {ev.what}"
             cmd.text(Severity.WARNING, f"Left the flight volume: {where}")
-        elif ev.kind == "entered_volume":
+        elif ev.kind == GuardEventKind.ENTERED_VOLUME:
             cmd.text(Severity.INFO, "Back inside the flight volume")
 
     @property
