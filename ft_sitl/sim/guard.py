@@ -14,8 +14,8 @@ flight volume, without calling Python on most steps. Per vehicle the compiled lo
   memory beyond the row);
 * a :class:`~ft_sitl.scenarios.distance_grid.DistanceGrid`: a voxel grid of lower bounds
   of the distance to the obstacles, built once per scenario. When a step leaves the ball
-  and the anchor no longer covers the new position, the loop reads the grid there; if the grid proves the step free (see
-  :func:`guard_step`) that bound becomes the new anchor.
+  and the anchor no longer covers the new position, the loop reads the grid there; if the
+  grid proves the step free (see :func:`guard_step`) that bound becomes the new anchor.
 
 Only when both fail (the vehicle is within about half a metre of an obstacle, or the grid
 does not cover it) does the loop stop that vehicle and hand the step to
