@@ -69,6 +69,17 @@ class LandedState(IntEnum):
     LANDING = 4
 
 
+class MissionState(IntEnum):
+    """MISSION_STATE values (MISSION_CURRENT.mission_state)."""
+
+    UNKNOWN = 0
+    NO_MISSION = 1
+    NOT_STARTED = 2
+    ACTIVE = 3
+    PAUSED = 4
+    COMPLETE = 5
+
+
 class Severity(IntEnum):
     """MAV_SEVERITY values for status texts."""
 
@@ -174,7 +185,7 @@ class Commander:
     cruise_speed: float = math.nan
     mission: list[MissionItem] = field(default_factory=list)
     mission_seq: int = 0
-    mission_state: int = 2  # MISSION_STATE: 1 no mission, 2 not started, 3 active, 4 paused, 5 done
+    mission_state: MissionState = MissionState.NOT_STARTED
     statustexts: deque = field(default_factory=lambda: deque(maxlen=64))
     reached: deque = field(default_factory=lambda: deque(maxlen=64))
     battery: Battery | None = None
@@ -195,7 +206,7 @@ class Commander:
         self._item_hold_until: int | None = None
         if self.battery is None:
             self.battery = Battery.for_platform(self.platform, self.params["FT_BAT_ENDURANCE"])
-        self.mission_state = 1
+        self.mission_state = MissionState.NO_MISSION
         self._bat_warned = 0
 
     # --- helpers -------------------------------------------------------------------
@@ -319,10 +330,11 @@ class Commander:
         elif sub == SUB_RTL:
             self._start_rtl()
         elif sub == SUB_MISSION:
-            if self.mission_state in (2, 5) or self.mission_seq >= len(self.mission):
+            if (self.mission_state in (MissionState.NOT_STARTED, MissionState.COMPLETE)
+                    or self.mission_seq >= len(self.mission)):
                 if self.mission_seq >= len(self.mission):
                     self.mission_seq = 0
-            self.mission_state = 3
+            self.mission_state = MissionState.ACTIVE
             self._item_started = False
             self._item_hold_until = None
 
@@ -396,7 +408,7 @@ class Commander:
     def set_mission(self, items: list[MissionItem]) -> None:
         self.mission = list(items)
         self.mission_seq = 0
-        self.mission_state = 2 if items else 1
+        self.mission_state = MissionState.NOT_STARTED if items else MissionState.NO_MISSION
         self._item_started = False
         if not items and self.main_mode == MAIN_AUTO and self.sub_mode == SUB_MISSION:
             self._set_mode(MAIN_AUTO, SUB_LOITER)
@@ -408,8 +420,8 @@ class Commander:
         self.mission_seq = seq
         self._item_started = False
         self._item_hold_until = None
-        if self.mission_state == 5:
-            self.mission_state = 2
+        if self.mission_state == MissionState.COMPLETE:
+            self.mission_state = MissionState.NOT_STARTED
         return Result.ACCEPTED
 
     # --- the tick ----------------------------------------------------------------------
@@ -599,16 +611,16 @@ class Commander:
         return self._land_setpoint(s, self.home)
 
     def _mission_setpoint(self, s: VehicleState) -> Setpoint:
-        if self.mission_state == 5 or self.mission_seq >= len(self.mission):
-            if self.mission_state != 5:
-                self.mission_state = 5
+        if self.mission_state == MissionState.COMPLETE or self.mission_seq >= len(self.mission):
+            if self.mission_state != MissionState.COMPLETE:
+                self.mission_state = MissionState.COMPLETE
                 self.text(Severity.INFO, "Mission finished, loitering")
             if s.on_ground:
                 return self._on_ground_idle()
             if self._nav.target is None or self._nav.phase != "hold":
                 self._hold_here()
             return Setpoint.position(self._nav.target, yaw=self._nav.yaw)
-        self.mission_state = 3
+        self.mission_state = MissionState.ACTIVE
         item = self.mission[self.mission_seq]
         if not self._item_started:
             self._start_item(item, s)

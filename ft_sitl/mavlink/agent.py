@@ -365,8 +365,9 @@ class VehicleAgent:
         c = self.cmd
         n = len(c.mission)
         state = c.mission_state
-        if state == 3 and not (c.main_mode == cm.MAIN_AUTO and c.sub_mode == cm.SUB_MISSION):
-            state = 4  # paused
+        if state == cm.MissionState.ACTIVE and not (c.main_mode == cm.MAIN_AUTO
+                                                    and c.sub_mode == cm.SUB_MISSION):
+            state = cm.MissionState.PAUSED
         mode = 1 if c.main_mode == cm.MAIN_AUTO and c.sub_mode == cm.SUB_MISSION else 0
         return mav.MAVLink_mission_current_message(min(c.mission_seq, max(n - 1, 0)) if n else 0,
                                                    n, state, mode)

@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 from ft_sitl.autopilot import commander as cm
-from ft_sitl.autopilot.commander import LandedState, MissionItem, Result
+from ft_sitl.autopilot.commander import LandedState, MissionItem, MissionState, Result
 from ft_sitl.autopilot.params import ParamSet
 from ft_sitl.autopilot.setpoints import Setpoint
 from ft_sitl.physics.catalog import catalog
@@ -123,10 +123,10 @@ def test_mission_runs_its_items_and_finishes():
     for _ in range(600):
         f.run(0.1)
         vmax = max(vmax, float(np.linalg.norm(f.state(0).velocity[:2])))
-        if c.mission_state == 5 and not c.armed:
+        if c.mission_state == MissionState.COMPLETE and not c.armed:
             break
     assert list(c.reached) == [0, 1, 2, 3, 4, 5]
-    assert c.mission_state == 5
+    assert c.mission_state == MissionState.COMPLETE
     assert vmax <= 2.0 * 1.1  # DO_CHANGE_SPEED honoured
     assert f.state(0).position[:2] == pytest.approx([10.0, 8.0], abs=0.3)
     assert not c.armed
