@@ -10,6 +10,6 @@ from ft_sitl import numeric_env  # noqa: E402
 
 numeric_env.pin()
 
-from ft_sitl import _jit_cache  # noqa: E402
+from ft_sitl import jit_cache  # noqa: E402
 
-JIT_CACHE_DIR = _jit_cache.configure()
+JIT_CACHE_DIR = jit_cache.configure()
