@@ -1,3 +1,8 @@
+# ft_sitl first, before anything loads numpy: its import pins the BLAS settings trial
+# results depend on (ft_sitl.numeric_env), so trials flown in this process match those of
+# the ft-sitl command and the committed results
+import ft_sitl  # noqa: F401, I001
+
 import os
 from pathlib import Path
 

@@ -1,5 +1,5 @@
 """What trial results depend on besides the spec: the BLAS settings (ft_sitl.numeric_env)
-and numba's cache key (ft_sitl._jit_cache)."""
+and numba's cache key (ft_sitl.jit_cache)."""
 
 import json
 import os
@@ -52,7 +52,7 @@ def test_jit_cache_key_covers_every_module(tmp_path):
     from pathlib import Path
 
     import ft_sitl
-    from ft_sitl._jit_cache import source_hash
+    from ft_sitl.jit_cache import source_hash
 
     pkg = tmp_path / "ft_sitl"
     shutil.copytree(Path(ft_sitl.__file__).parent, pkg,
@@ -65,3 +65,15 @@ def test_jit_cache_key_covers_every_module(tmp_path):
     assert edited != before
     lbfgs.rename(pkg / "navigation" / "lbfgs2.py")
     assert source_hash(pkg) != edited
+
+
+def test_the_test_process_runs_the_pinned_kernels():
+    """Trials flown inside pytest (run_campaign with one worker, run_trial) use the same
+    BLAS kernels as the command's processes: conftest imports ft_sitl before numpy."""
+    import threadpoolctl
+
+    blas = [p for p in threadpoolctl.threadpool_info() if p["internal_api"] == "openblas"]
+    assert blas and all(p["num_threads"] == 1 for p in blas)
+    if {"avx2", "fma"} <= numeric_env.cpu_flags() and \
+            os.environ.get(numeric_env.CORETYPE_VAR) == numeric_env.OPENBLAS_CORE:
+        assert all(p["architecture"] == numeric_env.OPENBLAS_CORE for p in blas), blas
