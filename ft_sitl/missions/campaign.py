@@ -58,7 +58,13 @@ from importlib import resources
 from pathlib import Path
 
 from ft_sitl import __version__
-from ft_sitl.missions.trial import TrialSpec, run_trial, wall_budget_from_env
+from ft_sitl.missions.protocol import failed_row
+from ft_sitl.missions.resources import RESOURCES
+from ft_sitl.missions.results import Outcome
+from ft_sitl.missions.spec import TrialSpec, platform_for
+from ft_sitl.missions.trial import run_trial
+from ft_sitl.missions.trial_wire import run_trial_wire, worker_bus
+from ft_sitl.missions.watchdog import wall_budget_from_env
 from ft_sitl.navigation.base import Limits
 
 PRESETS = ("quick", "paper")
@@ -481,8 +487,6 @@ def run_chunk(specs: list[dict], transport: Transport | None = None
         spec = TrialSpec.from_dict(d)
         try:
             if transport.kind == "mavlink" or spec.algorithm == "command":
-                from ft_sitl.wire.trial import run_trial_wire, worker_bus
-
                 row = run_trial_wire(spec, speed_factor=transport.speed_factor,
                                      **worker_bus(transport.mqtt)).row
             else:
@@ -519,9 +523,7 @@ def _worker_init(parent_pid: int | None = None, grid_dir: str | None = None) -> 
     signal.signal(signal.SIGINT, signal.SIG_IGN)  # the parent handles Ctrl-C
     _die_with_parent(parent_pid)
     if grid_dir is not None:
-        from ft_sitl.missions.trial import set_grid_dir
-
-        set_grid_dir(grid_dir)
+        RESOURCES.share_grids(grid_dir)
 
 
 def _die_with_parent(parent_pid: int | None) -> None:
@@ -647,17 +649,10 @@ def _chunks(specs: list[TrialSpec]) -> list[list[dict]]:
 
 def died_row(d: dict) -> dict:
     """A navigator-error row for a trial whose worker process died."""
-    from ft_sitl.missions.trial import _identity_row, load_scenario_for, platform_for
-
     spec = TrialSpec.from_dict(d)
-    p = platform_for(spec)
-    sc = load_scenario_for(spec)
-    row = _identity_row(spec, p, p.indicators(), sc)
-    row.update({"success": False, "reason": "navigator_error",
-                "detail": "the trial's process died (a crash in native code?)",
-                "code_version": __version__, "spec": spec.to_json(),
-                "finished_utc": time.strftime("%Y-%m-%dT%H:%M:%SZ", time.gmtime())})
-    return row
+    return failed_row(spec, platform_for(spec), RESOURCES.scenario(spec),
+                      Outcome.NAVIGATOR_ERROR,
+                      "the trial's process died (a crash in native code?)")
 
 
 def machine_info() -> dict:

@@ -13,7 +13,7 @@ identity
     ``family``, ``scenario_category`` (classic / theoretical / user), ``scenario_index``,
     ``scenario_seed``, ``scenario`` (name), ``trial`` (0-based repetition), ``seed``.
 outcome
-    ``success`` (bool), ``reason`` (one of :data:`REASONS`), ``detail`` (what was hit,
+    ``success`` (bool), ``reason`` (an :class:`Outcome` value), ``detail`` (what was hit,
     which bound, the navigator's exception ...).
 metrics (navigation phase)
     ``time_to_goal_s`` (first entry into the goal sphere, from navigation start),
@@ -29,8 +29,45 @@ run
 
 from __future__ import annotations
 
-REASONS = ("success", "collision", "out_of_bounds", "timeout", "unstable",
-           "loss_of_control", "navigator_error")
+import math
+from enum import StrEnum
+
+
+class Outcome(StrEnum):
+    """How a trial ended: the ``reason`` column (the FLYINGTRUST protocol's exit reasons,
+    docs/missions.md), in the order reports list them."""
+
+    SUCCESS = "success"
+    COLLISION = "collision"
+    OUT_OF_BOUNDS = "out_of_bounds"
+    TIMEOUT = "timeout"
+    UNSTABLE = "unstable"
+    LOSS_OF_CONTROL = "loss_of_control"
+    NAVIGATOR_ERROR = "navigator_error"
+
+
+#: the outcome values in report order (a view of :class:`Outcome`)
+REASONS: tuple[str, ...] = tuple(o.value for o in Outcome)
+
+
+class RowError(ValueError):
+    """A results row whose outcome columns are not what the protocol writes."""
+
+
+def check_outcome(row: dict) -> None:
+    """Raise :class:`RowError` unless ``row["reason"]`` is an :class:`Outcome` value and
+    ``row["success"]`` says whether it is SUCCESS (rows are checked where they are written
+    and where they are read)."""
+    reason = row.get("reason")
+    if not isinstance(reason, str) or reason not in REASONS:
+        raise RowError(f"trial {row.get('trial_id', '?')}: reason {reason!r} is not one of "
+                       f"{', '.join(REASONS)}")
+    success = row.get("success")
+    if isinstance(success, float) and math.isnan(success):
+        success = None
+    if success is None or bool(success) != (reason == Outcome.SUCCESS):
+        raise RowError(f"trial {row.get('trial_id', '?')}: success {success!r} does not "
+                       f"match reason {reason!r}")
 
 IDENTITY = ("trial_id", "campaign", "algorithm", "algorithm_params", "platform",
             "platform_category", "mass_kg", "twr_max", "alpha_xy_max", "alpha_z_max",
@@ -53,10 +90,14 @@ FLOAT = ("mass_kg", "twr_max", "alpha_xy_max", "alpha_z_max") + tuple(
 
 def to_frame(rows):
     """The tidy table of trial rows (dicts with :data:`COLUMNS`), typed: categoricals
-    for the grouping columns (``reason`` with every category of :data:`REASONS`)."""
-    import pandas as pd
+    for the grouping columns (``reason`` with every category of :data:`REASONS`).
+    :class:`RowError` for a row whose outcome is not one the protocol writes."""
+    import pandas as pd  # heavy: kept off the import path of modules needing only Outcome
 
-    df = pd.DataFrame(list(rows), columns=list(COLUMNS))
+    rows = list(rows)
+    for row in rows:
+        check_outcome(row)
+    df = pd.DataFrame(rows, columns=list(COLUMNS))
     for c in INTEGER:
         df[c] = pd.to_numeric(df[c], errors="coerce").astype("Int64")
     for c in FLOAT:

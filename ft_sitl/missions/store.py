@@ -24,6 +24,8 @@ import json
 import os
 from pathlib import Path
 
+from ft_sitl.missions.results import check_outcome, to_frame
+
 SPEC_FILE = "campaign.json"
 TRIALS_FILE = "trials.jsonl"
 PARQUET_FILE = "trials.parquet"
@@ -88,9 +90,12 @@ class ResultStore:
 
     # --- writing ------------------------------------------------------------------------
     def append(self, row: dict) -> None:
-        """Write one finished trial durably (flush + fsync) before anything else happens."""
+        """Write one finished trial durably (flush + fsync) before anything else happens.
+        :class:`~ft_sitl.missions.results.RowError` (nothing written) for a row whose
+        outcome is not one the protocol writes."""
         if row["trial_id"] in self.done:
             return
+        check_outcome(row)
         line = json.dumps(row, sort_keys=True, allow_nan=True, default=_plain) + "\n"
         self._fh.write(line.encode())
         self._fh.flush()
@@ -123,8 +128,6 @@ class ResultStore:
         return list(self.done.values())
 
     def frame(self):
-        from ft_sitl.missions.results import to_frame
-
         return to_frame(self.rows())
 
     def write_tables(self, csv: bool = False) -> list[Path]:

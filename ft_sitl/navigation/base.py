@@ -30,6 +30,14 @@ import numpy as np
 
 from ft_sitl.autopilot.setpoints import Setpoint
 
+#: navigation starts once the vehicle is stable at the start waypoint: within
+#: STABLE_POS_M of it (m) and slower than STABLE_SPEED_M_S (m/s) for STABLE_FOR_S (s). The
+#: protocol judges it (ft_sitl.missions.protocol); a navigator flying its own approach
+#: over the wire (ft-sitl navigate) waits for the same.
+STABLE_POS_M = 0.3
+STABLE_SPEED_M_S = 0.3
+STABLE_FOR_S = 1.0
+
 
 class GiveUp(Exception):  # noqa: N818 - a signal, not an error
     """Raised by a navigator that has no way to the goal; the message says why."""

@@ -27,18 +27,33 @@ import logging
 import math
 import time
 from dataclasses import asdict, dataclass, field
+from enum import StrEnum
 
 import numpy as np
 
 from ft_sitl import frames
-from ft_sitl.navigation.base import GiveUp, Limits, Observation, Task
+from ft_sitl.navigation.base import (
+    STABLE_FOR_S,
+    STABLE_POS_M,
+    STABLE_SPEED_M_S,
+    GiveUp,
+    Limits,
+    Observation,
+    Task,
+)
 from ft_sitl.wire.convert import ned_to_world, send, to_offboard
 
 log = logging.getLogger("ft_sitl.navigate")
 
-STABLE_POS_M = 0.3
-STABLE_SPEED_M_S = 0.3
-STABLE_FOR_S = 1.0
+
+
+class ClientResult(StrEnum):
+    """How ``ft-sitl navigate`` ended (the ``result`` of its JSON summary line)."""
+
+    SUCCESS = "success"
+    COLLISION = "collision"
+    GAVE_UP = "gave_up"
+    TIMEOUT = "timeout"
 
 
 @dataclass
@@ -351,7 +366,7 @@ async def _navigate(nav, wt: WireTask, off, state: _State, t_wall0: float,
         await state.updated.wait()
         state.updated.clear()
         if crash:
-            return {"result": "collision", "detail": crash[0], "steps": steps}
+            return {"result": ClientResult.COLLISION.value, "detail": crash[0], "steps": steps}
         t = _now(state, t_wall0, speed_factor) - t0
         if t + 1e-9 < next_step:
             continue
@@ -369,7 +384,7 @@ async def _navigate(nav, wt: WireTask, off, state: _State, t_wall0: float,
             # the navigator computes (a long replan must not overflow the bus queue)
             sp = await asyncio.get_running_loop().run_in_executor(None, nav.step, obs)
         except GiveUp as exc:
-            return {"result": "gave_up", "detail": str(exc), "steps": steps}
+            return {"result": ClientResult.GAVE_UP.value, "detail": str(exc), "steps": steps}
         if not isinstance(sp, Setpoint):
             raise NavigateError(f"navigator returned {type(sp).__name__}, not a Setpoint")
         await send(off, to_offboard(sp, wt.origin))
@@ -380,10 +395,11 @@ async def _navigate(nav, wt: WireTask, off, state: _State, t_wall0: float,
         if dist <= wt.goal_radius_m:
             entered = t if entered is None else entered
             if t - entered >= wt.hold_s:
-                return {"result": "success", "detail": f"goal held at t = {t:.1f} s",
-                        "steps": steps}
+                return {"result": ClientResult.SUCCESS.value,
+                        "detail": f"goal held at t = {t:.1f} s", "steps": steps}
         else:
             entered = None
         if entered is None and t >= wt.timeout_s:
-            return {"result": "timeout", "detail": f"{dist:.1f} m from the goal after "
-                                                   f"{wt.timeout_s:g} s", "steps": steps}
+            return {"result": ClientResult.TIMEOUT.value,
+                    "detail": f"{dist:.1f} m from the goal after {wt.timeout_s:g} s",
+                    "steps": steps}

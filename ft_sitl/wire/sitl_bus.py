@@ -21,6 +21,8 @@ import threading
 
 import numpy as np
 
+from ft_sitl.sim.guard import GuardEventKind
+
 log = logging.getLogger("ft_sitl.bus")
 
 
@@ -87,7 +89,7 @@ class SitlBus:
             self._mode = mode
         events = fleet.events
         for ev in events[self._events_seen:]:
-            if ev.vehicle == i and ev.kind == "collision":
+            if ev.vehicle == i and ev.kind == GuardEventKind.COLLISION:
                 self.event("collision", object=str(ev.what), speed_m_s=float(ev.speed_m_s))
         self._events_seen = len(events)
         with self._lock:

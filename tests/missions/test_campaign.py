@@ -24,9 +24,9 @@ from ft_sitl.missions.campaign import (
     load_campaign,
     run_campaign,
 )
-from ft_sitl.missions.results import COLUMNS
+from ft_sitl.missions.results import COLUMNS, RowError, to_frame
+from ft_sitl.missions.spec import platform_for
 from ft_sitl.missions.store import ResultStore, StoreError
-from ft_sitl.missions.trial import platform_for
 from ft_sitl.navigation.base import Limits, Navigator
 from ft_sitl.navigation.registry import NavigatorError, available, create, parameters
 from ft_sitl.navigation.straight import StraightLine
@@ -460,23 +460,44 @@ def test_a_killed_campaign_resumes_to_the_uninterrupted_result(tmp_path, cli_env
     assert trials.read_bytes() == before
 
 
+def _row(tid: str, v: int, reason: str = "timeout") -> dict:
+    return {"trial_id": tid, "v": v, "reason": reason, "success": reason == "success"}
+
+
 def test_a_damaged_tail_is_cut_before_appending(tmp_path):
     store = ResultStore(tmp_path)
     store.open({"spec": {"name": "x"}})
-    store.append({"trial_id": "a", "v": 1})
-    store.append({"trial_id": "a", "v": 2})  # already done: ignored
+    store.append(_row("a", 1))
+    store.append(_row("a", 2))  # already done: ignored
     store.close()
     with open(tmp_path / "trials.jsonl", "ab") as fh:
         fh.write(b'{"trial_id": "b", "v"')
     store = ResultStore(tmp_path)
     store.open({"spec": {"name": "x"}})
     assert list(store.done) == ["a"]
-    store.append({"trial_id": "b", "v": 3})
+    store.append(_row("b", 3, "success"))
     store.close()
-    assert read_jsonl(tmp_path / "trials.jsonl") == [{"trial_id": "a", "v": 1},
-                                                    {"trial_id": "b", "v": 3}]
+    assert read_jsonl(tmp_path / "trials.jsonl") == [_row("a", 1), _row("b", 3, "success")]
     with pytest.raises(StoreError, match="holds the results of a different campaign"):
         ResultStore(tmp_path).open({"spec": {"name": "y"}})
+
+
+@pytest.mark.parametrize("row,message", [
+    (_row("c", 1, "crashed"), r"trial c: reason 'crashed' is not one of success, collision"),
+    ({"trial_id": "c", "success": True, "reason": "timeout"},
+     r"trial c: success True does not match reason 'timeout'"),
+    ({"trial_id": "c", "reason": "success"}, r"trial c: success None does not match"),
+])
+def test_a_row_with_an_unknown_outcome_is_refused_and_nothing_written(tmp_path, row, message):
+    store = ResultStore(tmp_path)
+    store.open({"spec": {"name": "x"}})
+    store.append(_row("a", 1))
+    with pytest.raises(RowError, match=message):
+        store.append(row)
+    store.close()
+    assert read_jsonl(tmp_path / "trials.jsonl") == [_row("a", 1)]
+    with pytest.raises(RowError, match=message):
+        to_frame([_row("a", 1), row])
 
 
 # --- a navigator that kills its worker process -----------------------------------------------

@@ -542,15 +542,17 @@ def test_bad_spec_documents_are_refused(doc, message):
 
 def test_campaign_workers_share_one_build_of_a_scenario_distance_grid(tmp_path, yard,
                                                                       monkeypatch):
-    from ft_sitl.missions import trial as trial_mod
+    from ft_sitl.missions import resources
     from ft_sitl.scenarios.distance_grid import DistanceGrid
     from ft_sitl.scenarios.io import load_scenario
 
     sc = load_scenario(str(yard))
     built = DistanceGrid.build(sc.mesh, sc.bounds_min, sc.bounds_max)
-    key = trial_mod._scenario_key(sc)
-    monkeypatch.setattr(trial_mod, "_GRID_DIR", str(tmp_path))
-    first = trial_mod._distance_grid(sc, key)  # builds it and leaves it for the others
+
+    def grid_of(scenario):  # a fresh process's resources, sharing through tmp_path
+        return resources.TrialResources(grid_dir=str(tmp_path)).world_and_grid(scenario)[1]
+
+    first = grid_of(sc)  # builds it and leaves it for the others
     saved = list(tmp_path.glob("*.npz"))
     assert len(saved) == 1
 
@@ -558,22 +560,21 @@ def test_campaign_workers_share_one_build_of_a_scenario_distance_grid(tmp_path, 
         raise AssertionError("a shared grid must be loaded, not built again")
 
     monkeypatch.setattr(DistanceGrid, "build", no_build)
-    loaded = trial_mod._distance_grid(sc, key)
+    loaded = grid_of(sc)
     for grid in (first, loaded):
         assert np.array_equal(grid.data, built.data) and grid.data.dtype == np.float32
         assert np.array_equal(grid.origin, built.origin) and grid.pitch == built.pitch
 
     saved[0].write_bytes(b"not a grid")  # unreadable: built again and replaced
     monkeypatch.undo()
-    monkeypatch.setattr(trial_mod, "_GRID_DIR", str(tmp_path))
-    again = trial_mod._distance_grid(sc, key)
+    again = grid_of(sc)
     assert np.array_equal(again.data, built.data)
     with np.load(saved[0]) as z:
         assert np.array_equal(z["data"], built.data)
 
     # only the newest GRID_CACHE_KEEP grids stay on disk
-    monkeypatch.setattr(trial_mod, "GRID_CACHE_KEEP", 1)
+    monkeypatch.setattr(resources, "GRID_CACHE_KEEP", 1)
     other = load_scenario(str(write_yard(tmp_path / "other", "other",
                                          wall=((1.0, 5.0, 0.0), (9.0, 5.5, 2.0)))))
-    trial_mod._distance_grid(other, trial_mod._scenario_key(other))
+    grid_of(other)
     assert len(list(tmp_path.glob("*.npz"))) == 1 and not saved[0].exists()

@@ -12,10 +12,10 @@ navigator as a separate process:
   connection URL, MQTT URL, goal and limits in ``FT_SITL_*`` environment variables
   (docs/wire.md) and ``{connect}``-style placeholders in its arguments.
 
-The judge is the in-process protocol's code (:class:`~ft_sitl.missions.trial.NavigationJudge`)
-run after every 4 ms of simulated time. Approach: the navigator process takes off and
-holds the start itself; navigation starts when the vehicle is stable at the start (within
-0.3 m, slower than 0.3 m/s, for 1 s), as in-process. A navigator process that exits with
+The protocol is the in-process one's code (:class:`~ft_sitl.missions.protocol.TrialReferee`:
+the approach and navigation judges, the metrics, the row), run after every 4 ms of simulated
+time. Approach: the navigator process arms, takes off and holds the start itself; navigation
+starts when the vehicle is stable at the start, as in-process. A navigator process that exits with
 an error fails the trial as ``navigator_error`` (its stderr's last line in the detail); one
 that hangs runs into the protocol's timeout; one that never arms fails after
 ``arm_timeout_s`` of wall time.
@@ -26,7 +26,6 @@ from __future__ import annotations
 import asyncio
 import fcntl
 import json
-import math
 import os
 import shlex
 import signal
@@ -39,25 +38,18 @@ from pathlib import Path
 import numpy as np
 
 from ft_sitl import frames
-from ft_sitl.autopilot.cascade import C_SAT_STEPS
-from ft_sitl.missions.trial import (
+from ft_sitl.missions.protocol import (
     APPROACH_TIMEOUT_S,
-    STABLE_FOR_S,
-    STABLE_POS_M,
-    STABLE_SPEED_M_S,
-    NavigationJudge,
+    Phase,
+    TrialFailure,
     TrialOutcome,
-    TrialSpec,
-    _check,
-    _Fail,
-    _identity_row,
-    _Metrics,
-    finish_row,
-    load_scenario_for,
-    platform_for,
+    TrialReferee,
     trial_vehicle,
 )
-from ft_sitl.wire.navigate import WireTask
+from ft_sitl.missions.resources import RESOURCES
+from ft_sitl.missions.results import Outcome
+from ft_sitl.missions.spec import TrialSpec, platform_for
+from ft_sitl.wire.navigate import ClientResult, WireTask
 
 COMMAND = "command"  # the pseudo-navigator: a user's program
 INSTANCE_BASE = 20
@@ -179,64 +171,6 @@ def navigator_argv(spec: TrialSpec, wt: WireTask, connect: str, mqtt: str | None
     return argv, env
 
 
-class _Referee:
-    """Called after every chunk of simulated time: the approach, then the judge."""
-
-    def __init__(self, fleet, guard, spec, sc, metrics, record):
-        self.fleet, self.guard, self.spec, self.sc, self.m = fleet, guard, spec, sc, metrics
-        self.record = record
-        self.traj: list = []
-        self.judge: NavigationJudge | None = None
-        self.baselines = (None, 0.0, 0, math.nan)
-        self.armed_us = None
-        self.stable_us = None
-        self.outcome: tuple[str, str] | None = None
-        self.on_start = None  # callback when navigation starts
-
-    def __call__(self) -> None:
-        if self.outcome is not None:
-            return
-        try:
-            if self.judge is None:
-                self._approach()
-            elif self.judge.after_step():
-                self.outcome = ("success", "")
-        except _Fail as f:
-            self.outcome = (f.reason, f.detail)
-
-    def _approach(self) -> None:
-        fleet, sc = self.fleet, self.sc
-        cmd = fleet.commanders[0]
-        if fleet.events and fleet.events[-1].kind == "collision":
-            raise _Fail("collision", f"hit {fleet.events[-1].what} before navigation started")
-        if not cmd.armed:
-            return
-        now = fleet.time_us
-        if self.armed_us is None:
-            self.armed_us = now
-        s = fleet.state(0)
-        if not s.on_ground:
-            _check(fleet, len(fleet.events), s, self.spec)  # tilt, non-finite state
-        ok = (float(np.linalg.norm(s.position - sc.start)) < STABLE_POS_M
-              and float(np.linalg.norm(s.velocity)) < STABLE_SPEED_M_S)
-        if ok and self.stable_us is None:
-            self.stable_us = now
-        elif not ok:
-            self.stable_us = None
-        if self.stable_us is not None and now - self.stable_us >= round(STABLE_FOR_S * 1e6):
-            self.baselines = (now, float(fleet.sim.ctrl[0, C_SAT_STEPS]), fleet.sim.steps,
-                              fleet.sim.energy_j(0))
-            self.judge = NavigationJudge(fleet, self.guard, self.spec, sc, self.m,
-                                         len(fleet.events),
-                                         self.traj if self.record else None)
-            if self.on_start is not None:
-                self.on_start()
-            return
-        if now - self.armed_us > round((APPROACH_TIMEOUT_S + 30.0) * 1e6):
-            raise _Fail("loss_of_control", "could not reach the start "
-                        f"({np.linalg.norm(s.position - sc.start):.2f} m off)")
-
-
 def run_trial_wire(spec: TrialSpec, *, speed_factor: float = 2.0, mqtt: str | None = None,
                    record: bool = False, instance: int | None = None,
                    arm_timeout_s: float = ARM_TIMEOUT_S, log_dir: Path | None = None,
@@ -245,11 +179,9 @@ def run_trial_wire(spec: TrialSpec, *, speed_factor: float = 2.0, mqtt: str | No
     from ft_sitl.mavlink.server import SitlServer
 
     wall0 = time.perf_counter()
-    sc, platform = load_scenario_for(spec), platform_for(spec)
+    sc, platform = RESOURCES.scenario(spec), platform_for(spec)
     guard, fleet = trial_vehicle(spec, sc, platform)
-    row = _identity_row(spec, platform, platform.indicators(), sc)
-    m = _Metrics()
-    ref = _Referee(fleet, guard, spec, sc, m, record)
+    ref = TrialReferee(fleet, guard, spec, sc, record=record)
     wt = wire_task(spec, sc, platform)
     vehicle = spec.trial_id
     lock = InstanceLock() if instance is None else None
@@ -266,7 +198,7 @@ def run_trial_wire(spec: TrialSpec, *, speed_factor: float = 2.0, mqtt: str | No
         try:
             argv, env = navigator_argv(spec, wt, connect, mqtt, vehicle, speed_factor)
         except ValueError as exc:
-            raise _Fail("navigator_error", str(exc)) from None
+            raise TrialFailure(Outcome.NAVIGATOR_ERROR, str(exc)) from None
         logs = Path(log_dir or tempfile.mkdtemp(prefix="ft-sitl-nav-"))
         logs.mkdir(parents=True, exist_ok=True)
         out_path, err_path = logs / f"{spec.trial_id}.out", logs / f"{spec.trial_id}.err"
@@ -275,39 +207,38 @@ def run_trial_wire(spec: TrialSpec, *, speed_factor: float = 2.0, mqtt: str | No
                 proc = subprocess.Popen(argv, stdout=out_fh, stderr=err_fh,
                                         env={**os.environ, **env}, start_new_session=True)
             except OSError as exc:
-                raise _Fail("navigator_error", f"cannot start {argv[0]}: {exc}") from None
+                raise TrialFailure(Outcome.NAVIGATOR_ERROR,
+                                   f"cannot start {argv[0]}: {exc}") from None
             asyncio.run(_serve(server, fleet, ref, proc, spec, speed_factor, arm_timeout_s,
                                bus, out_path))
         client = _client_result(out_path)
-        reason, detail = ref.outcome or ("navigator_error", "no outcome")
-        if reason == "navigator_error" and not detail:
-            detail = _tail(err_path)
-    except _Fail as f:
-        reason, detail = f.reason, f.detail
+        if ref.outcome == Outcome.NAVIGATOR_ERROR and not ref.detail:
+            ref.detail = _tail(err_path)
+    except TrialFailure as f:
+        ref.end(f.reason, f.detail)
     finally:
         if proc is not None:
             _stop(proc)
         if lock is not None:
             lock.__exit__(None, None, None)
     # setpoints the client sent (unknown when the judge ended it first)
-    m.planner_calls = int(client["steps"]) if "steps" in client else -1
-    finish_row(row, spec, fleet, m, reason, detail, ref.baselines, -1, wall0)
-    return TrialOutcome(row, np.array(ref.traj) if record else None, sc)
+    ref.metrics.planner_calls = int(client["steps"]) if "steps" in client else -1
+    row = ref.finish(platform, replans=-1, wall0=wall0)
+    return TrialOutcome(row, ref.trajectory(), sc)
 
 
-async def _serve(server, fleet, ref: _Referee, proc, spec, speed_factor: float,
+async def _serve(server, fleet, ref: TrialReferee, proc, spec, speed_factor: float,
                  arm_timeout_s: float, bus, out_path: Path) -> None:
     await server.start()
     wall0 = time.monotonic()
     # the whole trial's wall-clock ceiling: approach + timeout at the speed factor, x3
-    wall_limit = arm_timeout_s + 3.0 * (APPROACH_TIMEOUT_S + 30.0 + spec.limits.timeout_s
+    wall_limit = arm_timeout_s + 3.0 * (APPROACH_TIMEOUT_S + spec.limits.timeout_s
                                          + spec.limits.hold_s) / speed_factor
 
     def after_chunk():
         if bus is not None:
             bus.service()
-        ref()
-        if ref.outcome is not None:
+        if ref.after_step():
             server.stop()
 
     server.on_chunk = after_chunk
@@ -322,25 +253,26 @@ async def _serve(server, fleet, ref: _Referee, proc, spec, speed_factor: float,
                 # ft-sitl navigate exits 1 when it gives up (or times out by its own
                 # clock): the protocol's "no plan" timeout; anything else is an error
                 res = _client_result(out_path) if code == 1 else {}
-                if res.get("result") in ("gave_up", "timeout"):
-                    ref.outcome = ("timeout", f"navigator gave up: {res.get('detail', '')}")
+                if res.get("result") in (ClientResult.GAVE_UP, ClientResult.TIMEOUT):
+                    ref.end(Outcome.TIMEOUT, f"navigator gave up: {res.get('detail', '')}")
                 else:
-                    ref.outcome = ("navigator_error", "")
+                    ref.end(Outcome.NAVIGATOR_ERROR)
                 server.stop()
-            elif ref.judge is None and not fleet.commanders[0].armed and \
+            elif ref.phase is Phase.APPROACH and not fleet.commanders[0].armed and \
                     time.monotonic() - wall0 > arm_timeout_s:
-                ref.outcome = ("navigator_error", f"the vehicle was not armed within "
-                                                  f"{arm_timeout_s:g} s")
+                ref.end(Outcome.NAVIGATOR_ERROR, f"the vehicle was not armed within "
+                                                 f"{arm_timeout_s:g} s")
                 server.stop()
             elif time.monotonic() - wall0 > wall_limit:
-                ref.outcome = ("timeout", f"wall-clock limit {wall_limit:.0f} s reached "
-                                          "(the simulator could not keep its speed factor)")
+                ref.end(Outcome.TIMEOUT, f"wall-clock limit {wall_limit:.0f} s reached "
+                                         "(the simulator could not keep its speed factor)")
                 server.stop()
         await runner
     finally:
         server.close()
         if bus is not None:
-            bus.event("trial_end", trial=spec.trial_id, outcome=(ref.outcome or ("?",))[0])
+            bus.event("trial_end", trial=spec.trial_id,
+                      outcome=ref.outcome.value if ref.outcome is not None else "?")
             bus.close()
 
 

@@ -1,0 +1,107 @@
+"""What decides a trial: :class:`TrialSpec`, its canonical JSON and its id.
+
+The spec is everything a trial is a pure function of (with the code version): navigator
+and parameters, platform, scenario, repetition, seed, limits. Its SHA-256 is the trial id,
+the campaign's key; ``ft-sitl trial rerun`` rebuilds a trial from the spec stored in its
+row.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import json
+from dataclasses import dataclass, field
+
+from ft_sitl.navigation.base import Limits
+from ft_sitl.physics.catalog import get_platform, platform_from_mapping
+from ft_sitl.physics.platform import Platform
+
+
+class TrialSpecError(ValueError):
+    """A trial spec is invalid; the message names the field."""
+
+
+def _check_int(name, v, lo=0):
+    if isinstance(v, bool) or not isinstance(v, int) or v < lo:
+        raise TrialSpecError(f"{name}: must be an integer >= {lo}, got {v!r}")
+    return v
+
+
+@dataclass(frozen=True)
+class TrialSpec:
+    """Everything that decides a trial. ``platform_def`` (the platform's physical fields)
+    and ``scenario_file`` make user platforms and scenarios rerunnable on their own."""
+
+    algorithm: str
+    platform: str
+    family: str
+    scenario_index: int = 1
+    scenario_seed: int = 0
+    trial: int = 0
+    seed: int = 0
+    algorithm_params: dict = field(default_factory=dict)
+    limits: Limits = field(default_factory=Limits)
+    campaign: str = ""
+    label: str = ""  # the algorithm's name in the results (default: the navigator's name)
+    platform_def: dict | None = None
+    scenario_file: str | None = None
+    physics_hz: int = 1000
+
+    def __post_init__(self):
+        for name in ("algorithm", "platform", "family"):
+            v = getattr(self, name)
+            if not isinstance(v, str) or not v:
+                raise TrialSpecError(f"{name}: must be a non-empty string, got {v!r}")
+        _check_int("scenario_index", self.scenario_index, 1)
+        _check_int("scenario_seed", self.scenario_seed)
+        _check_int("trial", self.trial)
+        _check_int("seed", self.seed)
+        _check_int("physics_hz", self.physics_hz, 1)
+        if not isinstance(self.algorithm_params, dict):
+            raise TrialSpecError("algorithm_params: must be a table of parameters")
+        if not isinstance(self.limits, Limits):
+            raise TrialSpecError("limits: must be a Limits")
+
+    # --- serialisation -------------------------------------------------------------------
+    def to_dict(self) -> dict:
+        return {
+            "algorithm": self.algorithm, "algorithm_params": self.algorithm_params,
+            "platform": self.platform, "platform_def": self.platform_def,
+            "family": self.family, "scenario_index": self.scenario_index,
+            "scenario_seed": self.scenario_seed, "scenario_file": self.scenario_file,
+            "trial": self.trial, "seed": self.seed, "limits": self.limits.as_dict(),
+            "campaign": self.campaign, "label": self.label, "physics_hz": self.physics_hz,
+        }
+
+    @classmethod
+    def from_dict(cls, d: dict) -> TrialSpec:
+        if not isinstance(d, dict):
+            raise TrialSpecError("a trial spec must be a table")
+        d = dict(d)
+        d.pop("code_version", None)
+        try:
+            limits = Limits(**d.pop("limits", {}))
+        except TypeError as exc:
+            raise TrialSpecError(f"limits: {exc}") from None
+        except ValueError as exc:
+            raise TrialSpecError(str(exc)) from None
+        try:
+            return cls(limits=limits, **d)
+        except TypeError as exc:
+            raise TrialSpecError(f"trial spec: {exc}") from None
+
+    def to_json(self) -> str:
+        return json.dumps(self.to_dict(), sort_keys=True, separators=(",", ":"))
+
+    @property
+    def trial_id(self) -> str:
+        """16 hex digits of the SHA-256 of the canonical spec (the campaign's key)."""
+        return hashlib.sha256(self.to_json().encode()).hexdigest()[:16]
+
+
+def platform_for(spec: TrialSpec) -> Platform:
+    """The spec's platform: its stored physical fields, else the catalog entry."""
+    if spec.platform_def is not None:
+        return platform_from_mapping(dict(spec.platform_def), f"trial spec platform "
+                                                               f"{spec.platform!r}")
+    return get_platform(spec.platform)
