@@ -1,0 +1,140 @@
+"""The package's layering (docs/architecture.md): imports point down only.
+
+physics <- autopilot <- sim <- mavlink / bridge / missions / cli, with scenarios (geometry)
+beside autopilot, navigation and the bus above them, the wire client above those. Checked
+statically on every import statement of the package (in functions too) and dynamically
+by importing the lower layers in a fresh interpreter.
+"""
+
+import ast
+import json
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+PKG = Path(__file__).resolve().parents[1] / "ft_sitl"
+#: modules directly under ft_sitl/ that every layer may use
+BASE = {"ft_sitl", "frames", "numeric_env", "jit_cache", "__version__", "G"}
+#: what each part of the package may import besides BASE and itself
+ALLOWED = {
+    "physics": set(),
+    "autopilot": {"physics"},
+    "scenarios": {"physics"},
+    "sim": {"physics", "autopilot", "scenarios"},
+    "navigation": {"physics", "autopilot", "scenarios"},
+    "bus": {"physics", "scenarios"},
+    "mavlink": {"physics", "autopilot", "scenarios", "sim"},
+    "bridge": {"physics", "autopilot", "scenarios", "sim"},
+    "wire": {"physics", "autopilot", "scenarios", "sim", "navigation", "bus"},
+    "missions": {"physics", "autopilot", "scenarios", "sim", "navigation", "bus", "mavlink",
+                 "wire"},
+    "demo": {"physics", "autopilot", "sim"},
+    "cli": {"physics", "autopilot", "scenarios", "sim", "navigation", "bus", "mavlink",
+            "bridge", "wire", "missions", "demo"},
+    "__main__": {"cli"},
+}
+
+
+def part_of(module: str) -> str:
+    """The layer a dotted ft_sitl module name belongs to."""
+    parts = module.split(".")
+    if len(parts) == 1:
+        return "ft_sitl"
+    return parts[1]
+
+
+def modules():
+    for path in sorted(PKG.rglob("*.py")):
+        rel = path.relative_to(PKG.parent).with_suffix("")
+        name = ".".join(rel.parts)
+        if name.endswith(".__init__"):
+            name = name[: -len(".__init__")]
+        yield name, path
+
+
+def own_imports(path: Path):
+    """(line, imported ft_sitl module, imported names) of every import in the file."""
+    for node in ast.walk(ast.parse(path.read_text())):
+        if isinstance(node, ast.ImportFrom) and node.module and node.level == 0 \
+                and node.module.split(".")[0] == "ft_sitl":
+            yield node.lineno, node.module, [a.name for a in node.names]
+        elif isinstance(node, ast.Import):
+            for a in node.names:
+                if a.name.split(".")[0] == "ft_sitl":
+                    yield node.lineno, a.name, []
+
+
+def test_every_part_has_a_layer():
+    parts = {part_of(name) for name, _ in modules()} - {"ft_sitl"}
+    assert parts - BASE <= set(ALLOWED), parts - BASE - set(ALLOWED)
+
+
+def test_imports_point_down_only():
+    bad = []
+    for name, path in modules():
+        me = part_of(name)
+        if me in BASE:
+            allowed = BASE
+        else:
+            allowed = BASE | ALLOWED[me] | {me}
+        for line, mod, names in own_imports(path):
+            targets = [mod] if mod != "ft_sitl" else [f"ft_sitl.{n}" for n in names]
+            for t in targets:
+                if part_of(t) not in allowed:
+                    bad.append(f"{path.relative_to(PKG.parent)}:{line} imports {t}")
+    assert not bad, "\n".join(bad)
+
+
+def test_no_private_name_is_imported_from_another_module():
+    bad = []
+    for _, path in modules():
+        for line, mod, names in own_imports(path):
+            private = [n for n in names if n.startswith("_") and not n.startswith("__")]
+            private += [p for p in mod.split(".") if p.startswith("_") and p != "__init__"]
+            if private:
+                bad.append(f"{path.relative_to(PKG.parent)}:{line}: {', '.join(private)} "
+                           f"from {mod}")
+    assert not bad, "\n".join(bad)
+
+
+@pytest.mark.parametrize("layer,forbidden", [
+    ("physics", ("sim", "autopilot", "missions", "navigation", "mavlink", "wire", "cli")),
+    ("autopilot", ("sim", "missions", "navigation", "mavlink", "wire", "cli")),
+    ("scenarios", ("sim", "autopilot", "missions", "navigation", "mavlink", "wire", "cli")),
+])
+def test_lower_layers_import_alone(layer, forbidden):
+    """Every module of a lower layer imported in a fresh interpreter pulls in no module
+    of the layers above it."""
+    names = [n for n, _ in modules() if part_of(n) == layer]
+    code = ("import importlib, json, sys\n"
+            f"for n in {names!r}: importlib.import_module(n)\n"
+            "print(json.dumps(sorted(m for m in sys.modules if m.startswith('ft_sitl.'))))")
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
+                         timeout=300, cwd=PKG.parent)
+    assert out.returncode == 0, out.stderr
+    loaded = json.loads(out.stdout.strip().splitlines()[-1])
+    above = [m for m in loaded if part_of(m) in forbidden]
+    assert len(names) > 2 and not above, above
+
+
+def test_in_function_imports_say_why():
+    """An import inside a function only where it breaks a real cost (a heavy or optional
+    dependency, the command line's start-up time), with its reason in a comment on its
+    line or the line above; everything else is imported at the top of the module."""
+    bad = []
+    for _, path in modules():
+        lines = path.read_text().splitlines()
+        for node in ast.walk(ast.parse("\n".join(lines))):
+            if not isinstance(node, (ast.FunctionDef, ast.AsyncFunctionDef)):
+                continue
+            for sub in ast.walk(node):
+                if isinstance(sub, (ast.Import, ast.ImportFrom)):
+                    here = lines[sub.lineno - 1]
+                    above = lines[sub.lineno - 2].strip() if sub.lineno > 1 else ""
+                    if "#" not in here and not above.startswith("#"):
+                        bad.append(f"{path.relative_to(PKG.parent)}:{sub.lineno}: "
+                                   f"{here.strip()}")
+    assert not bad, f"{len(bad)} in-function imports without a reason:\n" + "\n".join(
+        sorted(set(bad)))
