@@ -44,9 +44,6 @@ def read_document(path: str | Path, *, what: str = "file", hint: str = "",
     should hold, for the message when it is something else."""
     path = Path(path)
     suffix = path.suffix.lower()
-    if suffix not in SUFFIXES:
-        raise error(f"{path}: unknown {what} type {suffix or '(none)'}; "
-                    "use .toml, .yaml or .yml")
     try:
         text = path.read_text(encoding="utf-8")
     except FileNotFoundError:
@@ -55,6 +52,10 @@ def read_document(path: str | Path, *, what: str = "file", hint: str = "",
         raise error(f"{path}: cannot read the {what} ({exc.strerror or exc})") from None
     except UnicodeDecodeError:
         raise error(f"{path}: not a UTF-8 text file") from None
+    # after the read: a missing file is "no such file" whatever its name (a mistyped preset)
+    if suffix not in SUFFIXES:
+        raise error(f"{path}: unknown {what} type {suffix or '(none)'}; "
+                    "use .toml, .yaml or .yml")
     if suffix == ".toml":
         try:
             doc = tomllib.loads(text)
@@ -140,12 +141,7 @@ class Table:
     def integer(self, key: str, default=_MISSING, *, lo: int = 0,
                 hi: int | None = None) -> int:
         """An integer within lo..hi (bools refused)."""
-        v = self.get(key, default)
-        if isinstance(v, bool) or not isinstance(v, int) or v < lo or (hi is not None
-                                                                      and v > hi):
-            rng = f"{lo}..{hi}" if hi is not None else f">= {lo}"
-            raise self.fail(key, f"must be an integer {rng}, got {v!r}")
-        return v
+        return integer(self.get(key, default), self.fail, key, lo=lo, hi=hi)
 
     def number(self, key: str, default=_MISSING, *, lo: float | None = None,
                hi: float | None = None) -> float:
@@ -181,6 +177,15 @@ class Table:
         if not isinstance(v, list) or not v:
             raise self.fail(key, f"must be a non-empty list, got {v!r}")
         return v
+
+
+def integer(v, fail, key: str, *, lo: int = 0, hi: int | None = None) -> int:
+    """``v`` if it is an integer (not a bool) within lo..hi; else ``fail(key, message)`` (a
+    :meth:`Table.fail`) is raised. For list elements: ``integer(x, table.fail, "indices")``."""
+    if isinstance(v, bool) or not isinstance(v, int) or v < lo or (hi is not None and v > hi):
+        rng = f"{lo}..{hi}" if hi is not None else f">= {lo}"
+        raise fail(key, f"must be an integer {rng}, got {v!r}")
+    return v
 
 
 def number(v, fail, key: str, *, lo: float | None = None, hi: float | None = None) -> float:

@@ -24,10 +24,12 @@ def test_file_problems_name_the_file(tmp_path):
     assert _error(read_document, p, what="thing file") == (
         f"{p}: unknown thing file type .json; use .toml, .yaml or .yml")
     p = tmp_path / "noext"
+    p.write_text("a = 1\n")
     assert _error(read_document, p) == f"{p}: unknown file type (none); use .toml, .yaml or .yml"
-    p = tmp_path / "gone.toml"
-    assert _error(read_document, p, hint=" (presets: a, b)") == (
-        f"{p}: no such file (presets: a, b)")
+    for name in ("gone.toml", "gone"):  # missing: named so, whatever the suffix
+        p = tmp_path / name
+        assert _error(read_document, p, hint=" (presets: a, b)") == (
+            f"{p}: no such file (presets: a, b)")
     p = tmp_path / "dir.yaml"
     p.mkdir()
     assert _error(read_document, p) == f"{p}: cannot read the file (Is a directory)"
