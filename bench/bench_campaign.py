@@ -37,6 +37,7 @@ import time  # noqa: E402
 from benchutil import machine_info  # noqa: E402
 
 from ft_sitl.missions.campaign import load_campaign, run_campaign  # noqa: E402
+from ft_sitl.missions.campaign_file import parse_algorithms  # noqa: E402
 from ft_sitl.missions.store import load_rows  # noqa: E402
 from ft_sitl.scenarios.distance_grid import DistanceGrid  # noqa: E402
 from ft_sitl.scenarios.families import build_scenario  # noqa: E402
@@ -79,9 +80,7 @@ def main(argv=None) -> int:
     ap.add_argument("--json", action="store_true")
     args = ap.parse_args(argv)
     campaign = load_campaign(args.campaign)
-    from ft_sitl.missions.campaign import _algorithms
-
-    campaign.algorithms = _algorithms("--algorithms", list(args.algorithms))
+    campaign.algorithms = parse_algorithms("--algorithms", list(args.algorithms))
     configs = len({(s.family, i) for s in campaign.scenarios for i in s.indices})
     serial = one_run(campaign, 1)
     parallel = one_run(campaign, args.workers)

@@ -12,6 +12,8 @@ import math
 
 import numpy as np
 
+from ft_sitl.rotations import qmul
+
 # q_ned_enu: the fixed rotation that takes ENU vectors into NED (x<->y swap, z flip).
 _Q_NED_ENU = np.array([0.0, math.sqrt(0.5), math.sqrt(0.5), 0.0])
 # q_flu_frd: body FRD -> FLU is a rotation of pi about x.
@@ -57,29 +59,16 @@ def wrap_pi(a: float) -> float:
     return (a + math.pi) % (2.0 * math.pi) - math.pi
 
 
-def _qmul(a, b):
-    w1, x1, y1, z1 = a
-    w2, x2, y2, z2 = b
-    return np.array(
-        [
-            w1 * w2 - x1 * x2 - y1 * y2 - z1 * z2,
-            w1 * x2 + x1 * w2 + y1 * z2 - z1 * y2,
-            w1 * y2 - x1 * z2 + y1 * w2 + z1 * x2,
-            w1 * z2 + x1 * y2 - y1 * x2 + z1 * w2,
-        ]
-    )
-
-
 def q_enu_flu_to_ned_frd(q_world_body) -> np.ndarray:
     """Attitude q_enu_flu (ENU world, FLU body) to q_ned_frd (PX4's attitude quaternion)."""
-    q = _qmul(_qmul(_Q_NED_ENU, np.asarray(q_world_body, dtype=float)), _Q_FLU_FRD)
+    q = qmul(qmul(_Q_NED_ENU, np.asarray(q_world_body, dtype=float)), _Q_FLU_FRD)
     return q if q[0] >= 0 else -q
 
 
 def q_ned_frd_to_enu_flu(q_ned_frd) -> np.ndarray:
     q_enu_ned = _Q_NED_ENU * np.array([1.0, -1.0, -1.0, -1.0])
     q_frd_flu = _Q_FLU_FRD * np.array([1.0, -1.0, -1.0, -1.0])
-    q = _qmul(_qmul(q_enu_ned, np.asarray(q_ned_frd, dtype=float)), q_frd_flu)
+    q = qmul(qmul(q_enu_ned, np.asarray(q_ned_frd, dtype=float)), q_frd_flu)
     return q if q[0] >= 0 else -q
 
 

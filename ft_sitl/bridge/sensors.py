@@ -46,6 +46,7 @@ from dataclasses import dataclass, fields
 import numpy as np
 
 from ft_sitl import G, frames
+from ft_sitl.rotations import matrix_from_quat
 
 # --- ISA standard atmosphere (troposphere) ------------------------------------------------
 ISA_P0_PA = 101325.0  #: sea-level pressure
@@ -251,14 +252,9 @@ class _Distinct:
 
 
 def _rotate_ned_to_frd(q_ned_frd, v_ned) -> np.ndarray:
-    """World NED vector into body FRD: the inverse rotation of q_ned_frd (w, x, y, z)."""
-    w, x, y, z = (float(c) for c in q_ned_frd)
-    r = np.array([  # body -> world rotation matrix; its transpose maps world -> body
-        [1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y)],
-        [2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x)],
-        [2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)],
-    ])
-    return r.T @ np.asarray(v_ned, dtype=float)
+    """World NED vector into body FRD: the inverse rotation of the unit q_ned_frd."""
+    # body -> world rotation matrix; its transpose maps world -> body
+    return matrix_from_quat(q_ned_frd, normalise=False).T @ np.asarray(v_ned, dtype=float)
 
 
 class SensorSuite:

@@ -36,6 +36,7 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 from ft_sitl.bus.topics import check_vehicle
+from ft_sitl.rotations import matrix_from_quat, quat_from_matrix
 
 if TYPE_CHECKING:  # the camera module pulls in trimesh; import it only when needed
     from ft_sitl.scenarios.camera import CameraConfig, DepthFrame
@@ -564,36 +565,6 @@ _HEADER = struct.Struct("<4sBBBBIIQd3d4d4d2d3d4d")
 HEADER_SIZE = _HEADER.size  # 192
 
 
-def _quat_from_matrix(r: np.ndarray) -> np.ndarray:
-    """Unit quaternion (w, x, y, z) of a rotation matrix, w >= 0 (Shepperd's method)."""
-    m = np.asarray(r, dtype=np.float64)
-    tr = m[0, 0] + m[1, 1] + m[2, 2]
-    if tr > 0.0:
-        s = 2.0 * math.sqrt(tr + 1.0)
-        q = [0.25 * s, (m[2, 1] - m[1, 2]) / s, (m[0, 2] - m[2, 0]) / s, (m[1, 0] - m[0, 1]) / s]
-    elif m[0, 0] > m[1, 1] and m[0, 0] > m[2, 2]:
-        s = 2.0 * math.sqrt(1.0 + m[0, 0] - m[1, 1] - m[2, 2])
-        q = [(m[2, 1] - m[1, 2]) / s, 0.25 * s, (m[0, 1] + m[1, 0]) / s, (m[0, 2] + m[2, 0]) / s]
-    elif m[1, 1] > m[2, 2]:
-        s = 2.0 * math.sqrt(1.0 + m[1, 1] - m[0, 0] - m[2, 2])
-        q = [(m[0, 2] - m[2, 0]) / s, (m[0, 1] + m[1, 0]) / s, 0.25 * s, (m[1, 2] + m[2, 1]) / s]
-    else:
-        s = 2.0 * math.sqrt(1.0 + m[2, 2] - m[0, 0] - m[1, 1])
-        q = [(m[1, 0] - m[0, 1]) / s, (m[0, 2] + m[2, 0]) / s, (m[1, 2] + m[2, 1]) / s, 0.25 * s]
-    q = np.array(q)
-    q /= np.linalg.norm(q)
-    return -q if q[0] < 0.0 else q
-
-
-def _matrix_from_quat(q) -> np.ndarray:
-    w, x, y, z = np.asarray(q, dtype=np.float64) / np.linalg.norm(q)
-    return np.array([
-        [1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y)],
-        [2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x)],
-        [2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)],
-    ])
-
-
 @dataclass(frozen=True)
 class SensorFrame:
     """A decoded binary frame: the header's fields plus ``depth_mm`` or ``points``.
@@ -641,7 +612,7 @@ class SensorFrame:
     @property
     def r_world_optical(self) -> np.ndarray:
         """Rotation matrix taking optical-frame vectors to world ENU."""
-        return _matrix_from_quat(self.q_world_optical)
+        return matrix_from_quat(self.q_world_optical)
 
     def to_depth_frame(self) -> DepthFrame:
         """A ``DepthFrame`` as the camera would have produced it (depth to 0.5 mm)."""
@@ -657,7 +628,7 @@ class SensorFrame:
         p_opt = np.stack([(cols - self.cx) / self.fx * z, (rows - self.cy) / self.fy * z, z],
                          axis=1)
         r_wo = self.r_world_optical
-        r_wb = _matrix_from_quat(self.q_world_body)
+        r_wb = matrix_from_quat(self.q_world_body)
         # einsum, not @: a multi-threaded BLAS is slow for (N, 3) x (3, 3) on a busy machine
         points_world = np.einsum("ij,kj->ik", p_opt, r_wo) + self.p_world_camera
         points_body = np.einsum("ij,jk->ik", points_world - self.p_world_body, r_wb)
@@ -704,7 +675,7 @@ def _frame_header(frame: DepthFrame, config: CameraConfig, kind: int, frame_code
         raise BusPayloadError(f"{what}: r_world_optical must be a finite 3 x 3 matrix")
     if not np.allclose(r_wo @ r_wo.T, np.eye(3), atol=1e-6) or np.linalg.det(r_wo) <= 0:
         raise BusPayloadError(f"{what}: r_world_optical is not a rotation matrix")
-    q_wo = _quat_from_matrix(r_wo)
+    q_wo = quat_from_matrix(r_wo)
     p_wb = _pose3(frame.p_world_body, what, "p_world_body")
     q_wb = _unit_quat(frame.q_world_body, what, "q_world_body")
     intr = [_finite(getattr(config, n), what, n) for n in ("fx", "fy", "cx", "cy",

@@ -155,7 +155,7 @@ def final_score(score, var, beta: float, var_max):
     ``score`` in percent (0..100), ``var`` and ``var_max`` the weighted variances of the
     success rates (0..0.25). Scalars or arrays. ``var_max == 0`` (no algorithm varies at
     all) gives ``Var_norm = 0``, i.e. no penalty."""
-    _check_beta(beta)
+    check_beta(beta)
     score = np.asarray(score, dtype=float)
     var = np.asarray(var, dtype=float)
     var_max = np.asarray(var_max, dtype=float)
@@ -181,9 +181,10 @@ def final_scores_from_table(scores: Mapping[str, tuple[float, float]],
             for name, (s, v) in scores.items()}
 
 
-def _check_beta(beta) -> None:
+def check_beta(beta, what: str = "beta") -> None:
+    """The rule for the stability-penalty coefficient (eq. 18); ``what`` names it."""
     if isinstance(beta, bool) or not isinstance(beta, Real) or not 0.0 <= float(beta) <= 1.0:
-        raise ValueError(f"beta must be a number in [0, 1] (eq. 18), got {beta!r}")
+        raise ValueError(f"{what} must be a number in [0, 1] (eq. 18), got {beta!r}")
 
 
 def _category_of(cells: pd.DataFrame, key: str, cat_col: str, what: str) -> dict[str, str]:
@@ -258,10 +259,12 @@ def _lookup_categories(df, cells, key, cat_col) -> dict[str, str]:
     return {n: known[n] for n in names}
 
 
-def _resolve_weights(given, defaults: dict[str, float], names_to_cat: dict[str, str],
-                     known_names: Iterable[str], what: str) -> tuple[dict[str, float], dict]:
+def resolve_weights(given, defaults: dict[str, float], names_to_cat: dict[str, str],
+                    known_names: Iterable[str], what: str) -> tuple[dict[str, float], dict]:
     """Weight per name: a per-name entry wins over its category's entry; entries given
-    override the paper's defaults, the rest keep them."""
+    override the paper's defaults, the rest keep them. The rule for weights given (keys:
+    a category or a known name; values: finite numbers > 0) is checked here, for the
+    scorer and for campaign files alike; ``what`` names them in messages."""
     if given is None:
         given = {}
     if not isinstance(given, Mapping):
@@ -323,7 +326,7 @@ def composite_score(df_or_rates: pd.DataFrame, *, scenario_weights: Mapping | No
     Returns one row per algorithm (sorted by name) with :data:`SCORE_COLUMNS`; the
     resolved weights per family and platform are in ``.attrs``.
     """
-    _check_beta(beta)
+    check_beta(beta)
     if len(df_or_rates) == 0:
         raise ValueError("composite_score: the table is empty")
     cells = _cells(df_or_rates)
@@ -347,10 +350,10 @@ def composite_score(df_or_rates: pd.DataFrame, *, scenario_weights: Mapping | No
                    .itertuples(index=False, name=None))
     plat_cat = dict(cells[["platform", "platform_category"]].drop_duplicates()
                     .itertuples(index=False, name=None))
-    w_s, merged_s = _resolve_weights(scenario_weights, DEFAULT_SCENARIO_WEIGHTS, fam_cat,
-                                     list(FAMILIES) + grid_families, "scenario_weights")
-    w_m, merged_m = _resolve_weights(platform_weights, DEFAULT_PLATFORM_WEIGHTS, plat_cat,
-                                     (), "platform_weights")
+    w_s, merged_s = resolve_weights(scenario_weights, DEFAULT_SCENARIO_WEIGHTS, fam_cat,
+                                    list(FAMILIES) + grid_families, "scenario_weights")
+    w_m, merged_m = resolve_weights(platform_weights, DEFAULT_PLATFORM_WEIGHTS, plat_cat,
+                                    (), "platform_weights")
 
     cells["w"] = cells["family"].map(w_s) * cells["platform"].map(w_m)
     grid_size = len(grid_families) * len(platforms)

@@ -17,14 +17,11 @@ from __future__ import annotations
 
 import difflib
 import functools
-import math
-import tomllib
 from collections.abc import Iterable
 from importlib import resources
 from pathlib import Path
 
-import yaml
-
+from ft_sitl.config import Table, check_keys, read_document
 from ft_sitl.physics.platform import (
     CATEGORIES,
     SCHEMA,
@@ -43,37 +40,8 @@ _COMMON_OPTIONAL = ("category", "source")
 _PAPER_KEYS = ("paper_twr_max", "paper_alpha_xy_max_rad_s2", "paper_alpha_z_max_rad_s2")
 
 
-def _read_document(path: Path) -> dict:
-    suffix = path.suffix.lower()
-    try:
-        text = path.read_text(encoding="utf-8")
-    except OSError as exc:
-        raise PlatformError(f"{path}: cannot read the file ({exc.strerror})") from None
-    except UnicodeDecodeError:
-        raise PlatformError(f"{path}: not a UTF-8 text file") from None
-    try:
-        if suffix == ".toml":
-            doc = tomllib.loads(text)
-        elif suffix in (".yaml", ".yml"):
-            doc = yaml.safe_load(text)
-        else:
-            raise PlatformError(
-                f"{path}: unknown file type {suffix or '(none)'}; use .toml, .yaml or .yml"
-            )
-    except (tomllib.TOMLDecodeError, yaml.YAMLError) as exc:
-        raise PlatformError(f"{path}: not valid {suffix[1:].upper()}: {exc}") from None
-    if not isinstance(doc, dict):
-        raise PlatformError(f"{path}: the top level must be a table with a 'platform' key")
-    return doc
-
-
 def _entries(doc: dict, path: Path) -> list[dict]:
-    extra = sorted(set(doc) - {"platform"})
-    if extra:
-        raise PlatformError(
-            f"{path}: unknown top-level key(s) {', '.join(map(repr, extra))}; "
-            "expected only 'platform'"
-        )
+    check_keys(str(path), doc, ("platform",), error=PlatformError)
     if "platform" not in doc:
         raise PlatformError(f"{path}: missing the 'platform' table (or list of tables)")
     entries = doc["platform"]
@@ -85,12 +53,6 @@ def _entries(doc: dict, path: Path) -> list[dict]:
         if not isinstance(e, dict):
             raise PlatformError(f"{path}: platform[{i}] must be a table, got {type(e).__name__}")
     return entries
-
-
-def _number(where: str, key: str, v) -> float:
-    if isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v):
-        raise PlatformError(f"{where}: {key}: {v!r} is not a finite number")
-    return float(v)
 
 
 def platform_from_mapping(entry: dict, where: str, *, allow_paper_keys: bool = False) -> Platform:
@@ -110,47 +72,26 @@ def platform_from_mapping(entry: dict, where: str, *, allow_paper_keys: bool = F
     name = entry.get("name")
     if isinstance(name, str):
         where = f"{where} ({name!r})"
-    unknown = sorted(keys - allowed)
-    if unknown:
-        hints = []
-        for k in unknown:
-            close = difflib.get_close_matches(k, sorted(allowed), n=1)
-            hints.append(f"{k!r}" + (f" (did you mean {close[0]!r}?)" if close else ""))
-        raise PlatformError(
-            f"{where}: unknown key(s) {', '.join(hints)} for a platform in {form}; "
-            f"allowed: {', '.join(sorted(allowed))}"
-        )
-    missing = sorted(required - keys)
-    if missing:
-        raise PlatformError(f"{where}: missing key(s) {', '.join(missing)} ({form})")
-    if not isinstance(name, str) or not name.strip():
-        raise PlatformError(f"{where}: name: must be a non-empty string")
+    t = Table(entry, where, error=PlatformError)
+    t.check_keys(sorted(allowed), context=f" for a platform in {form}")
+    t.require(sorted(required), context=f" ({form})")
+    name = t.string("name")
     category = entry.get("category", "user")
     if category not in CATEGORIES:
-        raise PlatformError(
-            f"{where}: category: {category!r} is not one of {', '.join(CATEGORIES)}"
-        )
+        raise t.fail("category", f"{category!r} is not one of {', '.join(CATEGORIES)}")
     layout = entry["layout"]
     if not isinstance(layout, str):
-        raise PlatformError(f"{where}: layout: must be a string such as 'quad_x'")
-    source = entry.get("source", "")
-    if not isinstance(source, str):
-        raise PlatformError(f"{where}: source: must be a string")
+        raise t.fail("layout", f"must be a string such as 'quad_x', got {layout!r}")
+    source = t.string("source", "", nonempty=False)
     try:
         if indicator_form:
-            values = {k: _number(where, k, entry[k]) for k in INDICATOR_KEYS}
+            values = {k: t.number(k) for k in INDICATOR_KEYS}
             return synthesise(
                 name, layout=layout, category=category, source=source, **values
             )
         kwargs = {}
         for key in SCHEMA:
-            v = entry[key]
-            if key in VECTOR_FIELDS:
-                if not isinstance(v, list) or len(v) != 3:
-                    raise PlatformError(f"{where}: {key}: needs a list of 3 numbers [x, y, z]")
-                kwargs[key] = tuple(_number(where, key, x) for x in v)
-            else:
-                kwargs[key] = _number(where, key, v)
+            kwargs[key] = tuple(t.vector3(key)) if key in VECTOR_FIELDS else t.number(key)
         p = Platform(name=name, category=category, layout=layout, source=source, **kwargs)
         return validate(p, where)
     except PlatformError as exc:
@@ -164,7 +105,8 @@ def platform_from_mapping(entry: dict, where: str, *, allow_paper_keys: bool = F
 def load_platform_file(path: str | Path) -> list[Platform]:
     """All platforms of a user file, validated. Raises PlatformError naming what is wrong."""
     path = Path(path)
-    doc = _read_document(path)
+    doc = read_document(path, what="platform file", expected="platform",
+                        error=PlatformError)
     out = []
     seen = set()
     for i, entry in enumerate(_entries(doc, path)):
@@ -179,7 +121,7 @@ def load_platform_file(path: str | Path) -> list[Platform]:
 @functools.cache
 def _catalog_with_paper() -> tuple[tuple[Platform, dict], ...]:
     ref = resources.files("ft_sitl.physics.data").joinpath(CATALOG_RESOURCE)
-    doc = tomllib.loads(ref.read_text(encoding="utf-8"))
+    doc = read_document(Path(str(ref)), what="platform catalog", error=PlatformError)
     out = []
     for i, entry in enumerate(doc["platform"]):
         paper = {k: entry[k] for k in _PAPER_KEYS if k in entry}

@@ -71,6 +71,8 @@ import numpy as np
 import trimesh
 from numba import njit
 
+from ft_sitl.rotations import matrix_from_quat
+
 __all__ = [
     "NOISE_K_DEFAULT",
     "CameraConfig",
@@ -267,22 +269,6 @@ _CLOUD_FIELDS = ("points_body", "points_world", "pixels")
 
 
 # --- camera -----------------------------------------------------------------------------------
-def _rotmat(q) -> np.ndarray:
-    """Rotation matrix of a (w, x, y, z) quaternion (normalised here)."""
-    q = np.asarray(q, dtype=np.float64)
-    if q.shape != (4,):
-        raise ValueError(f"q_world_body must have shape (4,), got {q.shape}")
-    n = float(np.sqrt(q @ q))
-    if not (n > 0.0 and math.isfinite(n)):
-        raise ValueError(f"q_world_body must be a finite non-zero quaternion, got {q}")
-    w, x, y, z = q / n
-    return np.array([
-        [1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y)],
-        [2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x)],
-        [2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)],
-    ])
-
-
 def optical_to_body(mount_pitch_rad: float) -> np.ndarray:
     """Rotation optical (x right, y down, z forward) -> body FLU, camera pitched down."""
     # pitch 0: optical x -> -y_body, optical y -> -z_body, optical z -> +x_body
@@ -538,7 +524,7 @@ class DepthCamera:
                              "(the camera never uses a global RNG)")
         t_us = int(t_us)
         p_wb = np.asarray(p_world, dtype=np.float64).reshape(3)
-        r_wb = _rotmat(q_world_body)
+        r_wb = matrix_from_quat(q_world_body, name="q_world_body")
         r_wo = r_wb @ self.r_body_optical
         origin = p_wb + r_wb @ self.mount_body
 

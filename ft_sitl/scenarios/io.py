@@ -46,27 +46,25 @@ round-trip.
 
 from __future__ import annotations
 
-import difflib
 import hashlib
 import itertools
 import json
 import math
 import os
 import re
-import tomllib
 import xml.etree.ElementTree as ET
 from pathlib import Path
 
 import numpy as np
 import trimesh
-import yaml
 
 from ft_sitl import __version__
+from ft_sitl.config import SUFFIXES, Table, read_document
 from ft_sitl.scenarios.scenario import GOAL_RADIUS_M, Scenario, ScenarioError
 
 EXPORT_FORMATS = ("ply", "pcd", "obj", "dae", "sdf")
 MESH_FORMATS = ("ply", "obj", "stl", "dae")  # what load_mesh reads
-SPEC_SUFFIXES = (".toml", ".yaml", ".yml")
+SPEC_SUFFIXES = SUFFIXES
 USER_FAMILY = "user"
 USER_CATEGORY = "user"
 
@@ -641,64 +639,6 @@ def load_mesh(path) -> trimesh.Trimesh:
     return out
 
 
-def _read_spec(path: Path) -> dict:
-    suffix = path.suffix.lower()
-    if suffix not in SPEC_SUFFIXES:
-        raise ScenarioError(f"{path}: unknown spec file type {suffix or '(none)'}; "
-                            "use .toml, .yaml or .yml")
-    try:
-        text = path.read_text(encoding="utf-8")
-    except FileNotFoundError:
-        raise ScenarioError(f"{path}: spec file not found") from None
-    except OSError as exc:
-        raise ScenarioError(f"{path}: cannot read the file ({exc.strerror})") from None
-    except UnicodeDecodeError:
-        raise ScenarioError(f"{path}: not a UTF-8 text file") from None
-    if suffix == ".toml":
-        try:
-            doc = tomllib.loads(text)
-        except tomllib.TOMLDecodeError as exc:
-            raise ScenarioError(f"{path}: not valid TOML: {exc}") from None
-    else:
-        try:
-            doc = yaml.safe_load(text)
-        except yaml.YAMLError as exc:
-            mark = getattr(exc, "problem_mark", None)
-            where = f" (line {mark.line + 1}, column {mark.column + 1})" if mark else ""
-            problem = getattr(exc, "problem", None) or str(exc)
-            raise ScenarioError(f"{path}: not valid YAML{where}: {problem}") from None
-    if not isinstance(doc, dict):
-        raise ScenarioError(f"{path}: the top level must be a table of keys "
-                            f"({', '.join(_SPEC_REQUIRED)}, ...), got "
-                            f"{'nothing' if doc is None else type(doc).__name__}")
-    return doc
-
-
-def _unknown_keys(where: str, keys, allowed) -> None:
-    unknown = sorted(set(keys) - set(allowed), key=str)
-    if unknown:
-        hints = []
-        for k in unknown:
-            close = difflib.get_close_matches(str(k), sorted(allowed), n=1, cutoff=0.5)
-            hints.append(f"{k!r}" + (f" (did you mean {close[0]!r}?)" if close else ""))
-        raise ScenarioError(f"{where}: unknown key(s) {', '.join(hints)}; allowed: "
-                            f"{', '.join(allowed)}")
-
-
-def _number(where: str, key: str, v) -> float:
-    if isinstance(v, bool) or not isinstance(v, (int, float)):
-        raise ScenarioError(f"{where}: {key}: must be a number, got {v!r}")
-    if not math.isfinite(v):
-        raise ScenarioError(f"{where}: {key}: {v!r} is not a finite number")
-    return float(v)
-
-
-def _vector(where: str, key: str, v) -> np.ndarray:
-    if not isinstance(v, list) or len(v) != 3:
-        raise ScenarioError(f"{where}: {key}: needs a list of 3 numbers [x, y, z], got {v!r}")
-    return np.array([_number(where, f"{key}[{i}]", x) for i, x in enumerate(v)])
-
-
 def _fmt(v: np.ndarray) -> str:
     return "[" + ", ".join(f"{x:g}" for x in v) + "]"
 
@@ -708,11 +648,11 @@ def load_scenario(spec_path) -> Scenario:
     family = the spec's ``name`` (default ``user``), index 1, seed 0, category ``user``."""
     spec_path = Path(spec_path)
     w = str(spec_path)
-    doc = _read_spec(spec_path)
-    _unknown_keys(w, doc, _SPEC_REQUIRED + _SPEC_OPTIONAL)
-    missing = [k for k in _SPEC_REQUIRED if k not in doc]
-    if missing:
-        raise ScenarioError(f"{w}: missing key(s) {', '.join(missing)}")
+    doc = read_document(spec_path, what="spec file",
+                        expected=f"{', '.join(_SPEC_REQUIRED)}, ...", error=ScenarioError)
+    t = Table(doc, w, error=ScenarioError)
+    t.check_keys(_SPEC_REQUIRED + _SPEC_OPTIONAL)
+    t.require(_SPEC_REQUIRED)
 
     name = doc.get("name", USER_FAMILY)
     if not isinstance(name, str) or not _NAME_RE.fullmatch(name):
@@ -726,13 +666,13 @@ def load_scenario(spec_path) -> Scenario:
     if not mesh_file.is_absolute():
         mesh_file = spec_path.parent / mesh_file
 
-    start = _vector(w, "start", doc["start"])
-    goal = _vector(w, "goal", doc["goal"])
+    start = np.array(t.vector3("start"))
+    goal = np.array(t.vector3("goal"))
     for key, p in (("start", start), ("goal", goal)):
         if p[2] < 0:
             raise ScenarioError(f"{w}: {key}: z = {p[2]:g} is below the floor (z = 0)")
     if "takeoff" in doc:
-        takeoff = _vector(w, "takeoff", doc["takeoff"])
+        takeoff = np.array(t.vector3("takeoff"))
         if takeoff[2] != 0:
             raise ScenarioError(f"{w}: takeoff: must be on the floor (z = 0), "
                                 f"got z = {takeoff[2]:g}")
@@ -744,19 +684,19 @@ def load_scenario(spec_path) -> Scenario:
         if "bounds_min" in doc or "bounds_max" in doc:
             raise ScenarioError(f"{w}: bounds: give either 'bounds' or "
                                 "'bounds_min'/'bounds_max', not both")
-        b = doc["bounds"]
-        if not isinstance(b, dict):
-            raise ScenarioError(f"{w}: bounds: must be a table {{min = [x, y, z], "
-                                f"max = [x, y, z]}}, got {b!r}")
-        _unknown_keys(f"{w}: bounds", b, ("min", "max"))
-        lo = _vector(w, "bounds.min", b["min"]) if "min" in b else None
-        hi = _vector(w, "bounds.max", b["max"]) if "max" in b else None
+        if not isinstance(doc["bounds"], dict):
+            raise t.fail("bounds", f"must be a table {{min = [x, y, z], max = [x, y, z]}}, "
+                                   f"got {doc['bounds']!r}")
+        b = t.table("bounds")
+        b.check_keys(("min", "max"))
+        lo = np.array(b.vector3("min")) if "min" in b else None
+        hi = np.array(b.vector3("max")) if "max" in b else None
         lo_key, hi_key = "bounds.min", "bounds.max"
     else:
-        lo = _vector(w, "bounds_min", doc["bounds_min"]) if "bounds_min" in doc else None
-        hi = _vector(w, "bounds_max", doc["bounds_max"]) if "bounds_max" in doc else None
+        lo = np.array(t.vector3("bounds_min")) if "bounds_min" in doc else None
+        hi = np.array(t.vector3("bounds_max")) if "bounds_max" in doc else None
         lo_key, hi_key = "bounds_min", "bounds_max"
-    ceiling = _number(w, "ceiling", doc["ceiling"]) if "ceiling" in doc else None
+    ceiling = t.number("ceiling", None) if "ceiling" in doc else None
     if ceiling is not None and ceiling <= 0:
         raise ScenarioError(f"{w}: ceiling: must be above the floor (> 0 m), got {ceiling:g}")
     if hi is not None and ceiling is not None and not math.isclose(hi[2], ceiling):
@@ -769,11 +709,11 @@ def load_scenario(spec_path) -> Scenario:
         raise ScenarioError(f"{w}: {lo_key}: z must be 0 (the floor), got {lo[2]:g}")
     goal_radius = GOAL_RADIUS_M
     if "goal_radius_m" in doc:
-        goal_radius = _number(w, "goal_radius_m", doc["goal_radius_m"])
+        goal_radius = t.number("goal_radius_m")
         if goal_radius <= 0:
             raise ScenarioError(f"{w}: goal_radius_m: must be positive, got {goal_radius:g}")
     if "start_yaw_deg" in doc:
-        start_yaw = math.radians(_number(w, "start_yaw_deg", doc["start_yaw_deg"]))
+        start_yaw = math.radians(t.number("start_yaw_deg"))
     else:
         d = goal - start
         start_yaw = math.atan2(d[1], d[0]) if np.hypot(d[0], d[1]) > 0 else 0.0

@@ -8,7 +8,6 @@ import struct
 import numpy as np
 import pytest
 
-from ft_sitl.bus import codec
 from ft_sitl.bus.codec import (
     HEADER_SIZE,
     BusPayloadError,
@@ -28,6 +27,7 @@ from ft_sitl.bus.codec import (
     encode_telemetry,
     validate_config,
 )
+from ft_sitl.rotations import matrix_from_quat, quat_from_matrix
 
 
 def sample_telemetry(**overrides) -> Telemetry:
@@ -420,5 +420,5 @@ def test_quaternion_matrix_conversions_agree():
         q = rng.normal(size=4)
         q /= np.linalg.norm(q)
         q = -q if q[0] < 0 else q
-        r = codec._matrix_from_quat(q)
-        np.testing.assert_allclose(codec._quat_from_matrix(r), q, atol=1e-12)
+        r = matrix_from_quat(q)
+        np.testing.assert_allclose(quat_from_matrix(r), q, atol=1e-12)

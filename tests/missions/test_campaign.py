@@ -1,4 +1,4 @@
-"""Campaigns (ft_sitl.missions.campaign, .store) and the navigator registry.
+"""Campaigns (ft_sitl.missions.campaign, .campaign_file, .store) and the navigator registry.
 
 Parsing: every mistake is one CampaignError naming the file and the key. Matrix: trial
 counts, configurations, seeds, ids. Running: a campaign killed with SIGKILL mid-run resumes
@@ -18,12 +18,8 @@ import time
 import pandas as pd
 import pytest
 
-from ft_sitl.missions.campaign import (
-    GRID_CACHE_DIR,
-    CampaignError,
-    load_campaign,
-    run_campaign,
-)
+from ft_sitl.missions.campaign import GRID_CACHE_DIR, run_campaign
+from ft_sitl.missions.campaign_file import CampaignError, load_campaign
 from ft_sitl.missions.results import COLUMNS, RowError, to_frame
 from ft_sitl.missions.spec import platform_for
 from ft_sitl.missions.store import ResultStore, StoreError
@@ -60,7 +56,7 @@ def _error(path) -> str:
 BASE = 'algorithms = ["straight"]\n'
 ERRORS = [
     # (file body, what the message must contain after "FILE: ")
-    (BASE + "trails = 3", "unknown key 'trails'; did you mean 'trials'?"),
+    (BASE + "trails = 3", "unknown key(s) 'trails' (did you mean 'trials'?); allowed: name, "),
     ("trials = 3", "missing key 'algorithms'"),
     ('algorithms = ["stright"]',
      "algorithms[0]: unknown navigator 'stright'; did you mean 'straight'?"),
@@ -70,7 +66,8 @@ ERRORS = [
     ('algorithms = [{name = "straight", params = {speed_m_s = -1}}]',
      "algorithms[0]: navigator 'straight': speed_m_s: must be a positive number"),
     ('algorithms = [{name = "straight", lable = "x"}]',
-     "algorithms[0]: unknown key 'lable'; did you mean 'label'?"),
+     "algorithms[0]: unknown key(s) 'lable' (did you mean 'label'?); allowed: name, label, "
+     "params, command"),
     ('algorithms = [{label = "x"}]', "algorithms[0]: missing 'name'"),
     ('algorithms = ["straight", {name = "straight"}]',
      "algorithms[1]: label 'straight' is used twice"),
@@ -84,7 +81,8 @@ ERRORS = [
     (BASE + 'scenarios = ["maze", "forst"]',
      "scenarios[1]: unknown scenario family 'forst'; did you mean 'forest'?"),
     (BASE + 'scenarios = [{family = "maze", index = 3}]',
-     "scenarios[0]: unknown key 'index'; did you mean 'indices'?"),
+     "scenarios[0]: unknown key(s) 'index' (did you mean 'indices'?); allowed: family, "
+     "indices, file"),
     (BASE + "indices = [0]", "indices: must be an integer 1..10, got 0"),
     (BASE + "indices = []", "indices: must be a non-empty list"),
     (BASE + 'indices = ["1"]', "indices: must be an integer 1..10, got '1'"),
@@ -94,17 +92,25 @@ ERRORS = [
     (BASE + "seed = -1", "seed: must be an integer >= 0, got -1"),
     (BASE + "physics_hz = 333", "physics_hz: 333 must divide 1,000,000"),
     (BASE + 'name = ""', "name: must be a non-empty string"),
-    (BASE + "limits = 3", "limits: must be a table"),
+    (BASE + "limits = 3", "limits: must be a table, got 3"),
     (BASE + "[limits]\ntimeout_s = -1", "limits.timeout_s: must be a positive number, got -1"),
-    (BASE + "[limits]\ntimeout = 5", "limits: unknown key 'timeout'; did you mean 'timeout_s'?"),
+    (BASE + "[limits]\ntimeout = 5",
+     "limits: unknown key(s) 'timeout' (did you mean 'timeout_s'?); allowed: max_speed_m_s, "),
     (BASE + '[limits]\nhold_s = "3"', "limits.hold_s: must be a positive number, got '3'"),
-    (BASE + "[weights]\nbeta = 2", "weights.beta: must be within 0..1, got 2"),
-    (BASE + "[weights]\nbeta = true", "weights.beta: must be within 0..1, got True"),
+    (BASE + "[weights]\nbeta = 2", "weights.beta must be a number in [0, 1] (eq. 18), got 2"),
+    (BASE + "[weights]\nbeta = true",
+     "weights.beta must be a number in [0, 1] (eq. 18), got True"),
     (BASE + "[weights]\nscenarios = {classic = -1}",
-     "weights.scenarios.classic: must be a non-negative number, got -1"),
+     "weights.scenarios['classic'] = -1: weights must be finite numbers > 0"),
+    # 0 was accepted by the file check and refused by the scorer's: one rule now
+    (BASE + "[weights]\nplatforms = {real = 0}",
+     "weights.platforms['real'] = 0: weights must be finite numbers > 0"),
+    (BASE + "[weights]\nscenarios = {cave = 1}", "weights.scenarios: unknown key 'cave': "
+     "neither a category"),
     (BASE + "[weights]\nscenarios = 3", "weights.scenarios: must be a table of weights"),
-    (BASE + "[weights]\ngamma = 1", "weights: unknown key 'gamma'"),
-    (BASE + "weights = 1", "weights: must be a table"),
+    (BASE + "[weights]\ngamma = 1", "weights: unknown key(s) 'gamma'; allowed: scenarios, "
+     "platforms, beta"),
+    (BASE + "weights = 1", "weights: must be a table, got 1"),
 ]
 
 
@@ -116,8 +122,8 @@ def test_a_bad_campaign_names_the_file_and_the_key(tmp_path, body, message):
 
 def test_a_missing_user_file_is_named(tmp_path):
     path = campaign_file(tmp_path, "c.toml", BASE + 'scenarios = [{file = "nothere.yaml"}]')
-    assert _error(path) == f"{path}: scenarios[0]: {tmp_path / 'nothere.yaml'}: spec file " \
-                           "not found"
+    assert _error(path) == f"{path}: scenarios[0]: {tmp_path / 'nothere.yaml'}: no such " \
+                           "spec file"
     path = campaign_file(tmp_path, "c.toml", BASE + 'platform_files = ["nothere.toml"]')
     msg = _error(path)
     assert msg.startswith(f"{path}: platform_files: ") and "nothere.toml" in msg
@@ -126,19 +132,21 @@ def test_a_missing_user_file_is_named(tmp_path):
 def test_syntax_errors_name_the_file_and_the_line(tmp_path):
     path = campaign_file(tmp_path, "c.yaml", "algorithms: [straight\ntrials: 3\n")
     msg = _error(path)
-    assert msg.startswith(f"{path}: YAML syntax error at line ") and "\n" not in msg
+    assert msg.startswith(f"{path}: not valid YAML (line 2, column ") and "\n" not in msg
     path = campaign_file(tmp_path, "c.toml", 'algorithms = ["straight"\ntrials = 3\n')
     msg = _error(path)
-    assert msg.startswith(f"{path}: TOML syntax error: ") and "line 2" in msg
+    assert msg.startswith(f"{path}: not valid TOML: ") and "line 2" in msg
     path = campaign_file(tmp_path, "list.yaml", "- straight\n- trials\n")
-    assert _error(path) == f"{path}: the campaign must be a table of keys, got list"
+    assert _error(path) == f"{path}: the top level must be a table of keys (algorithms, ...), " \
+                           "got list"
     path = campaign_file(tmp_path, "empty.yaml", "")
-    assert _error(path) == f"{path}: the campaign must be a table of keys, got NoneType"
+    assert _error(path) == f"{path}: the top level must be a table of keys (algorithms, ...), " \
+                           "got nothing"
 
 
 def test_wrong_suffix_and_missing_file(tmp_path):
     path = campaign_file(tmp_path, "c.json", '{"algorithms": ["straight"]}')
-    assert _error(path) == f"{path}: a campaign file must end in .toml, .yaml or .yml"
+    assert _error(path) == f"{path}: unknown campaign file type .json; use .toml, .yaml or .yml"
     missing = tmp_path / "nothere.toml"
     assert _error(missing) == f"{missing}: no such campaign file (presets: quick, paper)"
     assert _error("quik") == "quik: no such campaign file (presets: quick, paper)"

@@ -1,0 +1,375 @@
+"""Campaign files: a :class:`Campaign` (what to run) from a TOML or YAML file or a preset
+(``quick``, ``paper``); running it is :mod:`ft_sitl.missions.campaign`.
+
+A campaign file (TOML or YAML) names what to run; every key is optional except
+``algorithms``::
+
+    name = "my-campaign"
+    trials = 10                      # per (algorithm, platform, scenario family)
+    seed = 0                         # trial seeds derive from it
+    scenario_seed = 0                # seed of the scenario configurations
+    platforms = ["real"]             # names, categories (real, virtual, user) or "all"
+    platform_files = ["mine.toml"]   # user platforms (relative to this file)
+    scenarios = "all"                # families (paper names work), {family, indices},
+                                     # {file = "yard.yaml"} (a user scenario), or "all"
+    indices = "all"                  # default configurations of each family (1..10)
+    physics_hz = 1000
+
+    [[algorithms]]                   # or: algorithms = "all" / ["straight", ...]
+    name = "straight"                # a registered navigator
+    label = "straight-3"             # optional: its name in the results
+    params = { speed_m_s = 3.0 }
+
+    [limits]                         # the protocol's defaults
+    max_speed_m_s = 4.0
+    timeout_s = 90.0
+    goal_radius_m = 2.0
+    hold_s = 3.0
+
+    [weights]                        # composite score (paper defaults)
+    scenarios = { classic = 1.2, theoretical = 1.0 }
+    platforms = { real = 1.5, virtual = 1.0 }
+    beta = 0.3
+
+Trial ``t`` (0-based) of a combination flies configuration ``indices[t % len(indices)]``,
+so 10 trials over the ten configurations fly each once, as in the paper. Its seed is
+derived from the campaign seed, the combination and ``t``.
+
+Every mistake is one :class:`CampaignError` naming the file and the key path; the file is
+read by :mod:`ft_sitl.config`, and the composite-score weights are checked here, when the
+file is read, by the scorer's own rule (:mod:`ft_sitl.missions.scoring`).
+"""
+
+from __future__ import annotations
+
+import hashlib
+from dataclasses import dataclass, field
+from importlib import resources
+from pathlib import Path
+
+from ft_sitl.config import Table, integer, read_document
+from ft_sitl.missions import scoring
+from ft_sitl.missions.spec import TrialSpec
+from ft_sitl.navigation.base import Limits
+
+PRESETS = ("quick", "paper")
+TOP_KEYS = ("name", "trials", "seed", "scenario_seed", "platforms", "platform_files",
+            "scenarios", "indices", "physics_hz", "algorithms", "limits", "weights",
+            "description")
+LIMIT_KEYS = ("max_speed_m_s", "timeout_s", "goal_radius_m", "hold_s")
+WEIGHT_KEYS = ("scenarios", "platforms", "beta")
+
+
+class CampaignError(ValueError):
+    """A campaign file or request is invalid; the message names the file and the key."""
+
+
+@dataclass(frozen=True)
+class AlgorithmEntry:
+    name: str
+    label: str
+    params: dict
+
+
+@dataclass(frozen=True)
+class ScenarioEntry:
+    family: str
+    indices: tuple[int, ...]
+    file: str | None = None
+
+
+@dataclass
+class Campaign:
+    name: str
+    algorithms: list[AlgorithmEntry]
+    platforms: list  # Platform objects
+    scenarios: list[ScenarioEntry]
+    trials: int = 10
+    seed: int = 0
+    scenario_seed: int = 0
+    limits: Limits = field(default_factory=Limits)
+    weights: dict = field(default_factory=dict)
+    physics_hz: int = 1000
+    source: str = ""
+    doc: dict = field(default_factory=dict)
+    #: what "all" left out and why (e.g. a navigator without its model weights)
+    notes: list[str] = field(default_factory=list)
+
+    def spec_dict(self) -> dict:
+        """The campaign as data: what resuming compares, what reports print."""
+        return {
+            "name": self.name, "trials": self.trials, "seed": self.seed,
+            "scenario_seed": self.scenario_seed, "physics_hz": self.physics_hz,
+            "algorithms": [{"name": a.name, "label": a.label, "params": a.params}
+                           for a in self.algorithms],
+            "platforms": [p.name for p in self.platforms],
+            "scenarios": [{"family": s.family, "indices": list(s.indices),
+                           **({"file": s.file} if s.file else {})} for s in self.scenarios],
+            "limits": self.limits.as_dict(), "weights": self.weights,
+        }
+
+    def trial_specs(self) -> list[TrialSpec]:
+        """Every trial of the matrix, grouped by scenario configuration."""
+        out = []
+        for sc in self.scenarios:
+            for a in self.algorithms:
+                for p in self.platforms:
+                    for t in range(self.trials):
+                        index = sc.indices[t % len(sc.indices)]
+                        key = f"{self.seed}|{a.label}|{p.name}|{sc.family}|{t}".encode()
+                        seed = int.from_bytes(hashlib.sha256(key).digest()[:4], "little")
+                        out.append(TrialSpec(
+                            algorithm=a.name, label=a.label, algorithm_params=a.params,
+                            platform=p.name,
+                            platform_def=p.physical_dict() if p.category == "user" else None,
+                            family=sc.family, scenario_index=index,
+                            scenario_seed=self.scenario_seed, scenario_file=sc.file,
+                            trial=t, seed=seed, limits=self.limits, campaign=self.name,
+                            physics_hz=self.physics_hz))
+        out.sort(key=lambda s: (s.scenario_file or "", s.family, s.scenario_index))
+        return out
+
+
+def preset_path(name: str) -> Path:
+    return Path(str(resources.files("ft_sitl.missions") / "presets" / f"{name}.toml"))
+
+
+def load_campaign(source: str | Path) -> Campaign:
+    """A campaign from a file, or a preset by name (``quick``, ``paper``)."""
+    text = str(source)
+    path = Path(text)
+    if text in PRESETS:  # a bare preset name (a campaign file always has a suffix)
+        path = preset_path(text)
+    doc = read_document(path, what="campaign file", hint=f" (presets: {', '.join(PRESETS)})",
+                        expected="algorithms, ...", error=CampaignError)
+    return parse_campaign(doc, path)
+
+
+def parse_campaign(doc: dict, path: Path | None = None) -> Campaign:
+    """A campaign from the top-level table of a campaign file (``path`` names it in
+    messages and anchors relative file names)."""
+    where = str(path) if path is not None else "campaign"
+    base = path.parent if path is not None else Path(".")
+    t = Table(doc, where, error=CampaignError)
+    t.check_keys(TOP_KEYS)
+    if "algorithms" not in doc:
+        raise CampaignError(f"{where}: missing key 'algorithms' (which navigators to run)")
+    name = t.string("name", path.stem if path is not None else "campaign")
+    trials = t.integer("trials", 10, lo=1, hi=10_000)
+    seed = t.integer("seed", 0)
+    scenario_seed = t.integer("scenario_seed", 0)
+    physics_hz = t.integer("physics_hz", 1000, lo=100, hi=10_000)
+    if 1_000_000 % physics_hz:
+        raise t.fail("physics_hz", f"{physics_hz} must divide 1,000,000")
+    limits_t = t.table("limits", {})
+    limits_t.check_keys(LIMIT_KEYS)
+    try:
+        limits = Limits(**limits_t.data)
+    except ValueError as exc:
+        raise CampaignError(f"{where}: {exc}") from None
+    platforms = _platforms(t, base)
+    scenarios = _scenarios(t, base)
+    weights = _weights(t, platforms, scenarios)
+    notes: list[str] = []
+    return Campaign(
+        name=name, algorithms=parse_algorithms(where, doc["algorithms"], notes),
+        platforms=platforms, scenarios=scenarios, trials=trials, seed=seed,
+        scenario_seed=scenario_seed, limits=limits, weights=weights, physics_hz=physics_hz,
+        source=str(path) if path is not None else "", doc=doc, notes=notes)
+
+
+def _weights(t: Table, platforms, scenarios) -> dict:
+    """The ``weights`` table, checked now by the scorer's rules (what the score would refuse
+    after every trial has flown)."""
+    from ft_sitl.scenarios.families import CATEGORY
+
+    w = t.table("weights", {})
+    w.check_keys(WEIGHT_KEYS)
+    out: dict = {}
+    if "beta" in w:
+        try:
+            scoring.check_beta(w.data["beta"], what=f"{w.prefix}beta")
+        except ValueError as exc:
+            raise CampaignError(f"{w.where}: {exc}") from None
+        out["beta"] = float(w.data["beta"])
+    fam = {s.family: ("user" if s.file else CATEGORY.get(s.family, "user")) for s in scenarios}
+    plat = {p.name: p.category for p in platforms}
+    for key, defaults, names in (("scenarios", scoring.DEFAULT_SCENARIO_WEIGHTS, fam),
+                                 ("platforms", scoring.DEFAULT_PLATFORM_WEIGHTS, plat)):
+        if key not in w:
+            continue
+        given = w.data[key]
+        if not isinstance(given, dict):
+            raise w.fail(key, f"must be a table of weights, got {given!r}")
+        try:
+            scoring.resolve_weights(given, defaults, names, names, f"{w.prefix}{key}")
+        except ValueError as exc:
+            raise CampaignError(f"{w.where}: {exc}") from None
+        out[key] = {str(k): float(v) for k, v in given.items()}
+    return out
+
+
+def parse_algorithms(where: str, v, notes: list[str] | None = None) -> list[AlgorithmEntry]:
+    """The ``algorithms`` entries (``where`` names them in messages); what ``"all"`` leaves
+    out is appended to ``notes``."""
+    from ft_sitl.navigation.registry import NavigatorError, available, create
+
+    if v == "all":
+        v = []
+        for n, c in sorted(available().items()):
+            why = c if isinstance(c, str) else c.unavailable()
+            if why is None:
+                v.append(n)
+            elif notes is not None:
+                notes.append(f"algorithms = \"all\" leaves out {n!r}: {why}")
+    out, labels = [], set()
+    for k, item in enumerate(Table({"algorithms": v}, where, error=CampaignError)
+                             .items("algorithms")):
+        w = f"{where}: algorithms[{k}]"
+        if isinstance(item, str):
+            item = {"name": item}
+        if not isinstance(item, dict):
+            raise CampaignError(f"{w}: must be a navigator name or a table with 'name'")
+        Table(item, w, error=CampaignError).check_keys(("name", "label", "params", "command"))
+        if "command" in item:
+            out.append(_command_entry(w, item, labels))
+            continue
+        name = item.get("name")
+        if not isinstance(name, str):
+            raise CampaignError(f"{w}: missing 'name' (a registered navigator)")
+        params = item.get("params", {})
+        if not isinstance(params, dict):
+            raise CampaignError(f"{w}: params: must be a table of parameters")
+        try:
+            create(name, params)  # validates the name and the parameters now
+        except NavigatorError as exc:
+            raise CampaignError(f"{w}: {exc}") from None
+        label = item.get("label", name)
+        if not isinstance(label, str) or not label:
+            raise CampaignError(f"{w}: label: must be a non-empty string")
+        if label in labels:
+            raise CampaignError(f"{w}: label {label!r} is used twice; give each entry its "
+                                "own label")
+        labels.add(label)
+        out.append(AlgorithmEntry(name, label, dict(params)))
+    return out
+
+
+def _command_entry(w: str, item: dict, labels: set) -> AlgorithmEntry:
+    """A user program as the navigator: ``{label = "mine", command = "python nav.py"}``."""
+    import shlex
+
+    if "name" in item or "params" in item:
+        raise CampaignError(f"{w}: a 'command' entry takes only 'label' and 'command'")
+    cmd = item["command"]
+    if isinstance(cmd, str):
+        try:
+            argv = shlex.split(cmd)
+        except ValueError as exc:
+            raise CampaignError(f"{w}: command: {exc}") from None
+    elif isinstance(cmd, list) and all(isinstance(a, str) for a in cmd):
+        argv = list(cmd)
+    else:
+        raise CampaignError(f"{w}: command: must be a command line (a string or a list of "
+                            "strings)")
+    if not argv:
+        raise CampaignError(f"{w}: command: is empty")
+    label = item.get("label")
+    if not isinstance(label, str) or not label:
+        raise CampaignError(f"{w}: a 'command' entry needs a 'label' (its name in the "
+                            "results)")
+    if label in labels:
+        raise CampaignError(f"{w}: label {label!r} is used twice; give each entry its "
+                            "own label")
+    labels.add(label)
+    return AlgorithmEntry("command", label, {"argv": argv})
+
+
+def _platforms(t: Table, base: Path) -> list:
+    from ft_sitl.physics.catalog import PlatformRegistry
+    from ft_sitl.physics.platform import PlatformError
+
+    where = t.where
+    files = t.items("platform_files") if t.get("platform_files", []) else []
+    try:
+        reg = PlatformRegistry([base / f for f in files])
+    except (PlatformError, OSError, ValueError) as exc:
+        raise CampaignError(f"{where}: platform_files: {exc}") from None
+    everything = reg.all()
+    chosen: list = []
+    for k, item in enumerate(t.items("platforms", "all")):
+        if not isinstance(item, str):
+            raise CampaignError(f"{where}: platforms[{k}]: must be a platform name or a "
+                                f"category, got {item!r}")
+        if item == "all":
+            picked = everything
+        elif item in ("real", "virtual", "user"):
+            picked = [p for p in everything if p.category == item]
+            if not picked:
+                raise CampaignError(f"{where}: platforms: no {item} platforms "
+                                    f"(user platforms come from platform_files)")
+        else:
+            try:
+                picked = [reg.get(item)]
+            except (PlatformError, KeyError, ValueError) as exc:
+                raise CampaignError(f"{where}: platforms[{k}]: {exc}") from None
+        for p in picked:
+            if p.name not in {q.name for q in chosen}:
+                chosen.append(p)
+    return chosen
+
+
+def _indices(t: Table, default="all") -> tuple[int, ...]:
+    """The configurations ``t["indices"]`` names: "all", one index or a list (1..10)."""
+    v = t.get("indices", default)
+    if v == "all":
+        return tuple(range(1, 11))
+    items = [v] if isinstance(v, int) else t.items("indices", default)
+    return tuple(integer(i, t.fail, "indices", lo=1, hi=10) for i in items)
+
+
+def _scenarios(t: Table, base: Path) -> list[ScenarioEntry]:
+    from ft_sitl.scenarios.families import FAMILIES, resolve_family
+    from ft_sitl.scenarios.scenario import ScenarioError
+
+    where = t.where
+    indices = _indices(t)
+    if t.get("scenarios", "all") == "all":
+        return [ScenarioEntry(f, indices) for f in FAMILIES]
+    out = []
+    for k, item in enumerate(t.items("scenarios")):
+        w = f"{where}: scenarios[{k}]"
+        if isinstance(item, str):
+            item = {"family": item}
+        if not isinstance(item, dict):
+            raise CampaignError(f"{w}: must be a family name or a table")
+        entry = Table(item, w, error=CampaignError)
+        entry.check_keys(("family", "indices", "file"))
+        if "file" in item:
+            from ft_sitl.scenarios.io import load_scenario
+
+            if "indices" in item:
+                raise CampaignError(f"{w}: indices do not apply to a scenario file (it is "
+                                    "one configuration)")
+            f = base / str(item["file"])
+            try:
+                sc = load_scenario(f)
+            except ScenarioError as exc:
+                raise CampaignError(f"{w}: {exc}") from None
+            out.append(ScenarioEntry(sc.family, (1,), str(f.resolve())))
+            continue
+        try:
+            fam = resolve_family(item.get("family"))
+        except ScenarioError as exc:
+            raise CampaignError(f"{w}: {exc}") from None
+        idx = _indices(entry) if "indices" in item else indices
+        out.append(ScenarioEntry(fam, idx))
+    seen: dict = {}
+    for k, e in enumerate(out):
+        key = e.file or e.family
+        if key in seen:
+            raise CampaignError(f"{where}: scenarios[{k}]: {key!r} is listed twice (also "
+                                f"scenarios[{seen[key]}]); give each family once, with all "
+                                "its indices")
+        seen[key] = k
+    return out
