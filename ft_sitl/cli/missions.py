@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import json
 import math
+import random
 import sys
 from pathlib import Path
 
@@ -17,8 +18,14 @@ from ft_sitl.missions.campaign import (
     run_campaign,
 )
 from ft_sitl.missions.report import write_report
-from ft_sitl.missions.results import to_frame
-from ft_sitl.missions.store import ResultStore, StoreError, load_rows
+from ft_sitl.missions.results import rows_from_parquet, to_frame
+from ft_sitl.missions.store import (
+    PARQUET_FILE,
+    SPEC_FILE,
+    ResultStore,
+    StoreError,
+    load_rows,
+)
 from ft_sitl.missions.trial import TrialSpec, TrialSpecError, run_trial
 from ft_sitl.navigation.registry import NavigatorError
 from ft_sitl.physics.platform import PlatformError
@@ -190,6 +197,29 @@ def cmd_campaign_compare(args) -> int:
 
 
 # --- trial -----------------------------------------------------------------------------------
+def _stored_rows(directory) -> list[dict]:
+    """The finished rows of a result directory: a campaign's (campaign.json,
+    trials.jsonl) or, without campaign.json, the table of one holding only trials.parquet
+    (e.g. docs/results/paper)."""
+    d = Path(directory)
+    if not (d / SPEC_FILE).exists() and (d / PARQUET_FILE).is_file():
+        try:
+            return rows_from_parquet(d / PARQUET_FILE)
+        except (OSError, ValueError) as exc:
+            raise CliError(f"{d / PARQUET_FILE}: unreadable ({exc})") from None
+    try:
+        return load_rows(d)[1]
+    except StoreError as exc:
+        raise CliError(str(exc)) from None
+
+
+def _spec_of(doc):
+    try:
+        return TrialSpec.from_dict(doc)
+    except TrialSpecError as exc:
+        raise CliError(f"trial spec: {exc}") from None
+
+
 def _find_spec(args):
     if args.spec is not None:
         try:
@@ -198,27 +228,39 @@ def _find_spec(args):
             raise CliError(f"--spec: {args.spec}: no such file") from None
         except (OSError, ValueError) as exc:
             raise CliError(f"--spec: {args.spec}: not a JSON trial spec ({exc})") from None
-        stored = None
-    else:
-        if args.dir is None or args.trial_id is None:
-            raise CliError("give a campaign directory and a trial id, or --spec FILE")
-        try:
-            _, rows = load_rows(args.dir)
-        except StoreError as exc:
-            raise CliError(str(exc)) from None
-        match = [r for r in rows if r["trial_id"].startswith(args.trial_id)]
-        if not match:
-            raise CliError(f"no trial {args.trial_id!r} in {args.dir} "
-                           f"({len(rows)} trials)")
-        if len(match) > 1:
-            raise CliError(f"trial id {args.trial_id!r} is ambiguous in {args.dir}: "
-                           f"{len(match)} trials start with it")
-        stored = match[0]
-        doc = json.loads(stored["spec"])
-    try:
-        return TrialSpec.from_dict(doc), stored
-    except TrialSpecError as exc:
-        raise CliError(f"trial spec: {exc}") from None
+        return _spec_of(doc), None
+    if args.dir is None or args.trial_id is None:
+        raise CliError("give a campaign directory and a trial id, or --spec FILE")
+    rows = _stored_rows(args.dir)
+    match = [r for r in rows if r["trial_id"].startswith(args.trial_id)]
+    if not match:
+        raise CliError(f"no trial {args.trial_id!r} in {args.dir} ({len(rows)} trials)")
+    if len(match) > 1:
+        raise CliError(f"trial id {args.trial_id!r} is ambiguous in {args.dir}: "
+                       f"{len(match)} trials start with it")
+    stored = match[0]
+    return _spec_of(json.loads(stored["spec"])), stored
+
+
+def sample_stratified(rows: list[dict], n: int, seed: int) -> list[dict]:
+    """``n`` rows picked round-robin over the (algorithm, family) cells: the cells in a
+    shuffled order, each cell's rows shuffled; the same rows for the same ``seed``."""
+    rng = random.Random(seed)
+    cells: dict[tuple, list[dict]] = {}
+    for r in sorted(rows, key=lambda r: r["trial_id"]):
+        cells.setdefault((str(r["algorithm"]), str(r["family"])), []).append(r)
+    order = sorted(cells)
+    rng.shuffle(order)
+    for key in order:
+        rng.shuffle(cells[key])
+    picked: list[dict] = []
+    depth = 0
+    while len(picked) < n:
+        for key in order:
+            if depth < len(cells[key]) and len(picked) < n:
+                picked.append(cells[key][depth])
+        depth += 1
+    return picked
 
 
 # columns that depend on the wall clock, not on the spec
@@ -231,12 +273,52 @@ def _same(a, b) -> bool:
     return a == b
 
 
-def cmd_trial_rerun(args) -> int:
-    spec, stored = _find_spec(args)
+def differences(new: dict, stored: dict) -> list[str]:
+    """The columns in which a rerun's row differs from the stored one, as ``column
+    (stored -> new)``; wall-clock columns are not compared, NaN equals NaN."""
+    return [f"{k} ({stored[k]!r} -> {new[k]!r})" for k in new
+            if k not in _NONDETERMINISTIC and k in stored and not _same(new[k], stored[k])]
+
+
+def _rerun(spec, record: bool = False):
     try:
-        outcome = run_trial(spec, record=bool(args.trajectory or args.render))
+        return run_trial(spec, record=record)
     except (NavigatorError, PlatformError, ScenarioError) as exc:
         raise CliError(f"cannot rerun trial {spec.trial_id}: {exc}") from None
+
+
+def _rerun_sample(args) -> int:
+    if args.trial_id is not None or args.spec is not None:
+        raise CliError("--sample: give a result directory alone, not a trial id or --spec")
+    if args.trajectory or args.render:
+        raise CliError("--trajectory and --render take one trial, not --sample")
+    if args.dir is None:
+        raise CliError("--sample: give a result directory")
+    rows = _stored_rows(args.dir)
+    if not 1 <= args.sample <= len(rows):
+        raise CliError(f"--sample: {args.sample} must be within 1..{len(rows)} (the trials "
+                       f"in {args.dir})")
+    picked = sample_stratified(rows, args.sample, args.sample_seed)
+    same = 0
+    for stored in picked:
+        spec = _spec_of(json.loads(stored["spec"]))
+        diff = differences(_rerun(spec).row, stored)
+        where = f"{spec.trial_id[:10]} {stored['algorithm']} {stored['family']} " \
+                f"{stored['scenario']} (trial {spec.trial})"
+        if diff:
+            print(f"{where}: DIFFERENT in " + ", ".join(diff[:8]), flush=True)
+        else:
+            same += 1
+            print(f"{where}: identical", flush=True)
+    print(f"{same} of {len(picked)} identical")
+    return 0 if same == len(picked) else 1
+
+
+def cmd_trial_rerun(args) -> int:
+    if args.sample is not None:
+        return _rerun_sample(args)
+    spec, stored = _find_spec(args)
+    outcome = _rerun(spec, record=bool(args.trajectory or args.render))
     row = outcome.row
     print(f"trial {spec.trial_id}: {row['algorithm']} on {row['platform']} in "
           f"{row['scenario']} (trial {spec.trial}): {row['reason']}"
@@ -248,11 +330,9 @@ def cmd_trial_rerun(args) -> int:
           f"{row['min_clearance_m']:.3f} m")
     status = 0
     if stored is not None:
-        diff = [k for k in row if k not in _NONDETERMINISTIC and k in stored
-                and not _same(row[k], stored[k])]
+        diff = differences(row, stored)
         if diff:
-            print("  DIFFERENT from the stored result in: " + ", ".join(
-                f"{k} ({stored[k]!r} -> {row[k]!r})" for k in diff[:8]))
+            print("  DIFFERENT from the stored result in: " + ", ".join(diff[:8]))
             status = 1
         else:
             print("  identical to the stored result (all but wall-clock columns)")

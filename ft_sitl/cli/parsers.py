@@ -168,11 +168,17 @@ def _add_missions(sub) -> None:
     trr = tsub.add_parser("rerun", help="replay one trial of a campaign and compare",
                           description="Replay one trial from its stored spec and check that "
                                       "it gives the same result.")
-    trr.add_argument("dir", nargs="?", help="campaign result directory")
+    trr.add_argument("dir", nargs="?", help="result directory (a campaign's, or one "
+                     "holding only trials.parquet)")
     trr.add_argument("trial_id", nargs="?", help="trial id (a unique prefix is enough)")
     trr.add_argument("--spec", metavar="FILE", help="a trial spec JSON file instead")
     trr.add_argument("--trajectory", metavar="CSV", help="save the flown trajectory")
     trr.add_argument("--render", metavar="PNG", help="draw the trajectory over the scenario")
+    trr.add_argument("--sample", type=int, metavar="N",
+                     help="rerun N trials of the directory, stratified over (algorithm, "
+                          "family), instead of one trial id")
+    trr.add_argument("--sample-seed", type=int, default=0, metavar="S",
+                     help="which trials --sample picks (default 0)")
     trr.set_defaults(handler="missions:cmd_trial_rerun")
 
 
