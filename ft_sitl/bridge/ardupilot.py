@@ -46,12 +46,13 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from ft_sitl.bridge import ARDUPILOT_DEFAULT_PORT
 from ft_sitl.bridge.vehicle import BridgeVehicle
 from ft_sitl.physics.layouts import get_layout
 
 log = logging.getLogger(__name__)
 
-DEFAULT_PORT = 9002  # SITL_cmdline.cpp: SIM_OUT_PORT (+ 10 per --instance)
+DEFAULT_PORT = ARDUPILOT_DEFAULT_PORT
 SERVO_MAGIC_16 = 18458
 SERVO_MAGIC_32 = 29569
 _SERVO_16 = struct.Struct("<HHI16H")

@@ -1,8 +1,7 @@
 """Campaigns: the algorithm x platform x scenario x trial matrix, run and resumed.
 
 The campaign file (what to run, TOML or YAML) and its parsing are in
-:mod:`ft_sitl.missions.campaign_file`; :class:`CampaignError` and :func:`load_campaign` are
-re-exported here for callers that run campaigns.
+:mod:`ft_sitl.missions.campaign_file` (:func:`~ft_sitl.missions.campaign_file.load_campaign`).
 
 Running: :func:`run_campaign` hands trials, grouped by scenario configuration (a worker
 builds each scenario's collision grid once), to an :class:`Executor`: in-process
@@ -23,7 +22,7 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from ft_sitl import __version__
-from ft_sitl.missions.campaign_file import Campaign, CampaignError, load_campaign
+from ft_sitl.missions.campaign_file import Campaign, CampaignError
 from ft_sitl.missions.protocol import failed_row
 from ft_sitl.missions.resources import RESOURCES
 from ft_sitl.missions.results import Outcome
@@ -32,10 +31,9 @@ from ft_sitl.missions.trial import run_trial
 from ft_sitl.missions.trial_wire import run_trial_wire, worker_bus
 from ft_sitl.missions.watchdog import wall_budget_from_env
 
-__all__ = ["CHUNK_MAX", "GRID_CACHE_DIR", "Campaign", "CampaignError", "Executor",
-           "ProcessExecutor", "RunSummary", "SerialExecutor", "Transport", "died_row",
-           "load_campaign", "machine_info", "record_run", "report_meta", "run_campaign",
-           "run_chunk"]
+__all__ = ["CHUNK_MAX", "GRID_CACHE_DIR", "Executor", "ProcessExecutor", "RunSummary",
+           "SerialExecutor", "Transport", "died_row", "machine_info", "record_run",
+           "report_meta", "run_campaign", "run_chunk"]
 
 CHUNK_MAX = 40
 #: the workers' shared distance grids, inside the output directory while a run lasts (a

@@ -109,3 +109,15 @@ def to_frame(rows):
         else:
             df[c] = df[c].astype("category")
     return df
+
+
+def rows_from_parquet(path) -> list[dict]:
+    """The trial rows of a ``trials.parquet`` table, as :func:`to_frame`'s input holds
+    them: plain Python values, NaN where a float does not apply, None for a missing
+    integer."""
+    import pandas as pd  # as to_frame: pandas only for callers that read tables
+
+    df = pd.read_parquet(path).astype(object)
+    return [{k: (None if v is pd.NA else v) for k, v in rec.items()}
+            for rec in df.to_dict("records")]
+

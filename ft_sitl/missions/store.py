@@ -68,6 +68,11 @@ class ResultStore:
         self.done = self._load(repair=True)
         self._fh = open(self.trials_path, "ab")  # noqa: SIM115 - kept open while running
 
+    def load(self) -> dict[str, dict]:
+        """Read the finished trials of the directory into :attr:`done` (trial id -> row)."""
+        self.done = self._load()
+        return self.done
+
     def _load(self, repair: bool = False) -> dict[str, dict]:
         done: dict[str, dict] = {}
         self.damaged_lines = 0

@@ -21,6 +21,8 @@ import threading
 
 import numpy as np
 
+from ft_sitl.bus.publisher import BusPublisher
+from ft_sitl.navigation.common import camera_config
 from ft_sitl.sim.guard import GuardEventKind
 
 log = logging.getLogger("ft_sitl.bus")
@@ -120,3 +122,25 @@ class SitlBus:
 
     def close(self) -> None:
         self.pub.close()
+
+
+def fleet_buses(opts, fleet, base_instance: int = 0, *, scenario=None,
+                camera: str = "benchmark", telemetry_rate_hz: float = 50.0,
+                connect_timeout_s: float = 10.0) -> tuple[list[SitlBus], bool]:
+    """The MQTT bus of a served fleet: one :class:`SitlBus` per vehicle on the broker
+    ``opts`` (:class:`~ft_sitl.bus.options.BrokerOptions`), vehicle ids ``base_instance +
+    i``; depth frames from ``camera`` ("benchmark", "d435" or "none") when flying in a
+    ``scenario``. Waits up to ``connect_timeout_s`` so publishing starts connected (later
+    outages only cost dropped messages, counted); returns (buses, all connected)."""
+    cam = None
+    if scenario is not None and camera != "none":
+        cam = camera_config(camera, None, None, None)
+    buses = []
+    for i in range(fleet.n):
+        vid = str(base_instance + i)
+        buses.append(SitlBus(lambda on_config, vid=vid: BusPublisher(opts, vid,
+                                                                      on_config=on_config),
+                             fleet, i, scenario=scenario, camera_config=cam,
+                             telemetry_rate_hz=telemetry_rate_hz))
+    connected = all(b.pub.wait_connected(connect_timeout_s) for b in buses)
+    return buses, connected

@@ -15,7 +15,8 @@ import pandas as pd
 import pytest
 
 from ft_sitl.cli import main
-from ft_sitl.missions.campaign import load_campaign, run_campaign
+from ft_sitl.missions.campaign import run_campaign
+from ft_sitl.missions.campaign_file import load_campaign
 from tests.missions.conftest import (
     PLATFORM,
     YARD_START,
@@ -185,6 +186,75 @@ def test_rerun_from_a_spec_file(capsys, done, tmp_path):
     assert (rc, err) == (0, "")
     assert out.splitlines()[0].startswith(f"trial {row['trial_id']}: straight on {PLATFORM}")
     assert "identical" not in out  # nothing stored to compare with
+
+
+def _parquet_only(done, tmp_path):
+    """A result directory holding only the campaign's trials.parquet (like
+    docs/results/paper: no campaign.json, no trials.jsonl)."""
+    out = tmp_path / "table"
+    out.mkdir()
+    shutil.copyfile(done / "trials.parquet", out / "trials.parquet")
+    return out
+
+
+def test_rerun_from_a_directory_holding_only_trials_parquet(capsys, done, tmp_path):
+    out = _parquet_only(done, tmp_path)
+    row = _row(done, "slow", 1)
+    rc, text, err = cli(capsys, "trial", "rerun", out, row["trial_id"][:8])
+    assert (rc, err) == (0, "")
+    lines = text.splitlines()
+    assert lines[0].startswith(f"trial {row['trial_id']}: slow on {PLATFORM} in yard (trial 1)")
+    assert "  identical to the stored result (all but wall-clock columns)" in lines
+    # a changed table value is found as in a campaign directory
+    df = pd.read_parquet(out / "trials.parquet")
+    k = int(np.flatnonzero(df["trial_id"] == row["trial_id"])[0])
+    df.loc[k, "max_tilt_deg"] += 0.5
+    df.to_parquet(out / "trials.parquet", index=False)
+    rc, text, _ = cli(capsys, "trial", "rerun", out, row["trial_id"])
+    assert rc == 1
+    assert any(ln.startswith("  DIFFERENT from the stored result in: max_tilt_deg (")
+               for ln in text.splitlines())
+
+
+def test_rerun_sample_is_stratified_reproducible_and_reports_differences(capsys, done,
+                                                                        tmp_path):
+    rows = {r["trial_id"]: r for r in read_jsonl(done / "trials.jsonl")}
+    rc, text, err = cli(capsys, "trial", "rerun", done, "--sample", 2, "--sample-seed", 3)
+    assert (rc, err) == (0, "")
+    lines = text.splitlines()
+    assert lines[-1] == "2 of 2 identical" and len(lines) == 3
+    picked = [next(t for t in rows if t.startswith(ln.split()[0])) for ln in lines[:2]]
+    # one trial per (algorithm, family) cell before any cell gets a second
+    assert sorted(rows[t]["algorithm"] for t in picked) == ["slow", "straight"]
+    for t, ln in zip(picked, lines):
+        r = rows[t]
+        assert ln == (f"{t[:10]} {r['algorithm']} yard {r['scenario']} (trial {r['trial']}): "
+                      "identical")
+    # the parquet-only table, same seed: the same trials; one of them altered -> exit 1
+    table = _parquet_only(done, tmp_path)
+    df = pd.read_parquet(table / "trials.parquet")
+    df.loc[df["trial_id"] == picked[1], "path_length_m"] += 1.0
+    df.to_parquet(table / "trials.parquet", index=False)
+    rc, text, _ = cli(capsys, "trial", "rerun", table, "--sample", 2, "--sample-seed", 3)
+    assert rc == 1
+    lines = text.splitlines()
+    assert lines[0].endswith(": identical") and lines[0].startswith(picked[0][:10])
+    assert lines[1].startswith(f"{picked[1][:10]} ")
+    assert ": DIFFERENT in path_length_m (" in lines[1]
+    assert lines[2] == "1 of 2 identical"
+
+
+@pytest.mark.parametrize(("args", "needle"), [
+    (["--sample", "0"], "--sample: 0 must be within 1..4 (the trials in {done})"),
+    (["--sample", "5"], "--sample: 5 must be within 1..4"),
+    (["abc", "--sample", "1"], "--sample: give a result directory alone"),
+    (["--sample", "1", "--render", "x.png"], "--trajectory and --render take one trial"),
+])
+def test_rerun_sample_bad_input(capsys, done, args, needle):
+    rc, out, err = cli(capsys, "trial", "rerun", done, *args)
+    assert (rc, out) == (2, "")
+    assert err.startswith("ft-sitl: error: ") and needle.format(done=done) in err
+    assert len(err.splitlines()) == 1
 
 
 # --- navigators list -------------------------------------------------------------------------

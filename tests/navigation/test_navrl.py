@@ -15,7 +15,7 @@ import pytest
 from scipy.signal import correlate
 
 from ft_sitl.autopilot.cascade import SP_POS, SP_VEL, SP_YAW
-from ft_sitl.missions.campaign import load_campaign
+from ft_sitl.missions.campaign_file import load_campaign
 from ft_sitl.missions.trial import TrialSpec, run_trial
 from ft_sitl.navigation.base import Limits, Observation, Task
 from ft_sitl.navigation.navrl import (

@@ -9,7 +9,8 @@ import numpy as np
 import pytest
 
 from ft_sitl.autopilot.setpoints import Setpoint
-from ft_sitl.missions.campaign import CampaignError, Transport, load_campaign
+from ft_sitl.missions.campaign import Transport
+from ft_sitl.missions.campaign_file import CampaignError, load_campaign
 from ft_sitl.wire.convert import ned_to_world, to_offboard
 from ft_sitl.wire.navigate import WireTask
 

@@ -11,7 +11,8 @@ import time
 from pathlib import Path
 
 from ft_sitl.bus.client import BusClient
-from ft_sitl.missions.campaign import Transport, load_campaign, run_campaign
+from ft_sitl.missions.campaign import Transport, run_campaign
+from ft_sitl.missions.campaign_file import load_campaign
 from ft_sitl.missions.results import REASONS
 from ft_sitl.missions.trial import TrialSpec
 from ft_sitl.missions.trial_wire import run_trial_wire, worker_bus

@@ -1,0 +1,65 @@
+"""``ft-sitl bridge px4|ardupilot``: our physics as the simulator of a real autopilot."""
+
+from __future__ import annotations
+
+import math
+import signal
+import sys
+
+from ft_sitl.bridge.ardupilot import FrameMatchError, run_ardupilot_bridge
+from ft_sitl.bridge.ardupilot_params import ardupilot_params
+from ft_sitl.bridge.px4 import BridgeError, run_px4_bridge
+from ft_sitl.cli.common import CliError, platform_registry
+
+
+def _speed(v):
+    if v is None:
+        return None
+    if not (math.isfinite(v) and 0.01 <= v <= 100):
+        raise CliError(f"--speed-factor: {v} must be within 0.01..100")
+    return float(v)
+
+
+def _stop_on_signals(stoppable) -> None:
+    def handler(_sig, _frame):
+        stoppable.stop()
+
+    for sig in (signal.SIGINT, signal.SIGTERM):
+        signal.signal(sig, handler)
+
+
+def cmd_bridge_ardupilot(args) -> int:
+    platform = platform_registry(args).get(args.platform)
+    if args.print_params:
+        try:
+            print(ardupilot_params(platform), end="")
+        except FrameMatchError as exc:
+            raise CliError(str(exc)) from None
+        return 0
+    if not 1 <= args.port <= 65535:
+        raise CliError(f"--port: {args.port} must be within 1..65535")
+    try:
+        out = run_ardupilot_bridge(platform, args.scenario, args.port, _speed(args.speed_factor),
+                                   host=args.bind, params_path=args.write_params,
+                                   on_start=_stop_on_signals)
+    except (FrameMatchError, ValueError) as exc:
+        raise CliError(str(exc)) from None
+    except OSError as exc:
+        raise CliError(f"cannot listen on {args.bind}:{args.port}: {exc.strerror}") from None
+    print(f"stopped: {out}", file=sys.stderr)
+    return 0
+
+
+def cmd_bridge_px4(args) -> int:
+    if not 0 <= args.instance <= 999:
+        raise CliError(f"--instance: {args.instance} must be within 0..999")
+    if args.duration is not None and not args.duration > 0:
+        raise CliError(f"--duration: {args.duration} must be positive")
+    try:
+        run_px4_bridge(args.platform, args.scenario, instance=args.instance,
+                       speed_factor=_speed(args.speed_factor), ground_truth=args.ground_truth,
+                       host=args.bind, platform_files=args.platform_file or (),
+                       duration_s=args.duration)
+    except (ValueError, BridgeError) as exc:
+        raise CliError(str(exc)) from None
+    return 0

@@ -1,0 +1,44 @@
+"""What the command modules share: :class:`CliError`, the exit status of bad input, and
+small helpers for options.
+
+Light on purpose: ``ft_sitl.cli`` imports it to start up, before any command runs.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+from ft_sitl.physics.catalog import PlatformRegistry
+
+__all__ = ["EXIT_BAD_INPUT", "CliError", "check_out_dir", "fmt_point", "option_value",
+           "platform_registry"]
+
+EXIT_BAD_INPUT = 2
+
+
+class CliError(Exception):
+    """Bad input from the command line: printed as one line, exit status 2."""
+
+
+def platform_registry(args) -> PlatformRegistry:
+    """The catalog plus the ``--platform-file`` files of ``args``."""
+    return PlatformRegistry(args.platform_file or ())
+
+
+def option_value(option: str, parse, *values):
+    """``parse(*values)``, its ValueError turned into a CliError naming ``option``."""
+    try:
+        return parse(*values)
+    except ValueError as exc:
+        raise CliError(f"{option}: {exc}") from None
+
+
+def check_out_dir(option: str, path: Path) -> None:
+    """An output file's directory must exist."""
+    parent = path.parent if str(path.parent) else Path(".")
+    if not parent.is_dir():
+        raise CliError(f"{option}: directory {parent} does not exist")
+
+
+def fmt_point(p) -> str:
+    return "(" + ", ".join(f"{v:.2f}" for v in p) + ")"

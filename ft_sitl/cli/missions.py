@@ -1,0 +1,348 @@
+"""``ft-sitl campaign`` and ``ft-sitl trial``: the benchmark itself."""
+
+from __future__ import annotations
+
+import json
+import math
+import random
+import sys
+from pathlib import Path
+
+from ft_sitl.bus.options import parse_broker_url
+from ft_sitl.cli.common import CliError, option_value
+from ft_sitl.missions.campaign import Transport, report_meta, run_campaign
+from ft_sitl.missions.campaign_file import CampaignError, load_campaign
+from ft_sitl.missions.report import write_report
+from ft_sitl.missions.results import rows_from_parquet, to_frame
+from ft_sitl.missions.spec import TrialSpec, TrialSpecError
+from ft_sitl.missions.store import (
+    PARQUET_FILE,
+    SPEC_FILE,
+    ResultStore,
+    StoreError,
+    load_rows,
+)
+from ft_sitl.missions.trial import run_trial
+from ft_sitl.navigation.registry import NavigatorError
+from ft_sitl.physics.platform import PlatformError
+from ft_sitl.scenarios.render import render_scenario
+from ft_sitl.scenarios.scenario import ScenarioError
+
+
+def _campaign(source: str):
+    try:
+        return load_campaign(source)
+    except CampaignError as exc:
+        raise CliError(str(exc)) from None
+
+
+# --- campaign ------------------------------------------------------------------------------
+def cmd_campaign_check(args) -> int:
+    c = _campaign(args.campaign)
+    specs = c.trial_specs()
+    info = {"name": c.name, "trials": len(specs),
+            "algorithms": [a.label for a in c.algorithms],
+            "platforms": [p.name for p in c.platforms],
+            "scenarios": [{"family": s.family, "indices": list(s.indices)}
+                          for s in c.scenarios],
+            "trials_per_combination": c.trials, "limits": c.limits.as_dict(),
+            "notes": list(c.notes)}
+    if args.json:
+        print(json.dumps(info, indent=2))
+        return 0
+    print(f"campaign {c.name!r}: {len(specs)} trials = {len(c.algorithms)} algorithms x "
+          f"{len(c.platforms)} platforms x {len(c.scenarios)} scenario families x "
+          f"{c.trials} trials")
+    print(f"  algorithms: {', '.join(info['algorithms'])}")
+    print(f"  platforms:  {', '.join(info['platforms'])}")
+    print("  scenarios:  " + ", ".join(
+        f"{s.family} {list(s.indices)}" for s in c.scenarios))
+    lim = c.limits
+    print(f"  limits: {lim.max_speed_m_s:g} m/s, {lim.timeout_s:g} s, goal sphere "
+          f"{lim.goal_radius_m:g} m held {lim.hold_s:g} s")
+    for note in c.notes:
+        print(f"  note: {note}")
+    return 0
+
+
+def cmd_campaign_run(args) -> int:
+    c = _campaign(args.campaign)
+    if args.workers < 1:
+        raise CliError(f"--workers: {args.workers} must be at least 1")
+    if args.limit is not None and args.limit < 1:
+        raise CliError(f"--limit: {args.limit} must be at least 1")
+    out = Path(args.out)
+    for note in c.notes:
+        print(f"note: {note}", file=sys.stderr)
+    try:
+        transport = Transport(args.transport, args.speed_factor, args.mqtt)
+    except CampaignError as exc:
+        raise CliError(str(exc)) from None
+    if args.mqtt:
+        option_value("--mqtt", parse_broker_url, args.mqtt)
+    try:
+        summary = run_campaign(c, out, workers=args.workers, progress=not args.quiet,
+                               limit=args.limit, transport=transport)
+    except StoreError as exc:
+        raise CliError(str(exc)) from None
+    except KeyboardInterrupt:
+        print(f"interrupted: finished trials are in {out}; run the same command again to "
+              f"resume", file=sys.stderr)
+        return 130
+    rate = summary.ran / summary.wall_s if summary.wall_s > 0 else math.nan
+    print(f"{summary.ran} trials run, {summary.skipped} already done, {summary.total} in the "
+          f"campaign; {summary.wall_s:.1f} s ({rate:.2f} trials/s) -> {out}")
+    for tid, err in summary.errors[:10]:
+        print(f"  trial {tid} could not run: {err}", file=sys.stderr)
+    if summary.errors:
+        print(f"{len(summary.errors)} trials could not run (not recorded; a rerun retries "
+              f"them)", file=sys.stderr)
+    if args.csv:
+        store = ResultStore(out)
+        store.load()
+        if store.done:
+            print(f"table: {store.write_tables(csv=True)[-1]}")
+    if not args.no_report and (summary.ran or summary.skipped):
+        _report(out, quiet=False)
+    return 1 if summary.errors else 0
+
+
+def _report(out: Path, quiet: bool = False) -> Path:
+    try:
+        campaign, rows = load_rows(out)
+    except StoreError as exc:
+        raise CliError(str(exc)) from None
+    if not rows:
+        raise CliError(f"{out}: no finished trials yet")
+    paths = write_report(to_frame(rows), out, campaign_spec=campaign.get("spec", {}),
+                         meta=report_meta(out, campaign))
+    page = paths["report.html"]
+    if not quiet:
+        print(f"report: {page}  (summary: {paths['summary.md']})")
+    return page
+
+
+def cmd_campaign_report(args) -> int:
+    out = Path(args.dir)
+    if args.csv:
+        try:
+            load_rows(out)
+        except StoreError as exc:
+            raise CliError(str(exc)) from None
+        store = ResultStore(out)
+        store.load()
+        print(f"table: {store.write_tables(csv=True)[-1]}")
+    _report(out)
+    return 0
+
+
+def compare_runs(a_rows: list[dict], b_rows: list[dict]) -> dict:
+    """Outcome agreement of two result sets on their common trial ids (e.g. the same
+    campaign in-process and over MAVLink): per algorithm and overall, with the trials that
+    disagree."""
+    a = {r["trial_id"]: r for r in a_rows}
+    b = {r["trial_id"]: r for r in b_rows}
+    common = sorted(set(a) & set(b))
+    per: dict = {}
+    diffs = []
+    for tid in common:
+        ra, rb = a[tid], b[tid]
+        alg = per.setdefault(ra["algorithm"], {"trials": 0, "same_success": 0,
+                                               "same_reason": 0})
+        alg["trials"] += 1
+        alg["same_success"] += bool(ra["success"]) == bool(rb["success"])
+        alg["same_reason"] += ra["reason"] == rb["reason"]
+        if bool(ra["success"]) != bool(rb["success"]) or ra["reason"] != rb["reason"]:
+            diffs.append({"trial_id": tid, "algorithm": ra["algorithm"],
+                          "platform": ra["platform"], "scenario": ra["scenario"],
+                          "a": f"{ra['reason']} {ra.get('detail', '')}".strip(),
+                          "b": f"{rb['reason']} {rb.get('detail', '')}".strip()})
+    n = len(common)
+    return {"common_trials": n, "only_in_a": len(set(a) - set(b)),
+            "only_in_b": len(set(b) - set(a)), "algorithms": per,
+            "same_success": sum(v["same_success"] for v in per.values()),
+            "same_reason": sum(v["same_reason"] for v in per.values()),
+            "disagreements": diffs}
+
+
+def cmd_campaign_compare(args) -> int:
+    try:
+        _, ra = load_rows(Path(args.a))
+        _, rb = load_rows(Path(args.b))
+    except StoreError as exc:
+        raise CliError(str(exc)) from None
+    res = compare_runs(ra, rb)
+    if res["common_trials"] == 0:
+        raise CliError(f"{args.a} and {args.b} have no trial in common (different "
+                       "campaigns or seeds?)")
+    if args.json:
+        print(json.dumps(res, indent=2))
+        return 0
+    n = res["common_trials"]
+    print(f"{n} common trials: success/failure agrees in {res['same_success']} "
+          f"({100.0 * res['same_success'] / n:.0f} %), the reason in {res['same_reason']} "
+          f"({100.0 * res['same_reason'] / n:.0f} %)")
+    for alg, v in sorted(res["algorithms"].items()):
+        print(f"  {alg:12s} {v['trials']:4d} trials  success agrees "
+              f"{100.0 * v['same_success'] / v['trials']:5.1f} %  reason agrees "
+              f"{100.0 * v['same_reason'] / v['trials']:5.1f} %")
+    for d in res["disagreements"]:
+        print(f"  {d['trial_id'][:10]} {d['algorithm']} {d['platform']} {d['scenario']}: "
+              f"A {d['a']} | B {d['b']}")
+    return 0
+
+
+# --- trial -----------------------------------------------------------------------------------
+def _stored_rows(directory) -> list[dict]:
+    """The finished rows of a result directory: a campaign's (campaign.json,
+    trials.jsonl) or, without campaign.json, the table of one holding only trials.parquet
+    (e.g. docs/results/paper)."""
+    d = Path(directory)
+    if not (d / SPEC_FILE).exists() and (d / PARQUET_FILE).is_file():
+        try:
+            return rows_from_parquet(d / PARQUET_FILE)
+        except (OSError, ValueError) as exc:
+            raise CliError(f"{d / PARQUET_FILE}: unreadable ({exc})") from None
+    try:
+        return load_rows(d)[1]
+    except StoreError as exc:
+        raise CliError(str(exc)) from None
+
+
+def _spec_of(doc):
+    try:
+        return TrialSpec.from_dict(doc)
+    except TrialSpecError as exc:
+        raise CliError(f"trial spec: {exc}") from None
+
+
+def _find_spec(args):
+    if args.spec is not None:
+        try:
+            doc = json.loads(Path(args.spec).read_text())
+        except FileNotFoundError:
+            raise CliError(f"--spec: {args.spec}: no such file") from None
+        except (OSError, ValueError) as exc:
+            raise CliError(f"--spec: {args.spec}: not a JSON trial spec ({exc})") from None
+        return _spec_of(doc), None
+    if args.dir is None or args.trial_id is None:
+        raise CliError("give a campaign directory and a trial id, or --spec FILE")
+    rows = _stored_rows(args.dir)
+    match = [r for r in rows if r["trial_id"].startswith(args.trial_id)]
+    if not match:
+        raise CliError(f"no trial {args.trial_id!r} in {args.dir} ({len(rows)} trials)")
+    if len(match) > 1:
+        raise CliError(f"trial id {args.trial_id!r} is ambiguous in {args.dir}: "
+                       f"{len(match)} trials start with it")
+    stored = match[0]
+    return _spec_of(json.loads(stored["spec"])), stored
+
+
+def sample_stratified(rows: list[dict], n: int, seed: int) -> list[dict]:
+    """``n`` rows picked round-robin over the (algorithm, family) cells: the cells in a
+    shuffled order, each cell's rows shuffled; the same rows for the same ``seed``."""
+    rng = random.Random(seed)
+    cells: dict[tuple, list[dict]] = {}
+    for r in sorted(rows, key=lambda r: r["trial_id"]):
+        cells.setdefault((str(r["algorithm"]), str(r["family"])), []).append(r)
+    order = sorted(cells)
+    rng.shuffle(order)
+    for key in order:
+        rng.shuffle(cells[key])
+    picked: list[dict] = []
+    depth = 0
+    while len(picked) < n:
+        for key in order:
+            if depth < len(cells[key]) and len(picked) < n:
+                picked.append(cells[key][depth])
+        depth += 1
+    return picked
+
+
+# columns that depend on the wall clock, not on the spec
+_NONDETERMINISTIC = ("wall_time_s", "planner_time_s", "finished_utc", "code_version")
+
+
+def _same(a, b) -> bool:
+    if isinstance(a, float) and isinstance(b, float) and math.isnan(a) and math.isnan(b):
+        return True
+    return a == b
+
+
+def differences(new: dict, stored: dict) -> list[str]:
+    """The columns in which a rerun's row differs from the stored one, as ``column
+    (stored -> new)``; wall-clock columns are not compared, NaN equals NaN."""
+    return [f"{k} ({stored[k]!r} -> {new[k]!r})" for k in new
+            if k not in _NONDETERMINISTIC and k in stored and not _same(new[k], stored[k])]
+
+
+def _rerun(spec, record: bool = False):
+    try:
+        return run_trial(spec, record=record)
+    except (NavigatorError, PlatformError, ScenarioError) as exc:
+        raise CliError(f"cannot rerun trial {spec.trial_id}: {exc}") from None
+
+
+def _rerun_sample(args) -> int:
+    if args.trial_id is not None or args.spec is not None:
+        raise CliError("--sample: give a result directory alone, not a trial id or --spec")
+    if args.trajectory or args.render:
+        raise CliError("--trajectory and --render take one trial, not --sample")
+    if args.dir is None:
+        raise CliError("--sample: give a result directory")
+    rows = _stored_rows(args.dir)
+    if not 1 <= args.sample <= len(rows):
+        raise CliError(f"--sample: {args.sample} must be within 1..{len(rows)} (the trials "
+                       f"in {args.dir})")
+    picked = sample_stratified(rows, args.sample, args.sample_seed)
+    same = 0
+    for stored in picked:
+        spec = _spec_of(json.loads(stored["spec"]))
+        diff = differences(_rerun(spec).row, stored)
+        where = f"{spec.trial_id[:10]} {stored['algorithm']} {stored['family']} " \
+                f"{stored['scenario']} (trial {spec.trial})"
+        if diff:
+            print(f"{where}: DIFFERENT in " + ", ".join(diff[:8]), flush=True)
+        else:
+            same += 1
+            print(f"{where}: identical", flush=True)
+    print(f"{same} of {len(picked)} identical")
+    return 0 if same == len(picked) else 1
+
+
+def cmd_trial_rerun(args) -> int:
+    if args.sample is not None:
+        return _rerun_sample(args)
+    spec, stored = _find_spec(args)
+    outcome = _rerun(spec, record=bool(args.trajectory or args.render))
+    row = outcome.row
+    print(f"trial {spec.trial_id}: {row['algorithm']} on {row['platform']} in "
+          f"{row['scenario']} (trial {spec.trial}): {row['reason']}"
+          f"{' - ' + row['detail'] if row['detail'] else ''}")
+    if not math.isnan(row["time_to_goal_s"]):
+        print(f"  time to goal {row['time_to_goal_s']:.2f} s")
+    print(f"  navigation {row['nav_time_s']:.2f} s, path {row['path_length_m']:.2f} m, "
+          f"max speed {row['max_speed_m_s']:.2f} m/s, min clearance "
+          f"{row['min_clearance_m']:.3f} m")
+    status = 0
+    if stored is not None:
+        diff = differences(row, stored)
+        if diff:
+            print("  DIFFERENT from the stored result in: " + ", ".join(diff[:8]))
+            status = 1
+        else:
+            print("  identical to the stored result (all but wall-clock columns)")
+    if args.trajectory:
+        np_traj = outcome.trajectory
+        with open(args.trajectory, "w") as fh:
+            fh.write("t_s,x,y,z\n")
+            for t, x, y, z in np_traj:
+                fh.write(f"{t:.3f},{x:.4f},{y:.4f},{z:.4f}\n")
+        print(f"  trajectory: {args.trajectory} ({len(np_traj)} samples, ENU m)")
+    if args.render:
+        render_scenario(outcome.scenario, args.render,
+                        trajectory=outcome.trajectory[:, 1:4] if len(outcome.trajectory)
+                        else None,
+                        title=f"{row['algorithm']} on {row['platform']}: {row['reason']}")
+        print(f"  render: {args.render}")
+    return status

@@ -1,0 +1,112 @@
+"""``ft-sitl navigate``: run a registered navigator as an out-of-process MAVSDK client."""
+
+from __future__ import annotations
+
+import asyncio
+import json
+import math
+import sys
+
+import numpy as np
+
+from ft_sitl import frames
+from ft_sitl.bus.options import parse_broker_url
+from ft_sitl.cli.common import CliError, option_value, platform_registry
+from ft_sitl.navigation.registry import NavigatorError, create
+from ft_sitl.scenarios.io import scenario_from_spec
+from ft_sitl.wire.navigate import ClientResult, NavigateError, WireTask, fly
+
+
+def _vec3(name: str, text: str) -> list[float]:
+    parts = [p.strip() for p in str(text).split(",")]
+    try:
+        v = [float(p) for p in parts]
+    except ValueError:
+        v = []
+    if len(v) != 3 or not all(math.isfinite(x) for x in v):
+        raise CliError(f"{name}: {text!r} is not three numbers X,Y,Z")
+    return v
+
+
+def _params(items) -> dict:
+    out = {}
+    for item in items or []:
+        if "=" not in item:
+            raise CliError(f"--param: {item!r} is not NAME=VALUE")
+        k, v = item.split("=", 1)
+        try:
+            out[k.strip()] = json.loads(v)
+        except json.JSONDecodeError:
+            out[k.strip()] = v  # a bare string
+    return out
+
+
+def wire_task_from_args(args):
+    """The WireTask of ``ft-sitl navigate``'s arguments."""
+    if args.task_json:
+        try:
+            return WireTask.from_json(args.task_json)
+        except ValueError as exc:
+            raise CliError(f"--task-json: {exc}") from None
+    kw = {"max_speed_m_s": args.max_speed, "timeout_s": args.timeout}
+    if args.platform:
+        p = platform_registry(args).get(args.platform)
+        ind = p.indicators()
+        kw.update(collision_radius_m=p.collision_radius_m, twr_max=ind.twr_max,
+                  alpha_xy_max=ind.alpha_xy_max_rad_s2, alpha_z_max=ind.alpha_z_max_rad_s2)
+    if args.scenario:
+        sc = option_value("--scenario", scenario_from_spec, args.scenario)
+        return WireTask(goal=list(sc.goal), start=list(sc.start), start_yaw=sc.start_yaw,
+                        origin=list(sc.takeoff), bounds_min=list(sc.bounds_min),
+                        bounds_max=list(sc.bounds_max), **kw)
+    if args.goal is None:
+        raise CliError("give --goal N,E,D (local NED metres) or --scenario FAMILY:INDEX")
+    goal = frames.ned_to_enu(np.array(_vec3("--goal", args.goal)))
+    start = frames.ned_to_enu(np.array(_vec3("--start", args.start)))
+    if start[2] <= 0.3 or goal[2] <= 0.3:
+        raise CliError("--start/--goal: must be above the ground (down < -0.3 m)")
+    d = goal - start
+    yaw = math.atan2(d[1], d[0]) if args.heading is None else frames.yaw_ned_to_enu(
+        math.radians(args.heading))
+    lo = np.minimum(start, goal) - 20.0
+    hi = np.maximum(start, goal) + 20.0
+    return WireTask(goal=list(goal), start=list(start), start_yaw=yaw,
+                    bounds_min=[lo[0], lo[1], 0.0], bounds_max=[hi[0], hi[1], hi[2]], **kw)
+
+
+def cmd_navigate(args) -> int:
+    if not (0.01 <= args.speed_factor <= 100):
+        raise CliError(f"--speed-factor: {args.speed_factor} must be within 0.01..100")
+    if args.mqtt:
+        option_value("--mqtt", parse_broker_url, args.mqtt)
+    wt = wire_task_from_args(args)
+    params = _params(args.param)
+    try:
+        nav = create(args.algorithm, params)
+    except NavigatorError as exc:
+        raise CliError(str(exc)) from None
+    last = [-1.0]
+
+    def progress(t, obs):
+        if not args.quiet and t - last[0] >= 1.0:
+            last[0] = t
+            d = float(np.linalg.norm(obs.position - np.array(wt.goal)))
+            print(f"t {t:6.1f} s  {d:6.1f} m to the goal", file=sys.stderr, flush=True)
+
+    try:
+        out = asyncio.run(fly(nav, wt, args.connect, mqtt=args.mqtt, vehicle=args.vehicle,
+                              speed_factor=args.speed_factor,
+                              connect_timeout_s=args.connect_timeout, progress=progress,
+                              real_latency="latency_s" not in params))
+    except NavigateError as exc:
+        print(f"ft-sitl navigate: {exc}", file=sys.stderr)
+        return 3
+    except KeyboardInterrupt:
+        return 130
+    except Exception as exc:  # noqa: BLE001 - the navigator's own failure
+        print(f"ft-sitl navigate: navigator error: {type(exc).__name__}: {exc}",
+              file=sys.stderr)
+        return 3
+    print(json.dumps(out) if args.json else f"{out['result']}: {out['detail']}", flush=True)
+    return 0 if out["result"] == ClientResult.SUCCESS else 1
+

@@ -1,0 +1,327 @@
+"""The ``ft-sitl`` argument parser: every command's options, nothing that runs them.
+
+Each command names its handler as ``"MODULE:FUNCTION"`` (``set_defaults(handler=...)``), a
+module of :mod:`ft_sitl.cli`; :func:`ft_sitl.cli.main` imports that module only when the
+command runs, so building the parser (``ft-sitl --help``) loads no simulator, planner,
+mesh or plotting code.
+"""
+
+from __future__ import annotations
+
+import argparse
+from pathlib import Path
+
+from ft_sitl import __version__
+from ft_sitl.bridge import ARDUPILOT_DEFAULT_PORT
+from ft_sitl.scenarios.render import DEFAULT_DPI  # numpy only: cheap at start-up
+
+
+def build_parser() -> argparse.ArgumentParser:
+    ap = argparse.ArgumentParser(
+        prog="ft-sitl",
+        description="FLYINGTRUST quadrotor SITL: platforms, rotor dynamics and a virtual PX4.",
+    )
+    ap.add_argument("--version", action="version", version=f"ft-sitl {__version__}")
+    pf = argparse.ArgumentParser(add_help=False)
+    pf.add_argument("--platform-file", action="append", type=Path, metavar="FILE",
+                    help="add user platforms from a TOML/YAML file (repeatable)")
+    sub = ap.add_subparsers(dest="command", metavar="COMMAND", required=True)
+
+    demo = sub.add_parser("demo", parents=[pf], help="fly a short demo flight and report it",
+                          description="Arm, take off to 2 m, fly an 8 m leg, turn 90 deg, "
+                          "descend and land, in lockstep at 1 kHz; print each phase.")
+    demo.add_argument("--platform", default="0.98kg-EGO Planner DIY",
+                      help="platform name (default: %(default)s)")
+    demo.add_argument("--plot", type=Path, metavar="PNG", help="save a plot of the flight")
+    demo.add_argument("--json", action="store_true", help="machine-readable output")
+    demo.set_defaults(handler="demo:cmd_demo")
+
+    plat = sub.add_parser("platforms", help="the platform catalog",
+                          description="List, show, check and generate platforms.")
+    psub = plat.add_subparsers(dest="platforms_command", metavar="ACTION", required=True)
+    pl = psub.add_parser("list", parents=[pf], help="list platforms with their indicators")
+    pl.add_argument("--category", choices=("real", "virtual", "user"))
+    pl.add_argument("--json", action="store_true", help="machine-readable output")
+    pl.set_defaults(handler="platforms:cmd_platforms_list")
+    ps = psub.add_parser("show", parents=[pf], help="show one platform's physical parameters")
+    ps.add_argument("name")
+    ps.add_argument("--json", action="store_true", help="machine-readable output")
+    ps.set_defaults(handler="platforms:cmd_platforms_show")
+    pc = psub.add_parser("check", help="validate a user platform file")
+    pc.add_argument("file", type=Path)
+    pc.add_argument("--json", action="store_true", help="machine-readable output")
+    pc.set_defaults(handler="platforms:cmd_platforms_check")
+    pg = psub.add_parser("generate", help="generate new virtual platforms by interpolation",
+                         description="Random convex combinations (in log space) of catalog "
+                         "platforms' mass and indicators, synthesised and validated.")
+    pg.add_argument("--count", type=int, default=5, help="how many (default: %(default)s)")
+    pg.add_argument("--seed", type=int, default=0, help="random seed (default: %(default)s)")
+    pg.add_argument("--base", choices=("real", "virtual", "all"), default="virtual",
+                    help="which catalog platforms span the design space (default: %(default)s)")
+    pg.add_argument("--out", type=Path, help="write a TOML platform file instead of stdout")
+    pg.add_argument("--force", action="store_true", help="overwrite --out if it exists")
+    pg.add_argument("--json", action="store_true", help="print the generated indicators as JSON")
+    pg.set_defaults(handler="platforms:cmd_platforms_generate")
+
+    sitl = sub.add_parser(
+        "sitl", parents=[pf], help="serve vehicles over MAVLink like PX4 SITL",
+        description="Start N simulated vehicles with PX4 SITL's UDP ports: vehicle i (sysid "
+        "i+1) sends to 127.0.0.1:14540+i (MAVSDK, listens on 14580+i) and to "
+        "127.0.0.1:14550 (GCS, listens on 18570+i).")
+    sitl.add_argument("--platform", default="0.98kg-EGO Planner DIY",
+                      help="platform name (default: %(default)s)")
+    sitl.add_argument("--instances", type=int, default=1, help="number of vehicles (1..64)")
+    sitl.add_argument("--mqtt", metavar="URL", help="MQTT broker for the bus "
+                      "(mqtt://[user[:pass]@]host[:port] or mqtts://...; default: an "
+                      "embedded broker on a free port)")
+    sitl.add_argument("--mqtt-ca", metavar="FILE", help="CA bundle for mqtts://")
+    sitl.add_argument("--mqtt-cert", metavar="FILE", help="client certificate for mqtts://")
+    sitl.add_argument("--mqtt-key", metavar="FILE", help="client key for mqtts://")
+    sitl.add_argument("--mqtt-insecure", action="store_true",
+                      help="do not verify the broker's certificate (testing only)")
+    sitl.add_argument("--no-mqtt", action="store_true", help="no MQTT bus")
+    sitl.add_argument("--telemetry-rate", type=float, default=50.0, metavar="HZ",
+                      help="bus telemetry rate in simulated Hz (default 50)")
+    sitl.add_argument("--camera", choices=("benchmark", "d435", "none"), default="benchmark",
+                      help="depth camera for bus depth frames with --scenario (default "
+                           "benchmark: 160 x 120 @ 15 Hz)")
+    sitl.add_argument("--instance", type=int, default=0, metavar="I",
+                      help="first instance number, as PX4's -i: ports 14580+I, 14540+I, "
+                           "18570+I (default 0)")
+    sitl.add_argument("--speed-factor", type=float, default=1.0,
+                      help="simulated seconds per wall second (default: 1)")
+    sitl.add_argument("--home", metavar="LAT,LON,ALT",
+                      help="geodetic home (default: PX4 SITL's 47.397742,8.545594,488)")
+    sitl.add_argument("--bind", default="127.0.0.1",
+                      help="address to listen on (default: loopback only)")
+    sitl.add_argument("--tlog", type=Path, metavar="PATH",
+                      help="record all MAVLink traffic as a telemetry log")
+    sitl.add_argument("--signing-key", metavar="KEY",
+                      help="MAVLink 2 signing passphrase: unsigned packets are rejected")
+    sitl.add_argument("--duration", type=float, metavar="S",
+                      help="stop after S wall seconds (default: run until Ctrl-C)")
+    sitl.add_argument("--scenario", metavar="FAMILY:INDEX[:SEED]|SPEC",
+                      help="fly in a scenario world (e.g. forest:3, or a .yaml/.toml spec): "
+                           "spawn at its takeoff point, crash on collision")
+    sitl.add_argument("--json", action="store_true", help="print the vehicle URLs as JSON")
+    sitl.set_defaults(handler="sitl:cmd_sitl")
+
+    par = sub.add_parser("params", help="flight-controller parameters")
+    parsub = par.add_subparsers(dest="params_command", metavar="ACTION", required=True)
+    parl = parsub.add_parser("list", help="list PX4-named parameters with defaults and bounds")
+    parl.add_argument("--json", action="store_true", help="machine-readable output")
+    parl.set_defaults(handler="params:cmd_params_list")
+
+    _add_missions(sub)
+    _add_navigators(sub)
+    _add_navigate(sub)
+    _add_bridge(sub)
+    _add_scenarios(sub)
+    return ap
+
+
+def _add_missions(sub) -> None:
+    camp = sub.add_parser("campaign", help="run benchmark campaigns and report them",
+                          description="Run the FLYINGTRUST matrix (algorithms x platforms x "
+                                      "scenarios x trials) and report it.")
+    csub = camp.add_subparsers(dest="campaign_command", metavar="ACTION", required=True)
+    cr = csub.add_parser("run", help="run (or resume) a campaign",
+                         description="Run a campaign file or preset (quick, paper) into "
+                                     "--out; rerunning the same command resumes it.")
+    cr.add_argument("campaign", help="campaign file (.toml, .yaml) or preset: quick, paper")
+    cr.add_argument("--out", required=True, metavar="DIR", help="result directory")
+    cr.add_argument("--workers", type=int, default=1, help="worker processes (default 1)")
+    cr.add_argument("--csv", action="store_true", help="also write trials.csv")
+    cr.add_argument("--no-report", action="store_true", help="do not write the report")
+    cr.add_argument("--limit", type=int, metavar="N", help="stop after N new trials")
+    cr.add_argument("--quiet", action="store_true", help="no progress bar")
+    cr.add_argument("--transport", choices=("inprocess", "mavlink"), default="inprocess",
+                    help="inprocess (default): navigators called in lockstep; mavlink: each "
+                         "trial's vehicle served over MAVLink and its navigator run as a "
+                         "MAVSDK client process (docs/wire.md)")
+    cr.add_argument("--speed-factor", type=float, default=2.0,
+                    help="simulated/wall time over MAVLink (default 2)")
+    cr.add_argument("--mqtt", metavar="URL", help="MQTT broker for the bus over MAVLink "
+                    "(default: an embedded broker per worker)")
+    cr.set_defaults(handler="missions:cmd_campaign_run")
+    cc = csub.add_parser("check", help="validate a campaign and show its matrix")
+    cc.add_argument("campaign", help="campaign file (.toml, .yaml) or preset: quick, paper")
+    cc.add_argument("--json", action="store_true", help="machine-readable output")
+    cc.set_defaults(handler="missions:cmd_campaign_check")
+    crep = csub.add_parser("report", help="write the HTML/Markdown report of a result dir")
+    crep.add_argument("dir", help="campaign result directory")
+    crep.add_argument("--csv", action="store_true", help="also write trials.csv")
+    crep.set_defaults(handler="missions:cmd_campaign_report")
+
+    ccmp = csub.add_parser("compare", help="outcome agreement of two result dirs",
+                           description="Compare two result directories trial by trial (the "
+                                       "same campaign in-process and --transport mavlink, "
+                                       "or two code versions): how often success and the "
+                                       "reason agree, and which trials differ.")
+    ccmp.add_argument("a", help="result directory A")
+    ccmp.add_argument("b", help="result directory B")
+    ccmp.add_argument("--json", action="store_true", help="machine-readable output")
+    ccmp.set_defaults(handler="missions:cmd_campaign_compare")
+
+    tr = sub.add_parser("trial", help="single trials")
+    tsub = tr.add_subparsers(dest="trial_command", metavar="ACTION", required=True)
+    trr = tsub.add_parser("rerun", help="replay one trial of a campaign and compare",
+                          description="Replay one trial from its stored spec and check that "
+                                      "it gives the same result.")
+    trr.add_argument("dir", nargs="?", help="result directory (a campaign's, or one "
+                     "holding only trials.parquet)")
+    trr.add_argument("trial_id", nargs="?", help="trial id (a unique prefix is enough)")
+    trr.add_argument("--spec", metavar="FILE", help="a trial spec JSON file instead")
+    trr.add_argument("--trajectory", metavar="CSV", help="save the flown trajectory")
+    trr.add_argument("--render", metavar="PNG", help="draw the trajectory over the scenario")
+    trr.add_argument("--sample", type=int, metavar="N",
+                     help="rerun N trials of the directory, stratified over (algorithm, "
+                          "family), instead of one trial id")
+    trr.add_argument("--sample-seed", type=int, default=0, metavar="S",
+                     help="which trials --sample picks (default 0)")
+    trr.set_defaults(handler="missions:cmd_trial_rerun")
+
+
+def _add_navigators(sub) -> None:
+    nav = sub.add_parser("navigators", help="the registered navigation algorithms")
+    nsub = nav.add_subparsers(dest="navigators_command", metavar="ACTION", required=True)
+    nl = nsub.add_parser("list", help="list navigators and their parameters")
+    nl.add_argument("--json", action="store_true", help="machine-readable output")
+    nl.set_defaults(handler="navigators:cmd_navigators_list")
+    ni = nsub.add_parser("install", help="install a navigator's model weights (navrl)",
+                         description="Check a NavRL policy checkpoint (the authors' released "
+                                     "navrl_checkpoint.pt) and copy it to the data directory "
+                                     "where the navrl navigator finds it.")
+    ni.add_argument("name", help="navigator (navrl)")
+    ni.add_argument("path", help="checkpoint file")
+    ni.set_defaults(handler="navigators:cmd_navigators_install")
+
+
+def _add_navigate(sub) -> None:
+    p = sub.add_parser(
+        "navigate", help="fly a registered navigator as a MAVSDK client",
+        description="Run a registered navigator (ft-sitl navigators list) out of process: "
+                    "connect with MAVSDK, take off, reach the start, then stream the "
+                    "navigator's setpoints with MAVSDK offboard until the goal is held.")
+    p.add_argument("--algorithm", required=True, metavar="NAME", help="navigator name")
+    p.add_argument("--param", action="append", metavar="NAME=VALUE",
+                   help="navigator parameter (JSON value), repeatable")
+    p.add_argument("--connect", default="udpin://0.0.0.0:14540", metavar="URL",
+                   help="MAVSDK connection URL (default udpin://0.0.0.0:14540)")
+    p.add_argument("--mqtt", metavar="URL", help="the simulator's MQTT bus (telemetry with "
+                   "simulated time, depth frames); needed by depth-camera navigators")
+    p.add_argument("--vehicle", default="0", help="vehicle id on the bus (default 0)")
+    p.add_argument("--scenario", metavar="FAMILY:INDEX[:SEED]|SPEC",
+                   help="take start, goal, heading and flight volume from a scenario (as "
+                        "served by `ft-sitl sitl --scenario`)")
+    p.add_argument("--goal", metavar="N,E,D", help="goal in local NED metres (no --scenario)")
+    p.add_argument("--start", default="0,0,-2", metavar="N,E,D",
+                   help="start in local NED metres (default 0,0,-2)")
+    p.add_argument("--heading", type=float, metavar="DEG",
+                   help="start heading (deg, 0 north; default toward the goal)")
+    p.add_argument("--platform", metavar="NAME", help="the vehicle's platform (indicators "
+                   "and collision radius for the navigator)")
+    p.add_argument("--platform-file", action="append", metavar="FILE",
+                   help="extra platform definitions")
+    p.add_argument("--max-speed", type=float, default=4.0, help="speed cap (default 4 m/s)")
+    p.add_argument("--timeout", type=float, default=90.0, help="navigation timeout (s)")
+    p.add_argument("--speed-factor", type=float, default=1.0,
+                   help="the simulator's speed factor (time base without --mqtt)")
+    p.add_argument("--connect-timeout", type=float, default=60.0,
+                   help="seconds to wait for the vehicle (default 60)")
+    p.add_argument("--task-json", metavar="JSON", help=argparse.SUPPRESS)
+    p.add_argument("--json", action="store_true", help="print the result as JSON")
+    p.add_argument("--quiet", action="store_true", help="no progress lines")
+    p.set_defaults(handler="navigate:cmd_navigate")
+
+
+def _bridge_options(p) -> None:
+    """The options both bridges take: the vehicle and its world."""
+    p.add_argument("--platform", default="0.98kg-EGO Planner DIY", help="platform name")
+    p.add_argument("--platform-file", action="append", metavar="FILE",
+                   help="extra platform definitions")
+    p.add_argument("--scenario", metavar="FAMILY:INDEX[:SEED]|SPEC",
+                   help="fly in a scenario world (collisions crash the vehicle)")
+    p.add_argument("--bind", default="127.0.0.1", help="address to listen on")
+
+
+def _add_bridge(sub) -> None:
+    br = sub.add_parser("bridge", help="serve our physics to a real PX4 / ArduPilot SITL",
+                        description="Autopilot in the loop: a real PX4 or ArduPilot SITL "
+                                    "flies our physics, scenarios and sensors "
+                                    "(docs/autopilot-in-the-loop.md).")
+    bsub = br.add_subparsers(dest="bridge_command", metavar="AUTOPILOT", required=True)
+    ap = bsub.add_parser("ardupilot", help="ArduPilot's JSON physics interface (UDP)",
+                         description="Serve ArduPilot SITL's JSON interface (--model JSON): "
+                                     "one JSON state per servo packet, in lockstep.")
+    _bridge_options(ap)
+    ap.add_argument("--port", type=int, default=ARDUPILOT_DEFAULT_PORT,
+                    help=f"UDP port ArduPilot sends to (default {ARDUPILOT_DEFAULT_PORT})")
+    ap.add_argument("--speed-factor", type=float, metavar="X",
+                    help="pace to X x real time (default: as fast as ArduPilot steps)")
+    ap.add_argument("--print-params", action="store_true",
+                    help="print the ArduCopter parameter file for the platform and exit")
+    ap.add_argument("--write-params", metavar="FILE",
+                    help="also write the parameter file to FILE")
+    ap.set_defaults(handler="bridge:cmd_bridge_ardupilot")
+    _add_px4(bsub)
+
+
+def _add_px4(bsub) -> None:
+    px = bsub.add_parser("px4", help="PX4's simulator_mavlink interface (HIL over TCP)",
+                         description="Listen on TCP 4560+I for a PX4 SITL (px4_sitl_default, "
+                                     "airframe none_iris) and fly our physics in lockstep: "
+                                     "HIL_SENSOR / HIL_GPS out, HIL_ACTUATOR_CONTROLS in.")
+    _bridge_options(px)
+    px.add_argument("--instance", type=int, default=0, metavar="I",
+                    help="PX4 instance (px4 -i I): TCP port 4560+I (default 0)")
+    px.add_argument("--speed-factor", type=float, metavar="X",
+                    help="pace to X x real time (default: as fast as PX4 steps)")
+    px.add_argument("--ground-truth", action="store_true",
+                    help="also send HIL_STATE_QUATERNION (ground truth)")
+    px.add_argument("--duration", type=float, metavar="S", help="stop after S wall seconds")
+    px.set_defaults(handler="bridge:cmd_bridge_px4")
+
+
+def _add_scenarios(sub) -> None:
+    sc = sub.add_parser("scenarios", help="the navigation scenario families",
+                        description="List, build, export and draw the seven FLYINGTRUST "
+                        "scenario families (10 configurations each, any seed).")
+    ssub = sc.add_subparsers(dest="scenarios_command", metavar="ACTION", required=True)
+    src = argparse.ArgumentParser(add_help=False)
+    src.add_argument("family", nargs="?", metavar="FAMILY",
+                     help="family name, e.g. forest or the paper's Narrow-Gap")
+    src.add_argument("--file", type=Path, metavar="SPEC",
+                     help="a scenario spec file (.yaml or .toml) instead of FAMILY")
+    src.add_argument("--index", type=int, help="configuration 1..10 (default: 1)")
+    src.add_argument("--seed", type=int, help="random seed, >= 0 (default: 0)")
+
+    sl = ssub.add_parser("list", help="list the scenario families")
+    sl.add_argument("--json", action="store_true", help="machine-readable output")
+    sl.set_defaults(handler="scenarios:cmd_scenarios_list")
+    sb = ssub.add_parser("build", parents=[src], help="build one scenario and summarise it",
+                         description="Build a scenario and print its summary.")
+    sb.add_argument("--json", action="store_true", help="print Scenario.summary() as JSON")
+    sb.set_defaults(handler="scenarios:cmd_scenarios_build")
+    se = ssub.add_parser("export", parents=[src], help="write a scenario's mesh to a file",
+                         description="Write a scenario's obstacle mesh as PLY, PCD, OBJ, "
+                         "Collada (DAE) or a Gazebo SDF world.")
+    se.add_argument("--format", metavar="FMT",
+                    help="ply, pcd, obj, dae or sdf (default: from the --out suffix)")
+    se.add_argument("-o", "--out", type=Path, metavar="PATH",
+                    help="output file (default: <scenario name>.<FMT> here)")
+    se.add_argument("--spec", action="store_true",
+                    help="also write a YAML spec that 'scenarios ... --file' reads back "
+                    "(<PATH stem>.yaml, with the exact mesh <PATH stem>.ply)")
+    se.add_argument("--json", action="store_true", help="print the written files as JSON")
+    se.set_defaults(handler="scenarios:cmd_scenarios_export")
+    sr = ssub.add_parser("render", parents=[src], help="draw a scenario to a PNG",
+                         description="Draw a top view and a perspective view of a scenario "
+                         "(start, goal, straight line, optional trajectory) to a PNG.")
+    sr.add_argument("-o", "--out", type=Path, metavar="PNG",
+                    help="output picture (default: <scenario name>.png here)")
+    sr.add_argument("--trajectory", type=Path, metavar="FILE",
+                    help="draw a flown path: .csv (x,y,z columns) or .npy (N x 3), ENU m")
+    sr.add_argument("--dpi", type=float, default=DEFAULT_DPI,
+                    help="resolution, dots per inch (default: %(default)s)")
+    sr.set_defaults(handler="scenarios:cmd_scenarios_render")

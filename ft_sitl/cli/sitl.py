@@ -1,0 +1,169 @@
+"""``ft-sitl sitl``: serve simulated vehicles over MAVLink like PX4 SITL, with the MQTT bus."""
+
+from __future__ import annotations
+
+import asyncio
+import ipaddress
+import json
+import math
+import signal
+import sys
+
+from ft_sitl import __version__
+from ft_sitl.bus.broker import EmbeddedBroker
+from ft_sitl.bus.options import TlsOptions, parse_broker_url
+from ft_sitl.cli.common import CliError, option_value, platform_registry
+from ft_sitl.frames import PX4_SITL_HOME, GeoReference, enu_to_ned, yaw_enu_to_ned
+from ft_sitl.mavlink.server import SitlServer
+from ft_sitl.scenarios.io import scenario_from_spec
+from ft_sitl.sim.fleet import Fleet
+from ft_sitl.sim.spawn import SpawnError, spawn_points
+from ft_sitl.wire.sitl_bus import fleet_buses
+
+
+def _parse_home(text: str):
+    parts = text.split(",")
+    if len(parts) != 3:
+        raise CliError(f"--home: {text!r} must be LAT,LON,ALT (degrees, degrees, metres AMSL)")
+    try:
+        lat, lon, alt = (float(v) for v in parts)
+    except ValueError:
+        raise CliError(f"--home: {text!r} has a value that is not a number") from None
+    try:
+        return GeoReference(lat, lon, alt)
+    except ValueError as exc:
+        raise CliError(f"--home: {exc}") from None
+
+
+def _ned(v) -> str:
+    return "[" + ", ".join(f"{x:.2f}" for x in v) + "]"
+
+
+def _heading_deg(yaw_enu: float) -> float:
+    return math.degrees(yaw_enu_to_ned(yaw_enu)) % 360.0
+
+
+def _sitl_bus(args, server, fleet, scenario):
+    """The MQTT bus of ``ft-sitl sitl``: one SitlBus per vehicle on the user's broker or
+    an embedded one; none with --no-mqtt."""
+    if args.no_mqtt:
+        return [], None
+    tls = None
+    if any((args.mqtt_ca, args.mqtt_cert, args.mqtt_key, args.mqtt_insecure)):
+        tls = option_value("--mqtt TLS options", TlsOptions, args.mqtt_ca, args.mqtt_cert,
+                           args.mqtt_key, args.mqtt_insecure)
+    broker = None
+    if args.mqtt:
+        opts = option_value("--mqtt", parse_broker_url, args.mqtt, tls)
+    else:
+        if tls is not None:
+            raise CliError("--mqtt-ca/--mqtt-cert/--mqtt-key/--mqtt-insecure need --mqtt "
+                           "mqtts://...")
+        try:
+            broker = EmbeddedBroker().start()
+        except Exception as exc:  # noqa: BLE001 - amqtt failing must not stop the SITL
+            print(f"warning: no MQTT bus: the embedded broker did not start ({exc})",
+                  file=sys.stderr)
+            return [], None
+        opts = parse_broker_url(broker.url)
+    if not 1.0 <= args.telemetry_rate <= 1000.0:
+        raise CliError(f"--telemetry-rate: {args.telemetry_rate} must be within 1..1000 Hz")
+    buses, connected = fleet_buses(opts, fleet, server.base_instance, scenario=scenario,
+                                   camera=args.camera, telemetry_rate_hz=args.telemetry_rate)
+    if buses and not connected:
+        print(f"warning: MQTT broker {opts.url} not reachable yet; the bus keeps trying "
+              "(messages are dropped and counted until it connects)", file=sys.stderr)
+    return buses, broker
+
+
+def cmd_sitl(args) -> int:
+    if not 1 <= args.instances <= 64:
+        raise CliError(f"--instances: {args.instances} must be within 1..64")
+    if not 0 <= args.instance <= 1000 - args.instances:
+        raise CliError(f"--instance: {args.instance} must be within 0..{1000 - args.instances}")
+    geo = _parse_home(args.home) if args.home else GeoReference(*PX4_SITL_HOME)
+    try:
+        loopback = ipaddress.ip_address(args.bind).is_loopback
+    except ValueError:
+        raise CliError(f"--bind: {args.bind!r} is not an IP address") from None
+    p = platform_registry(args).get(args.platform)
+    scenario = option_value("--scenario", scenario_from_spec, args.scenario) \
+        if args.scenario else None
+    try:
+        spawn, yaw = spawn_points(args.instances, scenario, p.collision_radius_m)
+    except SpawnError as exc:
+        raise CliError(f"--instances: {exc}") from None
+    fleet = Fleet([p] * args.instances, spawn=spawn, spawn_yaw=yaw, scenario=scenario)
+    try:
+        server = SitlServer(fleet, geo, bind=args.bind, speed_factor=args.speed_factor,
+                            tlog=args.tlog, signing_key=args.signing_key,
+                            base_instance=args.instance)
+    except (ValueError, OSError) as exc:
+        raise CliError(str(exc)) from None
+    urls = server.urls()
+    buses, broker = _sitl_bus(args, server, fleet, scenario)
+    for u, b in zip(urls, buses):
+        u["mqtt"] = b.pub.url
+        u["bus_vehicle"] = b.pub.vehicle
+    if args.json:
+        out = {"platform": p.name, "vehicles": urls}
+        if scenario is not None:
+            out["scenario"] = scenario.summary()
+            out["spawn_enu"] = spawn
+        print(json.dumps(out, indent=2), flush=True)
+    else:
+        print(f"ft-sitl {__version__}: {args.instances} x {p.name}, speed factor "
+              f"{args.speed_factor:g}, home {geo.lat_deg:.6f}, {geo.lon_deg:.6f}, "
+              f"{geo.alt_m:.1f} m", flush=True)
+        if not loopback:
+            print(f"warning: listening on {args.bind}, reachable from other machines",
+                  flush=True)
+        for u in urls:
+            print(f"  vehicle sysid {u['sysid']}: MAVSDK {u['mavsdk']}   pymavlink "
+                  f"{u['pymavlink']}   GCS {u['gcs']}", flush=True)
+        if buses:
+            where = "embedded broker" if broker is not None else "broker"
+            print(f"MQTT bus ({where}) {buses[0].pub.url}: topics ft-sitl/v1/<vehicle>/..., "
+                  f"vehicles {', '.join(b.pub.vehicle for b in buses)}", flush=True)
+        if scenario is not None:
+            o = scenario.takeoff
+            print(f"scenario {scenario.name}: {scenario.obstacle_count} obstacles, ceiling "
+                  f"{scenario.ceiling:g} m; in vehicle 1's local NED frame (origin = its "
+                  f"takeoff point) start {_ned(enu_to_ned(scenario.start - o))}, goal "
+                  f"{_ned(enu_to_ned(scenario.goal - o))}, start heading "
+                  f"{_heading_deg(scenario.start_yaw):.1f} deg", flush=True)
+        print("Ctrl-C stops.", flush=True)
+
+    async def main():
+        try:
+            await server.start()
+        except OSError as exc:
+            raise CliError(f"cannot listen on {args.bind}: {exc.strerror}") from None
+        loop = asyncio.get_running_loop()
+        for sig in (signal.SIGINT, signal.SIGTERM):
+            loop.add_signal_handler(sig, server.stop)
+        try:
+            await server.run(duration_s=args.duration)
+        finally:
+            server.close()
+
+    if buses:
+        server.on_chunk = lambda: [b.service() for b in buses]
+    try:
+        asyncio.run(main())
+    finally:
+        for b in buses:
+            st = b.stats()
+            sent = sum(st.sent.values())
+            dropped = ", ".join(f"{k} {v}" for k, v in st.dropped.items() if v) or "none"
+            print(f"bus vehicle {b.pub.vehicle}: {sent} messages sent, dropped: {dropped}; "
+                  f"{st.reconnects} reconnects", file=sys.stderr)
+            b.close()
+        if broker is not None:
+            broker.stop()
+    sim_s = fleet.time_us * 1e-6
+    print(f"stopped after {sim_s:.1f} s simulated; achieved speed factor "
+          f"{server.achieved_speed_factor:.2f} (asked {args.speed_factor:g}); "
+          f"{server.bad_packets} bad packets dropped", file=sys.stderr)
+    return 0
+
