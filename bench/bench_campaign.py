@@ -37,10 +37,7 @@ import time  # noqa: E402
 from benchutil import machine_info  # noqa: E402
 
 from ft_sitl.missions.campaign import run_campaign  # noqa: E402
-from ft_sitl.missions.campaign_file import (
-    load_campaign,  # noqa: E402
-    parse_algorithms,  # noqa: E402
-)
+from ft_sitl.missions.campaign_file import load_campaign, parse_algorithms  # noqa: E402
 from ft_sitl.missions.store import load_rows  # noqa: E402
 from ft_sitl.scenarios.distance_grid import DistanceGrid  # noqa: E402
 from ft_sitl.scenarios.families import build_scenario  # noqa: E402
