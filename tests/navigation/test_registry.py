@@ -1,5 +1,7 @@
 """The navigators' declared parameters: defaults, validation, display."""
 
+from pathlib import Path
+
 import pytest
 
 from ft_sitl.navigation.registry import NavigatorError, create, describe, get_class, parameters
@@ -79,3 +81,11 @@ def test_describe_lists_every_parameter_with_unit_and_range(name):
 def test_describe_refuses_an_unknown_navigator():
     with pytest.raises(NavigatorError, match="unknown navigator 'eg0'; did you mean 'ego'"):
         describe("eg0")
+
+
+def test_the_documented_tables_are_the_declarations():
+    text = (Path(__file__).resolve().parents[2] / "docs" / "planners.md").read_text()
+    for name in DEFAULTS:
+        block = (f"<!-- BEGIN generated: describe({name!r}).markdown() -->\n"
+                 f"{describe(name).markdown()}\n<!-- END generated -->")
+        assert block in text, f"docs/planners.md: regenerate the table of {name!r}"
