@@ -29,6 +29,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from ft_sitl.autopilot.setpoints import Setpoint
+from ft_sitl.schema import Schema
 
 #: navigation starts once the vehicle is stable at the start waypoint: within
 #: STABLE_POS_M of it (m) and slower than STABLE_SPEED_M_S (m/s) for STABLE_FOR_S (s). The
@@ -103,19 +104,22 @@ class Observation:
 class Navigator:
     """Base class of navigators. Subclasses set ``name`` and implement :meth:`step`.
 
-    Constructor keyword arguments are the navigator's parameters (they are stored with
-    every trial's spec); ``rate_hz`` is how often :meth:`step` is called; ``replans`` is
-    a counter the navigator increments when it plans again.
+    The navigator's parameters are declared once, in ``schema`` (a
+    :class:`~ft_sitl.schema.Schema`: name, default, unit, range, doc of each); the
+    registry validates a campaign's ``params`` with it, and they are stored with every
+    trial's spec. The constructor takes them as keyword arguments and leaves them, checked
+    and completed with the defaults, in ``self.settings``. ``rate_hz`` is how often
+    :meth:`step` is called; ``replans`` is a counter the navigator increments when it plans
+    again.
     """
 
     name: str = ""
     rate_hz: float = 20.0
     camera = None  # a CameraConfig to receive depth frames
+    schema: Schema = Schema()
 
     def __init__(self, **params):
-        if params:
-            raise TypeError(f"{type(self).__name__} takes no parameter "
-                            f"{', '.join(sorted(params))}")
+        self.settings = type(self).schema.resolve(params, f"navigator {self.name!r}")
         self.replans = 0
 
     @classmethod
@@ -131,14 +135,6 @@ class Navigator:
 
     def step(self, obs: Observation) -> Setpoint:  # pragma: no cover - abstract
         raise NotImplementedError
-
-
-def check_ranges(*items: tuple[str, object, float, float]) -> None:
-    """Validate navigator parameters: each ``(name, value, lo, hi)`` must be a number within
-    ``lo..hi``; the error names the parameter."""
-    for name, v, lo, hi in items:
-        if isinstance(v, bool) or not isinstance(v, (int, float)) or not lo <= v <= hi:
-            raise ValueError(f"{name}: {v!r} must be a number within {lo}..{hi}")
 
 
 def local_map_for(task: Task, camera):

@@ -16,9 +16,9 @@ from ft_sitl.navigation.base import (
     Navigator,
     Observation,
     Task,
-    check_ranges,
     local_map_for,
 )
+from ft_sitl.schema import Param, Schema
 
 #: after a failed plan, the next attempt waits this long (simulated s), doubling with each
 #: further failure in a row up to RETRY_MAX_S
@@ -34,31 +34,43 @@ def wrap_angle(a: float) -> float:
     return (a + math.pi) % (2.0 * math.pi) - math.pi
 
 
+CAMERA_PARAMS = Schema((
+    Param("camera", "benchmark", choices=("benchmark", "d435"),
+          doc="depth camera: 'benchmark' 160 x 120 @ 15 Hz, 'd435' the originals' "
+              "320 x 240 @ 30 Hz (same field of view)"),
+    Param("camera_width", None, "px", (16, 1280), kind="int",
+          doc="frame width (none: the camera's)"),
+    Param("camera_height", None, "px", (12, 960), kind="int",
+          doc="frame height (none: the camera's)"),
+    Param("camera_rate_hz", None, "Hz", (1.0, 60.0), kind="float",
+          doc="frame rate (none: the camera's)"),
+))
+"""The depth camera's parameters, which every camera-based navigator takes."""
+
+
 def camera_config(camera: str, width: int | None, height: int | None, rate_hz: float | None):
     """The planners' depth camera: "benchmark" (160 x 120 @ 15 Hz) or "d435" (the originals'
-    stream with every second pixel: 320 x 240 @ 30 Hz), optionally resized."""
+    stream with every second pixel: 320 x 240 @ 30 Hz), optionally resized (ranges: see
+    :data:`CAMERA_PARAMS`)."""
     from dataclasses import replace
 
     from ft_sitl.scenarios.camera import CameraConfig
 
+    for key, value in (("camera", camera), ("camera_width", width),
+                       ("camera_height", height), ("camera_rate_hz", rate_hz)):
+        CAMERA_PARAMS[key].check(value, "depth camera")
     base = CameraConfig(max_range_m=10.0)
     if camera == "benchmark":
         cfg = replace(base.subsampled(4), rate_hz=15.0)
-    elif camera == "d435":
-        cfg = replace(base.subsampled(2), rate_hz=30.0)
     else:
-        raise ValueError(f"camera: {camera!r} is not 'benchmark' or 'd435'")
+        cfg = replace(base.subsampled(2), rate_hz=30.0)
     if width is not None or height is not None:
         w = int(width or cfg.width)
         h = int(height or cfg.height)
-        if not (16 <= w <= 1280 and 12 <= h <= 960):
-            raise ValueError(f"camera_width/height: {w} x {h} outside 16..1280 x 12..960")
         step_x = base.width / w
         cfg = replace(base, width=w, height=h, fx=base.fx / step_x, fy=base.fy / step_x,
                       cx=(w - 1) / 2.0, cy=(h - 1) / 2.0, rate_hz=cfg.rate_hz)
     if rate_hz is not None:
-        if not (isinstance(rate_hz, (int, float)) and 1.0 <= rate_hz <= 60.0):
-            raise ValueError(f"camera_rate_hz: {rate_hz!r} must be within 1..60")
         cfg = replace(cfg, rate_hz=float(rate_hz))
     return cfg
 
@@ -105,6 +117,24 @@ def checked_setpoint(t: float, p, v, a, yaw: float, yaw_rate: float | None = Non
     return Setpoint.position(p, velocity=v, acceleration=a, yaw=yaw, yaw_rate=yaw_rate)
 
 
+MAX_ACC = Param("max_acc_m_s2", 2.0, "m/s^2", (0.5, 20.0),
+                doc="acceleration limit of the planned trajectories")
+LATENCY = Param("latency_s", 0.01, "s", (0.0, 1.0),
+                doc="a plan takes effect this long (simulated) after it was asked for: the "
+                    "original's compute time on a desktop CPU")
+MEASURED_LATENCY = Param("measured_latency", False,
+                         doc="use this process's measured compute time instead of latency_s")
+NO_REPLAN_THRESHOLD = Param("no_replan_threshold_m", 2.0, "m", (0.0, 10.0),
+                            doc="no new plan once the goal is this close")
+
+
+def planner_schema(*own: Param, **defaults) -> Schema:
+    """A replanning planner's parameters: ``max_acc_m_s2``, the planner's ``own``, the
+    latency ones and the camera's, with ``defaults`` replacing the declared ones."""
+    return Schema((MAX_ACC, *own, LATENCY, MEASURED_LATENCY,
+                   *CAMERA_PARAMS)).with_defaults(**defaults)
+
+
 class ReplanningPlanner(Navigator):
     """What EGO, Fast and PGO share around their own planning: the parameters every one of
     them takes, the local map, the plan that takes effect ``latency_s`` after it was asked
@@ -117,17 +147,16 @@ class ReplanningPlanner(Navigator):
 
     rate_hz = 100.0
 
-    def __init__(self, max_acc_m_s2: float, latency_s: float, measured_latency: bool,
-                 camera: str, camera_width: int | None, camera_height: int | None,
-                 camera_rate_hz: float | None, ranges: tuple = ()):
-        """``ranges``: the subclass's own ``(name, value, lo, hi)`` checks."""
-        super().__init__()
-        check_ranges(("max_acc_m_s2", max_acc_m_s2, 0.5, 20.0), *ranges,
-                     ("latency_s", latency_s, 0.0, 1.0))
-        self.max_acc = float(max_acc_m_s2)
-        self.latency = float(latency_s)
-        self.measured_latency = bool(measured_latency)
-        self.camera = camera_config(camera, camera_width, camera_height, camera_rate_hz)
+    schema = planner_schema()
+
+    def __init__(self, **params):
+        super().__init__(**params)
+        p = self.settings
+        self.max_acc = float(p["max_acc_m_s2"])
+        self.latency = float(p["latency_s"])
+        self.measured_latency = bool(p["measured_latency"])
+        self.camera = camera_config(p["camera"], p["camera_width"], p["camera_height"],
+                                    p["camera_rate_hz"])
 
     def reset(self, task: Task) -> None:
         super().reset(task)
@@ -205,18 +234,21 @@ class HorizonPlanner(ReplanningPlanner):
     unless the goal is within ``no_replan_threshold_m``; a collision less than
     ``emergency_time_s`` ahead is an emergency."""
 
-    def __init__(self, max_acc_m_s2: float, planning_horizon_m: float,
-                 replan_threshold_m: float, no_replan_threshold_m: float,
-                 emergency_time_s: float, latency_s: float, measured_latency: bool,
-                 camera: str, camera_width: int | None, camera_height: int | None,
-                 camera_rate_hz: float | None):
-        super().__init__(max_acc_m_s2, latency_s, measured_latency, camera, camera_width,
-                         camera_height, camera_rate_hz,
-                         (("planning_horizon_m", planning_horizon_m, 2.0, 20.0),
-                          ("replan_threshold_m", replan_threshold_m, 0.2, 10.0),
-                          ("no_replan_threshold_m", no_replan_threshold_m, 0.0, 10.0),
-                          ("emergency_time_s", emergency_time_s, 0.0, 5.0)))
-        self.horizon = float(planning_horizon_m)
-        self.replan_threshold = float(replan_threshold_m)
-        self.no_replan_threshold = float(no_replan_threshold_m)
-        self.emergency_time = float(emergency_time_s)
+    schema = planner_schema(
+        Param("planning_horizon_m", 7.5, "m", (2.0, 20.0),
+              doc="a plan reaches this far ahead along the global reference"),
+        Param("replan_threshold_m", 1.5, "m", (0.2, 10.0),
+              doc="replan once the vehicle is this far along the current trajectory"),
+        NO_REPLAN_THRESHOLD,
+        Param("emergency_time_s", 0.8, "s", (0.0, 5.0),
+              doc="a collision less than this far ahead on the trajectory is an emergency "
+                  "(stop, then plan from rest)"),
+    )
+
+    def __init__(self, **params):
+        super().__init__(**params)
+        p = self.settings
+        self.horizon = float(p["planning_horizon_m"])
+        self.replan_threshold = float(p["replan_threshold_m"])
+        self.no_replan_threshold = float(p["no_replan_threshold_m"])
+        self.emergency_time = float(p["emergency_time_s"])

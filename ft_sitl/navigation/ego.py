@@ -88,15 +88,8 @@ class EgoPlanner(HorizonPlanner):
 
     name = "ego"
 
-    def __init__(self, max_acc_m_s2: float = 3.0, planning_horizon_m: float = 7.5,
-                 replan_threshold_m: float = 1.5, no_replan_threshold_m: float = 2.0,
-                 emergency_time_s: float = 0.8, latency_s: float = DEFAULT_LATENCY_S,
-                 measured_latency: bool = False, camera: str = "benchmark",
-                 camera_width: int | None = None, camera_height: int | None = None,
-                 camera_rate_hz: float | None = None):
-        super().__init__(max_acc_m_s2, planning_horizon_m, replan_threshold_m,
-                         no_replan_threshold_m, emergency_time_s, latency_s, measured_latency,
-                         camera, camera_width, camera_height, camera_rate_hz)
+    schema = HorizonPlanner.schema.with_defaults(max_acc_m_s2=3.0, planning_horizon_m=7.5,
+                                                  latency_s=DEFAULT_LATENCY_S)
 
     # --- set-up ---------------------------------------------------------------------------
     def reset(self, task: Task) -> None:

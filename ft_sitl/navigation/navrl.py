@@ -61,8 +61,15 @@ import numpy as np
 from numba import njit
 
 from ft_sitl.autopilot.setpoints import Setpoint
-from ft_sitl.navigation.base import Navigator, Observation, Task, check_ranges, local_map_for
-from ft_sitl.navigation.common import camera_config, wrap_angle
+from ft_sitl.navigation.base import Navigator, Observation, Task, local_map_for
+from ft_sitl.navigation.common import (
+    CAMERA_PARAMS,
+    LATENCY,
+    MEASURED_LATENCY,
+    camera_config,
+    wrap_angle,
+)
+from ft_sitl.schema import Param, Schema
 
 ENV_VAR = "FT_SITL_NAVRL_CHECKPOINT"
 CHECKPOINT_NAME = "navrl_checkpoint.pt"
@@ -348,26 +355,32 @@ class NavRL(Navigator):
     name = "navrl"
     rate_hz = 100.0
 
-    def __init__(self, checkpoint: str | None = None, action_limit_m_s: float = 1.0,
-                 latency_s: float = DEFAULT_LATENCY_S, measured_latency: bool = False,
-                 use_shield: bool = True, camera: str = "benchmark",
-                 camera_width: int | None = None, camera_height: int | None = None,
-                 camera_rate_hz: float | None = None):
-        super().__init__()
-        check_ranges(("action_limit_m_s", action_limit_m_s, 0.1, 10.0),
-                     ("latency_s", latency_s, 0.0, 1.0))
-        if checkpoint is not None and not isinstance(checkpoint, str):
-            raise ValueError(f"checkpoint: {checkpoint!r} must be a file path")
+    schema = Schema((
+        Param("checkpoint", None, "path", kind="str",
+              doc=f"the policy checkpoint file (none: ${ENV_VAR}, then the installed one)"),
+        Param("action_limit_m_s", 1.0, "m/s", (0.1, 10.0),
+              doc="speed limit L of the policy's action (per axis)"),
+        LATENCY,
+        MEASURED_LATENCY,
+        Param("use_shield", True, doc="correct the policy's action with the ORCA safety shield"),
+        *CAMERA_PARAMS,
+    )).with_defaults(latency_s=DEFAULT_LATENCY_S)
+
+    def __init__(self, **params):
+        super().__init__(**params)
+        p = self.settings
+        checkpoint = p["checkpoint"]
         path = find_checkpoint(checkpoint)
         if path is None:
             raise FileNotFoundError(NO_CHECKPOINT)
         self.policy = load_policy(path)
         self.checkpoint_path = path
-        self.limit = float(action_limit_m_s)
-        self.latency = float(latency_s)
-        self.measured_latency = bool(measured_latency)
-        self.use_shield = bool(use_shield)
-        self.camera = camera_config(camera, camera_width, camera_height, camera_rate_hz)
+        self.limit = float(p["action_limit_m_s"])
+        self.latency = float(p["latency_s"])
+        self.measured_latency = bool(p["measured_latency"])
+        self.use_shield = bool(p["use_shield"])
+        self.camera = camera_config(p["camera"], p["camera_width"], p["camera_height"],
+                                    p["camera_rate_hz"])
 
     @classmethod
     def unavailable(cls) -> str | None:

@@ -64,9 +64,11 @@ from ft_sitl.autopilot.setpoints import Setpoint
 from ft_sitl.navigation.base import Observation, Task
 from ft_sitl.navigation.bspline import UniformBSpline
 from ft_sitl.navigation.common import (
+    NO_REPLAN_THRESHOLD,
     ReplanningPlanner,
     SplineTrajectory,
     checked_setpoint,
+    planner_schema,
     pursue_yaw,
 )
 from ft_sitl.navigation.topo import (
@@ -79,6 +81,7 @@ from ft_sitl.navigation.topo import (
     find_topo_paths,
     path_length,
 )
+from ft_sitl.schema import Param
 
 __all__ = ["DEFAULT_LATENCY_S", "PgoParams", "PgoPlan", "PgoPlanner", "first_collision_time",
            "guide_phase", "jerk_cost", "lengthen_time", "near_occupied", "normal_cost",
@@ -619,24 +622,26 @@ class PgoPlanner(ReplanningPlanner):
 
     name = "pgo"
 
-    def __init__(self, max_acc_m_s2: float = 2.0, local_segment_m: float = 7.0,
-                 replan_period_s: float = 0.5, no_replan_threshold_m: float = 2.0,
-                 stop_distance_m: float = 0.5, ctrl_pt_dist_m: float = 0.3,
-                 latency_s: float = DEFAULT_LATENCY_S, measured_latency: bool = False,
-                 camera: str = "benchmark", camera_width: int | None = None,
-                 camera_height: int | None = None, camera_rate_hz: float | None = None):
-        super().__init__(max_acc_m_s2, latency_s, measured_latency, camera, camera_width,
-                         camera_height, camera_rate_hz,
-                         (("local_segment_m", local_segment_m, 2.0, 20.0),
-                          ("replan_period_s", replan_period_s, 0.05, 5.0),
-                          ("no_replan_threshold_m", no_replan_threshold_m, 0.0, 10.0),
-                          ("stop_distance_m", stop_distance_m, 0.0, 5.0),
-                          ("ctrl_pt_dist_m", ctrl_pt_dist_m, 0.1, 2.0)))
-        self.segment_len = float(local_segment_m)
-        self.replan_period = float(replan_period_s)
-        self.no_replan_threshold = float(no_replan_threshold_m)
-        self.stop_distance = float(stop_distance_m)
-        self.ctrl_pt_dist = float(ctrl_pt_dist_m)
+    schema = planner_schema(
+        Param("local_segment_m", 7.0, "m", (2.0, 20.0),
+              doc="length of the local segment of the global path that is optimised"),
+        Param("replan_period_s", 0.5, "s", (0.05, 5.0), doc="replan this often"),
+        NO_REPLAN_THRESHOLD,
+        Param("stop_distance_m", 0.5, "m", (0.0, 5.0),
+              doc="an unsafe point on the trajectory closer than this is an emergency stop "
+                  "(farther: a replan at once)"),
+        Param("ctrl_pt_dist_m", 0.3, "m", (0.1, 2.0),
+              doc="B-spline control-point spacing of the local trajectory"),
+        max_acc_m_s2=2.0, latency_s=DEFAULT_LATENCY_S)
+
+    def __init__(self, **params):
+        super().__init__(**params)
+        p = self.settings
+        self.segment_len = float(p["local_segment_m"])
+        self.replan_period = float(p["replan_period_s"])
+        self.no_replan_threshold = float(p["no_replan_threshold_m"])
+        self.stop_distance = float(p["stop_distance_m"])
+        self.ctrl_pt_dist = float(p["ctrl_pt_dist_m"])
 
     # --- set-up ---------------------------------------------------------------------------
     def reset(self, task: Task) -> None:

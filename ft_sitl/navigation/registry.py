@@ -7,17 +7,18 @@ e.g. in its ``pyproject.toml``::
     my_planner = "my_pkg.nav:MyPlanner"
 
 The entry point's name is the navigator's name in campaign files; it must load a
-:class:`~ft_sitl.navigation.base.Navigator` subclass. Built-in navigators are registered in
-this module; a third-party name that clashes with a built-in is refused with a clear error.
+:class:`~ft_sitl.navigation.base.Navigator` subclass, which declares its parameters in its
+``schema`` (a :class:`~ft_sitl.schema.Schema`; a navigator without one takes none).
+Built-in navigators are registered in this module; a third-party name that clashes with a
+built-in is refused with a clear error.
 """
 
 from __future__ import annotations
 
-import difflib
-import inspect
 from importlib.metadata import entry_points
 
 from ft_sitl.navigation.base import Navigator
+from ft_sitl.schema import Schema, SchemaError, did_you_mean
 
 ENTRY_POINT_GROUP = "ft_sitl.navigators"
 
@@ -59,9 +60,7 @@ def available() -> dict[str, type[Navigator] | str]:
 def get_class(name: str) -> type[Navigator]:
     nav = available()
     if name not in nav:
-        close = difflib.get_close_matches(str(name), list(nav), n=1)
-        hint = f"; did you mean {close[0]!r}?" if close else ""
-        raise NavigatorError(f"unknown navigator {name!r}{hint} (available: "
+        raise NavigatorError(f"unknown navigator {name!r}{did_you_mean(name, nav)} (available: "
                              f"{', '.join(sorted(nav))})")
     cls = nav[name]
     if isinstance(cls, str):
@@ -70,27 +69,26 @@ def get_class(name: str) -> type[Navigator]:
 
 
 def parameters(cls: type[Navigator]) -> dict[str, object]:
-    """The navigator's parameters and their defaults (from its constructor)."""
-    out = {}
-    for p in inspect.signature(cls.__init__).parameters.values():
-        if p.name == "self" or p.kind in (p.VAR_KEYWORD, p.VAR_POSITIONAL):
-            continue
-        out[p.name] = None if p.default is inspect.Parameter.empty else p.default
-    return out
+    """The navigator's parameters and their defaults (from its declared schema)."""
+    return cls.schema.defaults()
+
+
+def describe(name: str) -> Schema:
+    """The declared parameters of navigator ``name`` (NavigatorError if there is none by
+    that name): ``describe(name).rows()`` gives name, default, unit, range and doc of each,
+    ``.markdown()`` a table."""
+    return get_class(name).schema
 
 
 def create(name: str, params: dict | None = None) -> Navigator:
     """A new navigator ``name`` with ``params``; unknown or invalid parameters raise a
-    NavigatorError naming them."""
+    NavigatorError naming the navigator, the key, the value and what is allowed."""
     cls = get_class(name)
     params = dict(params or {})
-    known = parameters(cls)
-    for key in params:
-        if key not in known:
-            close = difflib.get_close_matches(key, list(known), n=1)
-            hint = f"; did you mean {close[0]!r}?" if close else ""
-            raise NavigatorError(f"navigator {name!r} has no parameter {key!r}{hint} "
-                                 f"(parameters: {', '.join(known) or 'none'})")
+    try:
+        cls.schema.validate(params, f"navigator {name!r}")
+    except SchemaError as exc:
+        raise NavigatorError(str(exc)) from None
     try:
         return cls(**params)
     except Exception as exc:  # noqa: BLE001 - a plug-in's constructor may raise anything

@@ -15,18 +15,21 @@ import numpy as np
 
 from ft_sitl.autopilot.setpoints import Setpoint
 from ft_sitl.navigation.base import Navigator, Observation, Task
+from ft_sitl.schema import Param, Schema
 
 
 class StraightLine(Navigator):
     name = "straight"
     rate_hz = 20.0
 
-    def __init__(self, speed_m_s: float | None = None):
-        super().__init__()
-        if speed_m_s is not None and not (isinstance(speed_m_s, (int, float))
-                                          and math.isfinite(speed_m_s) and speed_m_s > 0):
-            raise ValueError(f"speed_m_s: must be a positive number of m/s, got {speed_m_s!r}")
-        self.speed_m_s = speed_m_s
+    schema = Schema((
+        Param("speed_m_s", None, "m/s", (0.1, 50.0), kind="float",
+              doc="flight speed along the line, capped at the speed limit (none: the cap)"),
+    ))
+
+    def __init__(self, **params):
+        super().__init__(**params)
+        self.speed_m_s = self.settings["speed_m_s"]
 
     def reset(self, task: Task) -> None:
         super().reset(task)

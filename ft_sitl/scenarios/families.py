@@ -78,7 +78,8 @@ from __future__ import annotations
 import difflib
 import math
 import zlib
-from collections.abc import Callable
+from collections.abc import Callable, Mapping
+from dataclasses import dataclass
 
 import numpy as np
 import trimesh
@@ -86,6 +87,7 @@ import trimesh
 from ft_sitl import __version__
 from ft_sitl.scenarios.scenario import INDEX_RANGE, Scenario, ScenarioError
 from ft_sitl.scenarios.solvability import segment_segment_distance
+from ft_sitl.schema import Param, Schema, SchemaError
 
 START_MARGIN_M = 3.0
 """Takeoff and goal lie this far inside the area's short sides."""
@@ -233,19 +235,23 @@ def _plain(v):
     return v
 
 
-def _make(family: str, category: str, index: int, seed: int, builder: _MeshBuilder, *,
-          width: float, length: float, ceiling: float, altitude: float,
-          parameters: dict, layout: dict, obstacle_count: int,
+def _make(fam: Family, index: int, seed: int, builder: _MeshBuilder, params: dict, *,
+          derived: dict, layout: dict, obstacle_count: int, altitude: float,
           start_xy=None, goal_xy=None, pitch=None, corridor: float = 0.0) -> Scenario:
+    """The scenario: the area and ceiling from ``params`` (``size_m``, ``ceiling_m``), its
+    provenance from the family's declaration (every parameter, ``derived`` values
+    included, in declaration order)."""
+    width, length = params["size_m"][:2]
+    ceiling = params["ceiling_m"]
     sx, sy = start_xy if start_xy is not None else (width / 2.0, START_MARGIN_M)
     gx, gy = goal_xy if goal_xy is not None else (width / 2.0, length - START_MARGIN_M)
     provenance = {
-        "generator": f"{__name__}.{family}",
-        "paper_name": PAPER_NAMES[family],
+        "generator": f"{__name__}.{fam.name}",
+        "paper_name": fam.paper_name,
         "seed": int(seed),
         "index": int(index),
         "ft_sitl_version": __version__,
-        "parameters": _plain(parameters),
+        "parameters": _plain(fam.schema.record(params, derived)),
         "obstacle_count": int(obstacle_count),
         "mesh_pieces": builder.pieces,
         "layout": _plain(layout),
@@ -254,7 +260,7 @@ def _make(family: str, category: str, index: int, seed: int, builder: _MeshBuild
     if pitch is not None:
         provenance["solvability_pitch_m"] = [float(p) for p in pitch]
     sc = Scenario(
-        family=family, index=int(index), seed=int(seed), category=category,
+        family=fam.name, index=int(index), seed=int(seed), category=fam.category,
         mesh=builder.mesh(),
         piece_first_face=first_face, piece_names=names,
         bounds_min=(0.0, 0.0, 0.0), bounds_max=(width, length, ceiling),
@@ -281,11 +287,87 @@ def _far_from(p, q, points, min_dist) -> bool:
 
 
 # --------------------------------------------------------------------------------------
+# the families' declarations
+# --------------------------------------------------------------------------------------
+
+
+@dataclass(frozen=True)
+class Family:
+    """One scenario family: its registry key, the paper's name, its category, the
+    generator's parameters (defaults, units, ranges, docs) and ``build(index, seed=0,
+    params=None) -> Scenario``; ``aliases`` are further names :func:`resolve_family`
+    accepts."""
+
+    name: str
+    paper_name: str
+    category: str
+    schema: Schema
+    build: Callable[..., Scenario]
+    aliases: tuple[str, ...] = ()
+
+    def resolve(self, params: Mapping | None) -> dict:
+        """The generator's parameters: the defaults updated with ``params`` (checked; a
+        ScenarioError names the family, the key, the value and the allowed range)."""
+        try:
+            return self.schema.resolve(params, f"scenario family {self.name!r}")
+        except SchemaError as exc:
+            raise ScenarioError(str(exc)) from None
+
+
+REGISTRY: dict[str, Family] = {}
+"""Family name -> its :class:`Family`, in the paper's order (the order of declaration)."""
+
+
+def _family(name: str, paper_name: str, category: str, schema: Schema,
+            aliases: tuple[str, ...] = ()):
+    """Declare the family whose generator the decorated function is. The function takes
+    ``(family, params, rng, index, seed)``; the decorator returns ``build(index, seed=0,
+    params=None)``, which checks index and seed, resolves the parameters and seeds the
+    generator (see the module docstring)."""
+    def declare(generator):
+        def build(index: int, seed: int = 0, params: Mapping | None = None) -> Scenario:
+            _check(name, index, seed)
+            resolved = fam.resolve(params)
+            return generator(fam, resolved, _rng(name, index, seed), index, seed)
+
+        build.__name__ = build.__qualname__ = generator.__name__
+        build.__doc__ = generator.__doc__
+        fam = Family(name, paper_name, category, schema, build, aliases)
+        REGISTRY[name] = fam
+        return build
+    return declare
+
+
+SIZE = Param("size_m", (40.0, 60.0), "m", (5.0, 500.0),
+             doc="the area: width (x, east) and length (y, north, along the route)")
+CEILING = Param("ceiling_m", 3.0, "m", (1.0, 100.0), doc="the flight volume's ceiling")
+CLEAR_RADIUS = Param("clear_radius_m", CLEAR_RADIUS_M, "m", (0.0, 20.0),
+                     doc="no obstacle within this horizontal distance of the takeoff/start "
+                         "column and the goal")
+START_ALTITUDE = Param("start_altitude_m", None, "m", derived=True,
+                       doc="start and goal altitude: min(2 m, ceiling_m / 2)")
+INTERVAL = "interval"
+
+
+# --------------------------------------------------------------------------------------
 # classic
 # --------------------------------------------------------------------------------------
 
 
-def forest(index: int, seed: int = 0) -> Scenario:
+@_family("forest", "Forest", "classic", Schema((
+    SIZE,
+    CEILING,
+    Param("density_per_m2", 1.0 / 49.0, "1/m^2", (0.0001, 0.2), doc="trunks per square metre"),
+    Param("tree_count", None, derived=True, doc="round(width x length x density_per_m2)"),
+    Param("trunk_radius_m", (0.15, 0.30), "m", (0.02, 2.0), kind=INTERVAL,
+          doc="trunk radius, uniform in [lo, hi]"),
+    Param("trunk_height_m", (6.0, 12.0), "m", (0.5, 100.0), kind=INTERVAL,
+          doc="trunk height, uniform in [lo, hi]"),
+    Param("min_trunk_gap_m", 1.5, "m", (0.0, 20.0), doc="minimum gap between trunk surfaces"),
+    CLEAR_RADIUS,
+    START_ALTITUDE,
+)).with_defaults(size_m=(40.0, 60.0), ceiling_m=3.0))
+def forest(fam: Family, p: dict, rng: np.random.Generator, index: int, seed: int) -> Scenario:
     """Forest: 40 x 60 m, ceiling 3 m, 49 trunks (density 1/49 per m^2).
 
     Trunks are vertical cylinders from the ground, radius U(0.15, 0.30) m, height
@@ -296,14 +378,10 @@ def forest(index: int, seed: int = 0) -> Scenario:
     0-0.6 m from the line (keeping the density exact): a vehicle flying the line straight
     hits it unless its collision radius is smaller than the gap.
     """
-    family = "forest"
-    _check(family, index, seed)
-    rng = _rng(family, index, seed)
-    width, length, ceiling = 40.0, 60.0, 3.0
-    alt = start_altitude(ceiling)
-    density = 1.0 / 49.0
-    count = round(width * length * density)
-    gap = 1.5
+    width, length = p["size_m"]
+    alt = start_altitude(p["ceiling_m"])
+    count = round(width * length * p["density_per_m2"])
+    gap, clear = p["min_trunk_gap_m"], p["clear_radius_m"]
     line_x = width / 2.0
     keep_out = [(line_x, START_MARGIN_M), (line_x, length - START_MARGIN_M)]
     trees: list[list[float]] = []  # x, y, r, h
@@ -314,9 +392,9 @@ def forest(index: int, seed: int = 0) -> Scenario:
             raise RuntimeError(f"forest #{index}: could not place {count} trees")
         x = rng.uniform(0.5, width - 0.5)
         y = rng.uniform(0.5, length - 0.5)
-        r = rng.uniform(0.15, 0.30)
-        h = rng.uniform(6.0, 12.0)
-        if not _tree_ok(x, y, r, trees, keep_out, gap):
+        r = rng.uniform(*p["trunk_radius_m"])
+        h = rng.uniform(*p["trunk_height_m"])
+        if not _tree_ok(x, y, r, trees, keep_out, gap, clear):
             continue
         trees.append([x, y, r, h])
     moved = None
@@ -333,7 +411,7 @@ def forest(index: int, seed: int = 0) -> Scenario:
             x, y, r, h = trees[i]
             others = trees[:i] + trees[i + 1:]
             nx = line_x + side * (r + offset)
-            if _tree_ok(nx, y, r, others, keep_out, gap):
+            if _tree_ok(nx, y, r, others, keep_out, gap, clear):
                 trees[i][0] = nx
                 moved = i
                 break
@@ -343,24 +421,169 @@ def forest(index: int, seed: int = 0) -> Scenario:
     for x, y, r, h in trees:
         b.cylinder((x, y, 0.0), (x, y, h), r, kind="tree")
     return _make(
-        family, "classic", index, seed, b, width=width, length=length, ceiling=ceiling,
-        altitude=alt, obstacle_count=count, corridor=LINE_CORRIDOR_M,
-        parameters={"size_m": [width, length], "ceiling_m": ceiling, "density_per_m2": density,
-                    "tree_count": count, "trunk_radius_m": [0.15, 0.30],
-                    "trunk_height_m": [6.0, 12.0], "min_trunk_gap_m": gap,
-                    "clear_radius_m": CLEAR_RADIUS_M, "start_altitude_m": alt},
+        fam, index, seed, b, p, altitude=alt, obstacle_count=count, corridor=LINE_CORRIDOR_M,
+        derived={"tree_count": count, "start_altitude_m": alt},
         layout={"trees_xyrh": trees, "moved_beside_line": moved},
     )
 
 
-def _tree_ok(x, y, r, trees, keep_out, gap) -> bool:
+def _tree_ok(x, y, r, trees, keep_out, gap, clear) -> bool:
     for kx, ky in keep_out:
-        if math.hypot(x - kx, y - ky) < CLEAR_RADIUS_M + r:
+        if math.hypot(x - kx, y - ky) < clear + r:
             return False
     return all(math.hypot(x - tx, y - ty) >= r + tr + gap for tx, ty, tr, _ in trees)
 
 
-def random_angle_cylinder(index: int, seed: int = 0) -> Scenario:
+@_family("urban", "Urban", "classic", Schema((
+    SIZE,
+    CEILING,
+    Param("block_zone_x_m", (4.0, 56.0), "m", (0.0, 500.0), kind=INTERVAL,
+          doc="the blocks fill x in [lo, hi]"),
+    Param("block_zone_y_m", (8.0, 52.0), "m", (0.0, 500.0), kind=INTERVAL,
+          doc="the blocks fill y in [lo, hi]"),
+    Param("park_probability", 0.15, "-", (0.0, 1.0),
+          doc="a block outside the middle column is an empty park"),
+    Param("tall_probability", 0.75, "-", (0.0, 1.0), doc="a building is tall"),
+    Param("tall_height_m", (12.0, 40.0), "m", (0.5, 500.0), kind=INTERVAL,
+          doc="a tall building's height, uniform in [lo, hi]"),
+    Param("low_height_m", (3.0, 7.0), "m", (0.5, 500.0), kind=INTERVAL,
+          doc="a low building's height, uniform in [lo, hi]"),
+    Param("alley_m", 1.2, "m", (0.0, 20.0), doc="alley between the lots of a block"),
+    Param("wall_height_m", (2.0, 6.0), "m", (0.1, 100.0), kind=INTERVAL,
+          doc="a free-standing wall's height, uniform in [lo, hi]"),
+    Param("wall_length_m", (3.0, 10.0), "m", (0.5, 100.0), kind=INTERVAL,
+          doc="a free-standing wall's length, uniform in [lo, hi]"),
+    Param("boulevard_probability", BOULEVARD_PROBABILITY, "-", (0.0, 1.0),
+          doc="the centre line runs along an open boulevard (walls only)"),
+    Param("line_corridor_m", LINE_CORRIDOR_M, "m", (0.0, 5.0),
+          doc="an obstacle stands within this distance of the start->goal line"),
+    START_ALTITUDE,
+)).with_defaults(size_m=(60.0, 60.0), ceiling_m=10.0))
+def urban(fam: Family, p: dict, rng: np.random.Generator, index: int, seed: int) -> Scenario:
+    """Urban: 60 x 60 m, ceiling 10 m: buildings on a street grid, and walls.
+
+    Blocks fill x in [4, 56], y in [8, 52]: 3 or 5 columns (mirror-symmetric about the
+    centre line, so the middle column straddles it) by 3-5 rows, separated by streets
+    (4.5-8 m), with a street ring at the edges. A block is a park (empty) with probability
+    0.15 -- never in the middle column -- else split into 1-2 x 1-2 lots (1.2 m alleys)
+    each holding one box building set back 0.3-0.8 m: 75 % are 12-40 m tall (above the
+    ceiling), the rest 3-7 m (the vehicle can cross over them). 4-9 free-standing walls
+    (0.3 m thick, 3-10 m long, 2-6 m tall) stand along streets, leaving them passable.
+    """
+    width, length = p["size_m"]
+    alt = start_altitude(p["ceiling_m"])
+    zone_x, zone_y = p["block_zone_x_m"], p["block_zone_y_m"]
+    corridor = p["line_corridor_m"]
+    ncols = int(rng.choice([3, 5]))
+    nrows = int(rng.integers(3, 6))
+    half = (zone_x[1] - zone_x[0]) / 2.0
+    k = (ncols - 1) // 2
+    if ncols == 3:
+        centre_w = rng.uniform(6.0, 12.0)
+        side_streets = rng.uniform(5.0, 8.0, k)
+    else:
+        centre_w = rng.uniform(5.0, 8.0)
+        side_streets = rng.uniform(4.5, 6.5, k)
+    weights = rng.uniform(0.7, 1.3, k)
+    side_blocks = (half - centre_w / 2 - side_streets.sum()) * weights / weights.sum()
+    cx = width / 2.0
+    cols = [(cx - centre_w / 2, cx + centre_w / 2)]
+    edge = centre_w / 2
+    for s, bw in zip(side_streets, side_blocks):
+        cols.append((cx + edge + s, cx + edge + s + bw))
+        cols.insert(0, (cx - edge - s - bw, cx - edge - s))
+        edge += s + bw
+    row_streets = rng.uniform(5.0, 7.0, nrows - 1)
+    row_w = rng.uniform(0.7, 1.3, nrows)
+    row_w = (zone_y[1] - zone_y[0] - row_streets.sum()) * row_w / row_w.sum()
+    rows, y = [], zone_y[0]
+    for j in range(nrows):
+        rows.append((y, y + row_w[j]))
+        y += row_w[j] + (row_streets[j] if j < nrows - 1 else 0.0)
+    mid = ncols // 2
+    alley = p["alley_m"]
+    # the middle column as an open boulevard: no buildings, a wall beside the line instead
+    boulevard = bool(rng.random() < p["boulevard_probability"])
+    b = _MeshBuilder()
+    buildings, walls = [], []
+    for i, (x0, x1) in enumerate(cols):
+        if boulevard and i == mid:
+            continue
+        for y0, y1 in rows:
+            park = rng.random() < p["park_probability"]
+            if park and i != mid:
+                continue
+            nx = 1 if (i == mid or x1 - x0 < 8.0) else int(rng.integers(1, 3))
+            ny = 1 if y1 - y0 < 8.0 else int(rng.integers(1, 3))
+            xs = _split(rng, x0, x1, nx, alley)
+            ys = _split(rng, y0, y1, ny, alley)
+            for lx0, lx1 in xs:
+                for ly0, ly1 in ys:
+                    s = min(rng.uniform(0.3, 0.8), 0.2 * min(lx1 - lx0, ly1 - ly0))
+                    tall = rng.random() < p["tall_probability"]
+                    h = rng.uniform(*p["tall_height_m" if tall else "low_height_m"])
+                    lo, hi = (lx0 + s, ly0 + s, 0.0), (lx1 - s, ly1 - s, h)
+                    b.box(lo, hi, "building")
+                    buildings.append([*lo, *hi])
+    streets_ns = [(cols[i][1], cols[i + 1][0]) for i in range(ncols - 1)]
+    streets_ew = [(rows[j][1], rows[j + 1][0]) for j in range(nrows - 1)]
+    for _ in range(int(rng.integers(4, 10))):
+        thick = 0.3
+        wlen = rng.uniform(*p["wall_length_m"])
+        h = rng.uniform(*p["wall_height_m"])
+        if rng.random() < 0.5:  # along a north-south street
+            a, c = streets_ns[int(rng.integers(len(streets_ns)))]
+            xw = rng.uniform(a + 0.5, c - 0.5 - thick)
+            yw = rng.uniform(zone_y[0], zone_y[1] - wlen)
+            lo, hi = (xw, yw, 0.0), (xw + thick, yw + wlen, h)
+        else:  # along an east-west street
+            a, c = streets_ew[int(rng.integers(len(streets_ew)))]
+            yw = rng.uniform(a + 0.5, c - 0.5 - thick)
+            xw = rng.uniform(zone_x[0], zone_x[1] - wlen)
+            lo, hi = (xw, yw, 0.0), (xw + wlen, yw + thick, h)
+        b.box(lo, hi, "wall")
+        walls.append([*lo, *hi])
+    if boulevard:  # a wall along the line, its near face 0..line_corridor_m beside it
+        thick, wlen, h = 0.3, rng.uniform(*p["wall_length_m"]), rng.uniform(3.0, 6.0)
+        offset = rng.uniform(0.0, corridor)
+        yw = rng.uniform(zone_y[0], zone_y[1] - wlen)
+        x_near = cx + offset if rng.random() < 0.5 else cx - offset - thick
+        lo, hi = (x_near, yw, 0.0), (x_near + thick, yw + wlen, h)
+        b.box(lo, hi, "wall")
+        walls.append([*lo, *hi])
+    return _make(
+        fam, index, seed, b, p, altitude=alt, obstacle_count=len(buildings) + len(walls),
+        corridor=corridor, derived={"start_altitude_m": alt},
+        layout={"columns_x_m": cols, "rows_y_m": rows, "buildings_lo_hi": buildings,
+                "walls_lo_hi": walls, "boulevard": boulevard},
+    )
+
+
+def _split(rng, a, b, n, alley):
+    if n == 1:
+        return [(a, b)]
+    cut = a + (b - a) * rng.uniform(0.35, 0.65)
+    return [(a, cut - alley / 2), (cut + alley / 2, b)]
+
+
+@_family("random_angle_cylinder", "Random-Angle Cylinder", "classic", Schema((
+    SIZE,
+    CEILING,
+    Param("density_per_m2", 1.0 / 36.0, "1/m^2", (0.0001, 0.2),
+          doc="cylinders per square metre"),
+    Param("cylinder_count", None, derived=True, doc="round(width x length x density_per_m2)"),
+    Param("radius_m", (0.25, 0.5), "m", (0.02, 2.0), kind=INTERVAL,
+          doc="cylinder radius, uniform in [lo, hi]"),
+    Param("length_m", 8.0, "m", (0.5, 50.0), doc="cylinder length"),
+    Param("tilt_deg", (0.0, 180.0), "deg", (0.0, 180.0), kind=INTERVAL,
+          doc="axis tilt from vertical, uniform in [lo, hi]"),
+    Param("min_axis_gap_m", 1.0, "m", (0.0, 20.0),
+          doc="axes at least r1 + r2 + this apart"),
+    CLEAR_RADIUS,
+    START_ALTITUDE,
+)).with_defaults(size_m=(40.0, 60.0), ceiling_m=3.0), aliases=("cylinder", "random_cylinder"))
+def random_angle_cylinder(fam: Family, p: dict, rng: np.random.Generator, index: int,
+                          seed: int) -> Scenario:
     """Random-Angle Cylinder: 40 x 60 m, ceiling 3 m, 67 cylinders (density 1/36).
 
     Each cylinder: radius U(0.25, 0.5) m, length 8 m, centre uniform over the area at a
@@ -369,14 +592,12 @@ def random_angle_cylinder(index: int, seed: int = 0) -> Scenario:
     >= 3 m + r from the takeoff column and the goal column. If none crosses the
     start->goal line, the one nearest to it is moved (translated) onto it.
     """
-    family = "random_angle_cylinder"
-    _check(family, index, seed)
-    rng = _rng(family, index, seed)
-    width, length, ceiling = 40.0, 60.0, 3.0
+    width, length = p["size_m"]
+    ceiling = p["ceiling_m"]
     alt = start_altitude(ceiling)
-    density = 1.0 / 36.0
-    count = round(width * length * density)
-    cyl_len, gap = 8.0, 1.0
+    count = round(width * length * p["density_per_m2"])
+    cyl_len, gap, clear = p["length_m"], p["min_axis_gap_m"], p["clear_radius_m"]
+    tilt_range = tuple(math.radians(a) for a in p["tilt_deg"])
     line_x = width / 2.0
     columns = [np.array([[line_x, y, 0.0], [line_x, y, ceiling]])
                for y in (START_MARGIN_M, length - START_MARGIN_M)]
@@ -386,7 +607,7 @@ def random_angle_cylinder(index: int, seed: int = 0) -> Scenario:
 
     def ok(p0, p1, r, skip=None):
         for col in columns:
-            if not _far_from(p0, p1, [col], CLEAR_RADIUS_M + r):
+            if not _far_from(p0, p1, [col], clear + r):
                 return False
         for i, c in enumerate(cyls):
             if i != skip and not _far_from(p0, p1, [(c["p0"], c["p1"])], r + c["r"] + gap):
@@ -400,8 +621,8 @@ def random_angle_cylinder(index: int, seed: int = 0) -> Scenario:
             raise RuntimeError(f"random_angle_cylinder #{index}: could not place {count}")
         centre = np.array([rng.uniform(0.0, width), rng.uniform(0.0, length),
                            rng.uniform(0.0, ceiling)])
-        r = rng.uniform(0.25, 0.5)
-        tilt = rng.uniform(0.0, math.pi)
+        r = rng.uniform(*p["radius_m"])
+        tilt = rng.uniform(*tilt_range)
         azimuth = rng.uniform(0.0, 2.0 * math.pi)
         axis = np.array([math.sin(tilt) * math.cos(azimuth),
                          math.sin(tilt) * math.sin(azimuth), math.cos(tilt)])
@@ -431,130 +652,10 @@ def random_angle_cylinder(index: int, seed: int = 0) -> Scenario:
     for c in cyls:
         b.cylinder(c["p0"], c["p1"], c["r"], kind="cylinder")
     return _make(
-        family, "classic", index, seed, b, width=width, length=length, ceiling=ceiling,
-        altitude=alt, obstacle_count=count,
-        parameters={"size_m": [width, length], "ceiling_m": ceiling, "density_per_m2": density,
-                    "cylinder_count": count, "radius_m": [0.25, 0.5], "length_m": cyl_len,
-                    "tilt_deg": [0.0, 180.0], "min_axis_gap_m": gap,
-                    "clear_radius_m": CLEAR_RADIUS_M, "start_altitude_m": alt},
+        fam, index, seed, b, p, altitude=alt, obstacle_count=count,
+        derived={"cylinder_count": count, "start_altitude_m": alt},
         layout={"cylinders": cyls, "moved_onto_line": moved},
     )
-
-
-def urban(index: int, seed: int = 0) -> Scenario:
-    """Urban: 60 x 60 m, ceiling 10 m: buildings on a street grid, and walls.
-
-    Blocks fill x in [4, 56], y in [8, 52]: 3 or 5 columns (mirror-symmetric about the
-    centre line, so the middle column straddles it) by 3-5 rows, separated by streets
-    (4.5-8 m), with a street ring at the edges. A block is a park (empty) with probability
-    0.15 -- never in the middle column -- else split into 1-2 x 1-2 lots (1.2 m alleys)
-    each holding one box building set back 0.3-0.8 m: 75 % are 12-40 m tall (above the
-    ceiling), the rest 3-7 m (the vehicle can cross over them). 4-9 free-standing walls
-    (0.3 m thick, 3-10 m long, 2-6 m tall) stand along streets, leaving them passable.
-    """
-    family = "urban"
-    _check(family, index, seed)
-    rng = _rng(family, index, seed)
-    width, length, ceiling = 60.0, 60.0, 10.0
-    alt = start_altitude(ceiling)
-    zone_x, zone_y = (4.0, 56.0), (8.0, 52.0)
-    ncols = int(rng.choice([3, 5]))
-    nrows = int(rng.integers(3, 6))
-    half = (zone_x[1] - zone_x[0]) / 2.0
-    k = (ncols - 1) // 2
-    if ncols == 3:
-        centre_w = rng.uniform(6.0, 12.0)
-        side_streets = rng.uniform(5.0, 8.0, k)
-    else:
-        centre_w = rng.uniform(5.0, 8.0)
-        side_streets = rng.uniform(4.5, 6.5, k)
-    weights = rng.uniform(0.7, 1.3, k)
-    side_blocks = (half - centre_w / 2 - side_streets.sum()) * weights / weights.sum()
-    cx = width / 2.0
-    cols = [(cx - centre_w / 2, cx + centre_w / 2)]
-    edge = centre_w / 2
-    for s, bw in zip(side_streets, side_blocks):
-        cols.append((cx + edge + s, cx + edge + s + bw))
-        cols.insert(0, (cx - edge - s - bw, cx - edge - s))
-        edge += s + bw
-    row_streets = rng.uniform(5.0, 7.0, nrows - 1)
-    row_w = rng.uniform(0.7, 1.3, nrows)
-    row_w = (zone_y[1] - zone_y[0] - row_streets.sum()) * row_w / row_w.sum()
-    rows, y = [], zone_y[0]
-    for j in range(nrows):
-        rows.append((y, y + row_w[j]))
-        y += row_w[j] + (row_streets[j] if j < nrows - 1 else 0.0)
-    mid = ncols // 2
-    alley = 1.2
-    # the middle column as an open boulevard: no buildings, a wall beside the line instead
-    boulevard = bool(rng.random() < BOULEVARD_PROBABILITY)
-    b = _MeshBuilder()
-    buildings, walls = [], []
-    for i, (x0, x1) in enumerate(cols):
-        if boulevard and i == mid:
-            continue
-        for y0, y1 in rows:
-            park = rng.random() < 0.15
-            if park and i != mid:
-                continue
-            nx = 1 if (i == mid or x1 - x0 < 8.0) else int(rng.integers(1, 3))
-            ny = 1 if y1 - y0 < 8.0 else int(rng.integers(1, 3))
-            xs = _split(rng, x0, x1, nx, alley)
-            ys = _split(rng, y0, y1, ny, alley)
-            for lx0, lx1 in xs:
-                for ly0, ly1 in ys:
-                    s = min(rng.uniform(0.3, 0.8), 0.2 * min(lx1 - lx0, ly1 - ly0))
-                    tall = rng.random() < 0.75
-                    h = rng.uniform(12.0, 40.0) if tall else rng.uniform(3.0, 7.0)
-                    lo, hi = (lx0 + s, ly0 + s, 0.0), (lx1 - s, ly1 - s, h)
-                    b.box(lo, hi, "building")
-                    buildings.append([*lo, *hi])
-    streets_ns = [(cols[i][1], cols[i + 1][0]) for i in range(ncols - 1)]
-    streets_ew = [(rows[j][1], rows[j + 1][0]) for j in range(nrows - 1)]
-    for _ in range(int(rng.integers(4, 10))):
-        thick = 0.3
-        wlen = rng.uniform(3.0, 10.0)
-        h = rng.uniform(2.0, 6.0)
-        if rng.random() < 0.5:  # along a north-south street
-            a, c = streets_ns[int(rng.integers(len(streets_ns)))]
-            xw = rng.uniform(a + 0.5, c - 0.5 - thick)
-            yw = rng.uniform(zone_y[0], zone_y[1] - wlen)
-            lo, hi = (xw, yw, 0.0), (xw + thick, yw + wlen, h)
-        else:  # along an east-west street
-            a, c = streets_ew[int(rng.integers(len(streets_ew)))]
-            yw = rng.uniform(a + 0.5, c - 0.5 - thick)
-            xw = rng.uniform(zone_x[0], zone_x[1] - wlen)
-            lo, hi = (xw, yw, 0.0), (xw + wlen, yw + thick, h)
-        b.box(lo, hi, "wall")
-        walls.append([*lo, *hi])
-    if boulevard:  # a wall along the line, its near face 0..LINE_CORRIDOR_M beside it
-        thick, wlen, h = 0.3, rng.uniform(3.0, 10.0), rng.uniform(3.0, 6.0)
-        offset = rng.uniform(0.0, LINE_CORRIDOR_M)
-        yw = rng.uniform(zone_y[0], zone_y[1] - wlen)
-        x_near = cx + offset if rng.random() < 0.5 else cx - offset - thick
-        lo, hi = (x_near, yw, 0.0), (x_near + thick, yw + wlen, h)
-        b.box(lo, hi, "wall")
-        walls.append([*lo, *hi])
-    return _make(
-        family, "classic", index, seed, b, width=width, length=length, ceiling=ceiling,
-        altitude=alt, obstacle_count=len(buildings) + len(walls), corridor=LINE_CORRIDOR_M,
-        parameters={"size_m": [width, length], "ceiling_m": ceiling, "block_zone_x_m": zone_x,
-                    "block_zone_y_m": zone_y, "park_probability": 0.15,
-                    "tall_probability": 0.75, "tall_height_m": [12.0, 40.0],
-                    "low_height_m": [3.0, 7.0], "alley_m": alley,
-                    "wall_height_m": [2.0, 6.0], "wall_length_m": [3.0, 10.0],
-                    "boulevard_probability": BOULEVARD_PROBABILITY,
-                    "line_corridor_m": LINE_CORRIDOR_M, "start_altitude_m": alt},
-        layout={"columns_x_m": cols, "rows_y_m": rows, "buildings_lo_hi": buildings,
-                "walls_lo_hi": walls, "boulevard": boulevard},
-    )
-
-
-def _split(rng, a, b, n, alley):
-    if n == 1:
-        return [(a, b)]
-    cut = a + (b - a) * rng.uniform(0.35, 0.65)
-    return [(a, cut - alley / 2), (cut + alley / 2, b)]
 
 
 # --------------------------------------------------------------------------------------
@@ -566,7 +667,20 @@ NARROW_GAP_PITCH_M = (0.025, 0.25, 0.25)
 0.384 m radius is only 0.85 - 0.768 = 0.082 m wide."""
 
 
-def narrow_gap(index: int, seed: int = 0) -> Scenario:
+@_family("narrow_gap", "Narrow-Gap", "theoretical", Schema((
+    SIZE,
+    CEILING,
+    Param("gap_count", None, derived=True, doc="walls, one gap each: the configuration index"),
+    Param("gap_width_m", (0.85, 0.90), "m", (0.1, 10.0), kind=INTERVAL,
+          doc="gap width, uniform in [lo, hi]"),
+    Param("gap_offset_m", (4.0, 18.0), "m", (0.0, 100.0), kind=INTERVAL,
+          doc="gap centre's distance from the centre line, uniform in [lo, hi]"),
+    Param("wall_thickness_m", 0.3, "m", (0.05, 5.0), doc="wall thickness"),
+    Param("wall_height_m", 5.0, "m", (0.5, 100.0), doc="wall height"),
+    START_ALTITUDE,
+)).with_defaults(size_m=(50.0, 50.0), ceiling_m=4.0))
+def narrow_gap(fam: Family, p: dict, rng: np.random.Generator, index: int,
+               seed: int) -> Scenario:
     """Narrow-Gap: 50 x 50 m, ceiling 4 m; ``index`` walls, one gap each (gaps = index).
 
     Walls span the full width (x in [0, 50]), 0.3 m thick and 5 m tall, at evenly spaced
@@ -574,49 +688,54 @@ def narrow_gap(index: int, seed: int = 0) -> Scenario:
     U(0.85, 0.90) m wide whose centre lies U(4, 18) m off the centre line, on alternating
     sides, so the vehicle must move laterally between gaps.
     """
-    family = "narrow_gap"
-    _check(family, index, seed)
-    rng = _rng(family, index, seed)
-    width, length, ceiling = 50.0, 50.0, 4.0
-    alt = start_altitude(ceiling)
-    thick, height = 0.3, 5.0
+    width, length = p["size_m"]
+    alt = start_altitude(p["ceiling_m"])
+    thick, height = p["wall_thickness_m"], p["wall_height_m"]
     spacing = 30.0 / index
     side = 1.0 if rng.random() < 0.5 else -1.0
     b = _MeshBuilder()
     walls = []
     for j in range(index):
         y = 10.0 + spacing * (j + 0.5) + rng.uniform(-0.125, 0.125) * spacing
-        w = rng.uniform(0.85, 0.90)
-        c = width / 2.0 + side * rng.uniform(4.0, 18.0)
+        w = rng.uniform(*p["gap_width_m"])
+        c = width / 2.0 + side * rng.uniform(*p["gap_offset_m"])
         side = -side
         b.box((0.0, y - thick / 2, 0.0), (c - w / 2, y + thick / 2, height), "wall")
         b.box((c + w / 2, y - thick / 2, 0.0), (width, y + thick / 2, height), "wall")
         walls.append({"y_m": y, "gap_centre_x_m": c, "gap_width_m": w})
     return _make(
-        family, "theoretical", index, seed, b, width=width, length=length, ceiling=ceiling,
-        altitude=alt, obstacle_count=index, pitch=NARROW_GAP_PITCH_M,
-        parameters={"size_m": [width, length], "ceiling_m": ceiling, "gap_count": index,
-                    "gap_width_m": [0.85, 0.90], "gap_offset_m": [4.0, 18.0],
-                    "wall_thickness_m": thick, "wall_height_m": height,
-                    "start_altitude_m": alt},
+        fam, index, seed, b, p, altitude=alt, obstacle_count=index, pitch=NARROW_GAP_PITCH_M,
+        derived={"gap_count": index, "start_altitude_m": alt},
         layout={"walls": walls},
     )
 
 
-def sudden_drop(index: int, seed: int = 0) -> Scenario:
+@_family("sudden_drop", "Sudden-Drop", "theoretical", Schema((
+    Param("size_m", (50.0, 50.0, 14.0), "m", (1.0, 500.0),
+          doc="the area's width and length, and the volume's height (the blocks' top)"),
+    CEILING,
+    Param("volume_height_m", None, derived=True, doc="size_m[2]"),
+    Param("lowest_obstacle_m", 1.5, "m", (0.1, 100.0), doc="the blocks' underside"),
+    Param("start_altitude_m", 2.5, "m", (0.1, 100.0), doc="start and goal altitude"),
+    Param("block_count", None, derived=True, doc="the configuration index"),
+    Param("block_depth_m", (1.5, 3.0), "m", (0.1, 100.0), kind=INTERVAL,
+          doc="a block's depth along y, uniform in [lo, hi]"),
+    Param("block_zone_y_m", (8.0, 44.0), "m", (0.0, 500.0), kind=INTERVAL,
+          doc="the blocks lie in y in [lo, hi]"),
+)).with_defaults(ceiling_m=4.0))
+def sudden_drop(fam: Family, p: dict, rng: np.random.Generator, index: int,
+                seed: int) -> Scenario:
     """Sudden-Drop: 50 x 50 x 14 m, ceiling 4 m, start at 2.5 m; ``index`` blocks.
 
     Blocks span the full width and hang from 1.5 m (the lowest obstacle point) to 14 m;
     each is U(1.5, 3) m deep, placed in order along y in [8, 44] with random gaps (>= 0.5
     m). The start altitude 2.5 m passes through them: the vehicle must drop below 1.5 m.
     """
-    family = "sudden_drop"
-    _check(family, index, seed)
-    rng = _rng(family, index, seed)
-    width, length, ceiling, top, underside = 50.0, 50.0, 4.0, 14.0, 1.5
-    alt = 2.5
-    zone = (8.0, 44.0)
-    depths = rng.uniform(1.5, 3.0, index)
+    width, length, top = p["size_m"]
+    underside = p["lowest_obstacle_m"]
+    alt = p["start_altitude_m"]
+    zone = p["block_zone_y_m"]
+    depths = rng.uniform(*p["block_depth_m"], index)
     spare = zone[1] - zone[0] - depths.sum() - 0.5 * (index + 1)
     gaps = 0.5 + spare * rng.dirichlet(np.ones(index + 1))
     b = _MeshBuilder()
@@ -628,17 +747,25 @@ def sudden_drop(index: int, seed: int = 0) -> Scenario:
         blocks.append([y, y + depths[j]])
         y += depths[j]
     return _make(
-        family, "theoretical", index, seed, b, width=width, length=length, ceiling=ceiling,
-        altitude=alt, obstacle_count=index,
-        parameters={"size_m": [width, length, top], "ceiling_m": ceiling,
-                    "volume_height_m": top, "lowest_obstacle_m": underside,
-                    "start_altitude_m": alt, "block_count": index,
-                    "block_depth_m": [1.5, 3.0], "block_zone_y_m": zone},
+        fam, index, seed, b, p, altitude=alt, obstacle_count=index,
+        derived={"volume_height_m": top, "block_count": index},
         layout={"blocks_y_m": blocks},
     )
 
 
-def maze(index: int, seed: int = 0) -> Scenario:
+@_family("maze", "Maze", "theoretical", Schema((
+    SIZE,
+    CEILING,
+    Param("cells", (11, 17), "-", (2, 200), doc="cells across (x) and along (y)"),
+    Param("cell_m", None, derived=True, doc="size_m / cells"),
+    Param("corridor_width_m", None, derived=True, doc="min(cell_m) - wall_thickness_m"),
+    Param("wall_thickness_m", 0.2, "m", (0.01, 5.0), doc="wall thickness"),
+    Param("wall_height_m", 2.5, "m", (0.1, 100.0), doc="wall height"),
+    Param("algorithm", "recursive backtracker", choices=("recursive backtracker",),
+          doc="how the passages are carved"),
+    START_ALTITUDE,
+)).with_defaults(size_m=(25.0, 40.0), ceiling_m=2.0))
+def maze(fam: Family, p: dict, rng: np.random.Generator, index: int, seed: int) -> Scenario:
     """Maze: 25 x 40 m, ceiling 2 m; a perfect maze (one path between any two cells).
 
     11 x 17 cells (2.27 x 2.35 m; corridors >= 2.07 m between 0.2 m walls, 2.5 m tall),
@@ -646,12 +773,9 @@ def maze(index: int, seed: int = 0) -> Scenario:
     first row); the goal is the middle of the last row. A layout whose middle column is a
     straight corridor (start->goal line clear) is redrawn. Dead ends are counted.
     """
-    family = "maze"
-    _check(family, index, seed)
-    rng = _rng(family, index, seed)
-    width, length, ceiling = 25.0, 40.0, 2.0
-    alt = start_altitude(ceiling)
-    nx, ny, thick, height = 11, 17, 0.2, 2.5
+    width, length = p["size_m"]
+    alt = start_altitude(p["ceiling_m"])
+    (nx, ny), thick, height = p["cells"], p["wall_thickness_m"], p["wall_height_m"]
     cw, ch = width / nx, length / ny
     mid = nx // 2
     for _ in range(100):
@@ -683,13 +807,10 @@ def maze(index: int, seed: int = 0) -> Scenario:
     degree[:, 1:] += north[:, :-1]
     dead_ends = int((degree == 1).sum())
     return _make(
-        family, "theoretical", index, seed, b, width=width, length=length, ceiling=ceiling,
-        altitude=alt, obstacle_count=runs,
+        fam, index, seed, b, p, altitude=alt, obstacle_count=runs,
         start_xy=((mid + 0.5) * cw, 0.5 * ch), goal_xy=((mid + 0.5) * cw, (ny - 0.5) * ch),
-        parameters={"size_m": [width, length], "ceiling_m": ceiling, "cells": [nx, ny],
-                    "cell_m": [cw, ch], "corridor_width_m": min(cw, ch) - thick,
-                    "wall_thickness_m": thick, "wall_height_m": height,
-                    "algorithm": "recursive backtracker", "start_altitude_m": alt},
+        derived={"cell_m": [cw, ch], "corridor_width_m": min(cw, ch) - thick,
+                 "start_altitude_m": alt},
         layout={"dead_ends": dead_ends,
                 "east_passages": east[:-1, :].astype(int).tolist(),
                 "north_passages": north[:, :-1].astype(int).tolist()},
@@ -786,7 +907,23 @@ def fbm3(x, y, z, perm, frequency: float, octaves: int = 4, lacunarity: float = 
     return total
 
 
-def perlin(index: int, seed: int = 0) -> Scenario:
+@_family("perlin", "Random Perlin-Noise", "theoretical", Schema((
+    SIZE,
+    CEILING,
+    Param("voxel_m", 0.25, "m", (0.05, 5.0), doc="voxel edge"),
+    Param("noise_frequency_per_voxel", 0.05, "1/voxel", (0.001, 1.0),
+          doc="the paper's noise frequency, taken per voxel index"),
+    Param("noise_frequency_per_m", None, derived=True,
+          doc="noise_frequency_per_voxel / voxel_m (cycles per metre)"),
+    Param("octaves", 2, "-", (1, 8), doc="noise octaves"),
+    Param("lacunarity", 2.0, "-", (1.0, 4.0), doc="frequency factor between octaves"),
+    Param("gain", 0.5, "-", (0.0, 1.0), doc="amplitude factor between octaves"),
+    Param("fill_rate", 0.03, "-", (0.001, 0.5),
+          doc="fraction of the voxels filled (those of highest noise)"),
+    CLEAR_RADIUS,
+    START_ALTITUDE,
+)).with_defaults(size_m=(40.0, 50.0), ceiling_m=4.0), aliases=("perlin_noise", "random_perlin"))
+def perlin(fam: Family, p: dict, rng: np.random.Generator, index: int, seed: int) -> Scenario:
     """Random Perlin-Noise: 40 x 50 m, ceiling 4 m, noise frequency 0.05, fill rate 0.03.
 
     The flight volume is cut into 0.25 m voxels (160 x 200 x 16). Perlin noise is sampled
@@ -799,13 +936,11 @@ def perlin(index: int, seed: int = 0) -> Scenario:
     2 x 2 voxel block surrounds the line. Filled voxels are merged into one box per run in
     each voxel column.
     """
-    family = "perlin"
-    _check(family, index, seed)
-    rng = _rng(family, index, seed)
-    width, length, ceiling = 40.0, 50.0, 4.0
+    width, length = p["size_m"]
+    ceiling = p["ceiling_m"]
     alt = start_altitude(ceiling)
-    voxel, per_voxel, fill_rate, octaves = 0.25, 0.05, 0.03, 2
-    frequency = per_voxel / voxel  # cycles per metre
+    voxel, fill_rate = p["voxel_m"], p["fill_rate"]
+    frequency = p["noise_frequency_per_voxel"] / voxel  # cycles per metre
     shape = (int(width / voxel), int(length / voxel), int(ceiling / voxel))
     perm = rng.permutation(256)
     offset = rng.uniform(0.0, 1000.0, 3)
@@ -815,8 +950,9 @@ def perlin(index: int, seed: int = 0) -> Scenario:
     cz = (np.arange(shape[2]) + 0.5) * voxel
     line_x = width / 2.0
     sy, gy = START_MARGIN_M, length - START_MARGIN_M
-    near = ((np.hypot(cx[:, None] - line_x, cy[None, :] - sy) < CLEAR_RADIUS_M)
-            | (np.hypot(cx[:, None] - line_x, cy[None, :] - gy) < CLEAR_RADIUS_M))
+    clear = p["clear_radius_m"]
+    near = ((np.hypot(cx[:, None] - line_x, cy[None, :] - sy) < clear)
+            | (np.hypot(cx[:, None] - line_x, cy[None, :] - gy) < clear))
     # voxels around the line: columns either side of x = 20, layers either side of z = alt
     ix = [int(line_x / voxel) - 1, int(line_x / voxel)]
     iz = [int(alt / voxel) - 1, int(alt / voxel)]
@@ -825,7 +961,7 @@ def perlin(index: int, seed: int = 0) -> Scenario:
     def fill(shift):
         val = fbm3((cx[:, None, None] + offset[0] + shift * voxel),
                    (cy[None, :, None] + offset[1]), (cz[None, None, :] + offset[2]),
-                   perm, frequency, octaves)
+                   perm, frequency, p["octaves"], p["lacunarity"], p["gain"])
         val = np.where(near[:, :, None], -np.inf, val)
         order = np.argsort(-val.ravel(), kind="stable")[:n_fill]
         filled = np.zeros(val.size, dtype=bool)
@@ -863,13 +999,8 @@ def perlin(index: int, seed: int = 0) -> Scenario:
 
     _, blobs = label(filled)
     return _make(
-        family, "theoretical", index, seed, b, width=width, length=length, ceiling=ceiling,
-        altitude=alt, obstacle_count=blobs,
-        parameters={"size_m": [width, length], "ceiling_m": ceiling, "voxel_m": voxel,
-                    "noise_frequency_per_voxel": per_voxel,
-                    "noise_frequency_per_m": frequency, "octaves": octaves,
-                    "lacunarity": 2.0, "gain": 0.5, "fill_rate": fill_rate,
-                    "clear_radius_m": CLEAR_RADIUS_M, "start_altitude_m": alt},
+        fam, index, seed, b, p, altitude=alt, obstacle_count=blobs,
+        derived={"noise_frequency_per_m": frequency, "start_altitude_m": alt},
         layout={"voxels": list(shape), "filled_voxels": int(filled.sum()),
                 "noise_offset_m": offset, "x_shift_voxels": shift, "blobs": blobs},
     )
@@ -879,33 +1010,23 @@ def perlin(index: int, seed: int = 0) -> Scenario:
 # registry
 # --------------------------------------------------------------------------------------
 
-FAMILIES: dict[str, Callable[[int, int], Scenario]] = {
-    "forest": forest,
-    "urban": urban,
-    "random_angle_cylinder": random_angle_cylinder,
-    "narrow_gap": narrow_gap,
-    "sudden_drop": sudden_drop,
-    "maze": maze,
-    "perlin": perlin,
-}
-"""Family name -> ``build(index, seed) -> Scenario``, in the paper's order."""
+FAMILIES: dict[str, Callable[..., Scenario]] = {k: f.build for k, f in REGISTRY.items()}
+"""Family name -> ``build(index, seed=0, params=None) -> Scenario``, in the paper's order
+(a view of :data:`REGISTRY`)."""
 
-CATEGORY = {"forest": "classic", "urban": "classic", "random_angle_cylinder": "classic",
-            "narrow_gap": "theoretical", "sudden_drop": "theoretical", "maze": "theoretical",
-            "perlin": "theoretical"}
+CATEGORY = {k: f.category for k, f in REGISTRY.items()}
+"""Family name -> category (a view of :data:`REGISTRY`)."""
 
-PAPER_NAMES = {"forest": "Forest", "urban": "Urban",
-               "random_angle_cylinder": "Random-Angle Cylinder", "narrow_gap": "Narrow-Gap",
-               "sudden_drop": "Sudden-Drop", "maze": "Maze", "perlin": "Random Perlin-Noise"}
+PAPER_NAMES = {k: f.paper_name for k, f in REGISTRY.items()}
+"""Family name -> the paper's name (a view of :data:`REGISTRY`)."""
 
 
 def _normalise(name: str) -> str:
     return "_".join(name.strip().lower().replace("-", " ").replace("_", " ").split())
 
 
-_ALIASES = {_normalise(v): k for k, v in PAPER_NAMES.items()}
-_ALIASES.update({"perlin_noise": "perlin", "random_perlin": "perlin",
-                 "cylinder": "random_angle_cylinder", "random_cylinder": "random_angle_cylinder"})
+_ALIASES = {_normalise(f.paper_name): k for k, f in REGISTRY.items()}
+_ALIASES.update({a: k for k, f in REGISTRY.items() for a in f.aliases})
 
 
 def resolve_family(name) -> str:
@@ -927,8 +1048,17 @@ def resolve_family(name) -> str:
                         f"(families: {', '.join(FAMILIES)})")
 
 
-def build_scenario(family: str, index: int, seed: int = 0) -> Scenario:
-    """Configuration ``index`` (1..10) of ``family`` for ``seed`` (see the module docs)."""
+def describe_family(name: str) -> Family:
+    """The declaration of family ``name`` (the paper's names are accepted; ScenarioError if
+    there is none by that name): ``.paper_name``, ``.category``, and ``.schema.rows()``
+    giving name, default, unit, range and doc of each generator parameter."""
+    return REGISTRY[resolve_family(name)]
+
+
+def build_scenario(family: str, index: int, seed: int = 0,
+                   params: Mapping | None = None) -> Scenario:
+    """Configuration ``index`` (1..10) of ``family`` for ``seed`` (see the module docs);
+    ``params`` change the generator's parameters (:func:`describe_family`)."""
     key = resolve_family(family)
     _check(key, index, seed)
-    return FAMILIES[key](int(index), int(seed))
+    return REGISTRY[key].build(int(index), int(seed), params)

@@ -41,16 +41,18 @@ import time
 
 from ft_sitl.autopilot.setpoints import Setpoint
 from ft_sitl.navigation.base import Navigator
+from ft_sitl.schema import Param, Schema
 
 
 class Hover(Navigator):
     """Hover at the start waypoint (times out); optionally sleep in reset (wall clock)."""
 
     name = "t_hover"
+    schema = Schema((Param("sleep_s", 0.0, "s", (0.0, 600.0), doc="sleep in reset"),))
 
-    def __init__(self, sleep_s: float = 0.0):
-        super().__init__()
-        self.sleep_s = float(sleep_s)
+    def __init__(self, **params):
+        super().__init__(**params)
+        self.sleep_s = float(self.settings["sleep_s"])
 
     def reset(self, task):
         super().reset(task)

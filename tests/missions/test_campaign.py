@@ -64,7 +64,8 @@ ERRORS = [
      "algorithms[0]: navigator 'straight' has no parameter 'speed'; did you mean "
      "'speed_m_s'?"),
     ('algorithms = [{name = "straight", params = {speed_m_s = -1}}]',
-     "algorithms[0]: navigator 'straight': speed_m_s: must be a positive number"),
+     "algorithms[0]: navigator 'straight': speed_m_s: must be a number 0.1..50, or none "
+     "(m/s), got -1"),
     ('algorithms = [{name = "straight", lable = "x"}]',
      "algorithms[0]: unknown key(s) 'lable' (did you mean 'label'?); allowed: name, label, "
      "params, command"),
