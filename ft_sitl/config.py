@@ -83,6 +83,13 @@ def suggestion(key, allowed: Iterable[str]) -> str | None:
     return close[0] if close else None
 
 
+def did_you_mean(key, choices: Iterable[str], *, n: int = 1) -> str:
+    """``"; did you mean 'x'?"`` (up to ``n`` close choices), or ``""``: the one "did you
+    mean" of every name lookup (configuration keys, navigators, platforms, parameters)."""
+    close = difflib.get_close_matches(str(key), list(choices), n=n, cutoff=SUGGEST_CUTOFF)
+    return f"; did you mean {', '.join(map(repr, close))}?" if close else ""
+
+
 def check_keys(where: str, table: Mapping, allowed: Iterable[str], *, context: str = "",
                error: type[Exception] = ConfigError) -> None:
     """Refuse the keys of ``table`` not in ``allowed``: all of them in one message, each with

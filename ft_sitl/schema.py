@@ -15,10 +15,11 @@ that a record of the parameters (a scenario's provenance) lists every value in o
 
 from __future__ import annotations
 
-import difflib
 import math
-from collections.abc import Iterable, Mapping
+from collections.abc import Mapping
 from dataclasses import dataclass, field, replace
+
+from ft_sitl.config import did_you_mean
 
 KINDS = ("float", "int", "bool", "str", "vector", "interval")
 
@@ -26,12 +27,6 @@ KINDS = ("float", "int", "bool", "str", "vector", "interval")
 class SchemaError(ValueError):
     """A value a schema refuses; the message names the owner, the key, the value and what is
     allowed."""
-
-
-def did_you_mean(key: str, choices: Iterable[str]) -> str:
-    """``"; did you mean 'x'?"`` for the choice closest to ``key``, or ``""``."""
-    close = difflib.get_close_matches(str(key), list(choices), n=1)
-    return f"; did you mean {close[0]!r}?" if close else ""
 
 
 def _is_number(v) -> bool:

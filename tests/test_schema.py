@@ -2,7 +2,8 @@
 
 import pytest
 
-from ft_sitl.schema import Param, Schema, SchemaError, did_you_mean
+from ft_sitl.config import did_you_mean
+from ft_sitl.schema import Param, Schema, SchemaError
 
 S = Schema((
     Param("speed_m_s", 2.0, "m/s", (0.1, 10.0), doc="how fast"),

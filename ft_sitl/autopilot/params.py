@@ -8,9 +8,10 @@ such a PARAM_SET the same way.
 
 from __future__ import annotations
 
-import difflib
 import math
 from dataclasses import dataclass
+
+from ft_sitl.config import did_you_mean
 
 
 class ParamError(ValueError):
@@ -129,8 +130,7 @@ class ParamSet:
         try:
             return PARAMS[name]
         except KeyError:
-            close = difflib.get_close_matches(name, PARAMS, n=2)
-            hint = f"; did you mean {', '.join(close)}?" if close else ""
+            hint = did_you_mean(name, PARAMS, n=2)
             raise ParamError(f"unknown parameter {name!r}{hint}") from None
 
     def get(self, name: str) -> float:

@@ -17,8 +17,9 @@ from __future__ import annotations
 
 from importlib.metadata import entry_points
 
+from ft_sitl.config import did_you_mean
 from ft_sitl.navigation.base import Navigator
-from ft_sitl.schema import Schema, SchemaError, did_you_mean
+from ft_sitl.schema import Schema, SchemaError
 
 ENTRY_POINT_GROUP = "ft_sitl.navigators"
 

@@ -15,13 +15,12 @@ else is rejected with a message naming the file, the entry and the key.
 
 from __future__ import annotations
 
-import difflib
 import functools
 from collections.abc import Iterable
 from importlib import resources
 from pathlib import Path
 
-from ft_sitl.config import Table, check_keys, read_document
+from ft_sitl.config import Table, check_keys, did_you_mean, read_document
 from ft_sitl.physics.platform import (
     CATEGORIES,
     SCHEMA,
@@ -165,8 +164,7 @@ class PlatformRegistry:
         try:
             return self._platforms[name]
         except KeyError:
-            close = difflib.get_close_matches(name, self._platforms, n=3, cutoff=0.5)
-            hint = f"; did you mean {', '.join(map(repr, close))}?" if close else ""
+            hint = did_you_mean(name, self._platforms, n=3)
             raise PlatformError(
                 f"unknown platform {name!r}{hint} ('ft-sitl platforms list' shows all)"
             ) from None

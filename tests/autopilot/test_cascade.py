@@ -182,7 +182,7 @@ def test_params_are_bounded_and_named():
     ps = ParamSet()
     with pytest.raises(ParamError, match="MPC_XY_VEL_MAX: 25.0 m/s is outside"):
         ps.set("MPC_XY_VEL_MAX", 25.0)
-    with pytest.raises(ParamError, match="did you mean MPC_XY_VEL_MAX"):
+    with pytest.raises(ParamError, match="did you mean 'MPC_XY_VEL_MAX'"):
         ps.set("MPC_XY_VEL_MX", 3.0)
     with pytest.raises(ParamError, match="not finite"):
         ps.set("MC_ROLL_P", float("nan"))
