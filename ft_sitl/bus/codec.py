@@ -248,11 +248,13 @@ def _decode(decoder: msgspec.json.Decoder, payload, what: str):
     except msgspec.ValidationError as exc:
         try:
             obj = msgspec.json.decode(payload)
-        except (msgspec.MsgspecError, RecursionError):  # e.g. 1e999: no value to show
+        except (msgspec.MsgspecError, RecursionError, UnicodeDecodeError):  # no value to show
             obj = None
         raise _error(what, exc, obj) from None
-    except (msgspec.DecodeError, RecursionError) as exc:
-        raise _malformed(payload, what, exc) from None
+    except (msgspec.DecodeError, UnicodeDecodeError) as exc:  # msgspec raises the latter for
+        raise _malformed(payload, what, exc) from None      # bad UTF-8 inside a string
+    except RecursionError:
+        raise BusPayloadError(f"{what}: payload is nested too deeply to decode") from None
 
 
 def _convert(value, type_, what: str):
