@@ -177,6 +177,7 @@ EventName = Annotated[str, Meta(pattern=r"^[a-z][a-z0-9_]{0,63}$",
 EventValue = (Annotated[str, Meta(max_length=MAX_EVENT_STRING)] | int | float | bool | None
               | Annotated[list[float], Meta(max_length=MAX_EVENT_ARRAY)])
 
+_EVENT_FIELDS = dict[str, EventValue]
 _NAME_RE = re.compile(r"[a-z][a-z0-9_]{0,63}")
 
 
@@ -508,16 +509,43 @@ class Event:
                                       f"({', '.join(_EVENT_RESERVED)})")
             if isinstance(value, np.ndarray):
                 value = value.ravel()
-            value = _convert(_plain(value, what, name), EventValue, f"{what}: field {name!r}")
+            clean[name] = _plain(value, what, name)
+        try:  # one conversion of all fields; on failure, one per field to name the field
+            clean = msgspec.convert(clean, _EVENT_FIELDS)
+        except (msgspec.MsgspecError, RecursionError):
+            for name, value in clean.items():
+                _convert(value, EventValue, f"{what}: field {name!r}")
+            raise  # not reached: some field failed above
+        for name, value in clean.items():
             if isinstance(value, float):
                 _check_finite((value,), what, f"field {name!r}")
             elif isinstance(value, list):
                 _check_finite(value, what, f"field {name!r}")
-            clean[name] = value
         required = EVENT_TYPES.get(self.type)
         if required is not None:
             _convert(clean, required, what)
         object.__setattr__(self, "fields", clean)
+
+    @classmethod
+    def _from_payload(cls, header: EventHeader, fields: dict[str, Any]) -> Event:
+        """An Event from a decoded header and field values already of ``EventValue`` type
+        (decoded as such): checks the names and the required fields, not the values."""
+        self = object.__new__(cls)
+        object.__setattr__(self, "type", _event_type(header.type))
+        object.__setattr__(self, "time_usec", header.time_usec)
+        what = f"event {str(self.type)!r}"
+        if len(fields) > MAX_EVENT_FIELDS:
+            raise BusPayloadError(f"{what}: {len(fields)} fields, more than "
+                                  f"{MAX_EVENT_FIELDS}")
+        for name in fields:
+            if not _NAME_RE.fullmatch(name):
+                raise BusPayloadError(f"{what}: field name {name!r} must match "
+                                      "[a-z][a-z0-9_]*")
+        required = EVENT_TYPES.get(self.type)
+        if required is not None:
+            _convert(fields, required, what)
+        object.__setattr__(self, "fields", fields)
+        return self
 
     @property
     def t(self) -> float:
@@ -526,6 +554,9 @@ class Event:
 
 
 _EVENT_DECODER = msgspec.json.Decoder(dict[str, Any])
+#: Decodes an event whose every value is an EventValue (the header's are too); a decoder
+#: caches its type, msgspec.convert would rebuild it on every call.
+_EVENT_VALUES_DECODER = msgspec.json.Decoder(_EVENT_FIELDS)
 
 
 def encode_event(event: Event) -> bytes:
@@ -539,10 +570,18 @@ def encode_event(event: Event) -> bytes:
 def decode_event(payload) -> Event:
     """An Event from a JSON payload; BusPayloadError naming what was wrong."""
     what = "event"
-    obj = _decode(_EVENT_DECODER, payload, what)
+    _check_payload(payload, what)
+    try:
+        obj = _EVENT_VALUES_DECODER.decode(payload)
+    except (msgspec.MsgspecError, RecursionError, UnicodeDecodeError):
+        # the slow path, to name what is wrong: Event() checks each value by name
+        obj = _decode(_EVENT_DECODER, payload, what)
+        header = _convert(obj, EventHeader, what)
+        fields = {k: v for k, v in obj.items() if k not in _EVENT_RESERVED}
+        return Event(type=header.type, time_usec=header.time_usec, fields=fields)
     header = _convert(obj, EventHeader, what)
-    fields = {k: v for k, v in obj.items() if k not in _EVENT_RESERVED}
-    return Event(type=header.type, time_usec=header.time_usec, fields=fields)
+    return Event._from_payload(header, {k: v for k, v in obj.items()
+                                        if k not in _EVENT_RESERVED})
 
 
 # --- status ---------------------------------------------------------------------------------
