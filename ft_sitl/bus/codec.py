@@ -13,6 +13,16 @@ JSON (UTF-8, compact, no NaN/Infinity, ``"v": 1`` = ``SCHEMA_VERSION``)
     status     ``{"v", "vehicle", "status": "online"|"offline"[, "reason"]}``.
     config     ``{["v",] "telemetry_rate_hz", "depth", "points"}`` (any non-empty subset).
 
+Each JSON payload is declared once as a ``msgspec.Struct`` (``TelemetryPayload``,
+``EventHeader`` and the known events' ``*Fields``, ``StatusPayload``, ``ConfigPayload``):
+field, type, range (``msgspec.Meta``) and a one-line description. Decoding is
+``msgspec.json`` against that declaration, and the values given to ``Telemetry``, ``Event``
+and ``validate_config`` are checked against the same declaration with ``msgspec.convert``;
+what a type cannot say (``t`` against ``time_usec``, a unit quaternion, the schema
+version, event field names) is checked in ``__post_init__`` or next to the conversion.
+msgspec's own message (e.g. ``Expected `float` <= 1.0 - at `$.motors[1]```) follows the
+payload's name in ``BusPayloadError``.
+
 ``t`` is simulated time in seconds and always equals ``time_usec / 1e6`` (decoders check it).
 
 Binary sensor frames (little-endian): a fixed ``HEADER_SIZE`` = 192 byte header (magic
@@ -24,16 +34,18 @@ float32 points, row-major (x, y, z).
 
 from __future__ import annotations
 
-import json
+import enum
 import math
 import numbers
 import re
 import struct
 from collections.abc import Mapping
 from dataclasses import dataclass, field
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING, Annotated, Any
 
+import msgspec
 import numpy as np
+from msgspec import UNSET, Meta, Struct, UnsetType
 
 from ft_sitl.bus.topics import check_vehicle
 from ft_sitl.rotations import matrix_from_quat, quat_from_matrix
@@ -49,10 +61,23 @@ __all__ = [
     "HEADER_SIZE",
     "SCHEMA_VERSION",
     "BusPayloadError",
+    "CollisionFields",
+    "ConfigPayload",
     "Event",
+    "EventHeader",
+    "EventType",
+    "FrameKind",
+    "FrameName",
+    "ModeFields",
+    "NoFields",
+    "OfflineReason",
     "SensorFrame",
     "Status",
+    "StatusPayload",
+    "StatusValue",
     "Telemetry",
+    "TelemetryPayload",
+    "TrialEndFields",
     "decode_config",
     "decode_event",
     "decode_frame",
@@ -75,6 +100,12 @@ MAX_JSON_BYTES = 64 * 1024
 MAX_TIME_USEC = 2**63 - 1
 #: Largest number of motors in telemetry.
 MAX_MOTORS = 16
+#: Longest string value in an event.
+MAX_EVENT_STRING = 1024
+#: Most fields (besides v, type, t, time_usec) in one event.
+MAX_EVENT_FIELDS = 32
+#: Most numbers in an event field's array.
+MAX_EVENT_ARRAY = 64
 #: Largest allowed difference between ``t`` and ``time_usec / 1e6`` (s).
 _T_TOL_S = 1e-6
 #: Tolerance on a quaternion's norm in JSON telemetry (values are rounded to 1e-9).
@@ -90,92 +121,177 @@ class BusPayloadError(ValueError):
     """A payload (or the values to encode into one) is malformed; the message says how."""
 
 
-# --- JSON helpers ---------------------------------------------------------------------------
-def _reject_constant(name: str):
-    raise BusPayloadError(f"JSON constant {name} is not allowed (numbers must be finite)")
+# --- enumerations ---------------------------------------------------------------------------
+class EventType(enum.StrEnum):
+    """The event types this library knows (``EVENT_TYPES`` gives their required fields).
+    Other types matching ``[a-z][a-z0-9_]*`` are allowed and stay plain strings."""
+
+    ARMED = "armed"
+    DISARMED = "disarmed"
+    MODE = "mode"
+    COLLISION = "collision"
+    TRIAL_START = "trial_start"
+    TRIAL_END = "trial_end"
 
 
-def _loads(payload, what: str) -> dict:
-    """Parse a JSON object payload (bytes or str) and check its ``"v"`` field."""
-    if isinstance(payload, bytes | bytearray | memoryview):
-        raw = bytes(payload)
-        if len(raw) > MAX_JSON_BYTES:
-            raise BusPayloadError(f"{what}: payload is {len(raw)} bytes, more than the "
-                                  f"{MAX_JSON_BYTES} allowed for JSON")
-        try:
-            text = raw.decode("utf-8")
-        except UnicodeDecodeError as exc:
-            raise BusPayloadError(f"{what}: payload is not UTF-8 ({exc.reason} at byte "
-                                  f"{exc.start})") from None
-    elif isinstance(payload, str):
-        text = payload
-        if len(text) > MAX_JSON_BYTES:
-            raise BusPayloadError(f"{what}: payload is {len(text)} characters, more than the "
-                                  f"{MAX_JSON_BYTES} allowed for JSON")
-    else:
-        raise BusPayloadError(f"{what}: payload must be bytes or str, got "
-                              f"{type(payload).__name__}")
-    try:
-        obj = json.loads(text, parse_constant=_reject_constant)
-    except BusPayloadError as exc:
-        raise BusPayloadError(f"{what}: {exc}") from None
-    except ValueError as exc:  # json.JSONDecodeError
-        raise BusPayloadError(f"{what}: payload is not valid JSON ({exc})") from None
-    if not isinstance(obj, dict):
-        raise BusPayloadError(f"{what}: payload must be a JSON object, got a JSON "
-                              f"{_json_type(obj)}")
-    return obj
+class StatusValue(enum.StrEnum):
+    """``"status"`` of a status payload."""
+
+    ONLINE = "online"
+    OFFLINE = "offline"
 
 
-def _dumps(obj: dict) -> bytes:
-    return json.dumps(obj, separators=(",", ":"), allow_nan=False).encode("utf-8")
+class OfflineReason(enum.StrEnum):
+    """The reasons the publisher gives when a vehicle goes offline (the payload's
+    ``"reason"`` is any non-empty string; these are the ones this library writes)."""
+
+    CLOSED = "closed"
+    CONNECTION_LOST = "connection lost"
 
 
-def _json_type(value) -> str:
-    if value is None:
-        return "null"
-    if isinstance(value, bool):
-        return "boolean"
-    if isinstance(value, int | float):
-        return "number"
-    if isinstance(value, str):
-        return "string"
-    if isinstance(value, list):
-        return "array"
-    if isinstance(value, dict):
-        return "object"
-    return type(value).__name__
+class FrameKind(enum.StrEnum):
+    """``SensorFrame.kind``: what a binary frame carries."""
+
+    DEPTH = "depth"
+    POINTS = "points"
 
 
-def _check_schema_version(obj: dict, what: str, required: bool = True) -> None:
-    if "v" not in obj:
-        if required:
-            raise BusPayloadError(f"{what}: missing schema version field \"v\" (expected "
-                                  f"{SCHEMA_VERSION})")
-        return
-    v = obj["v"]
-    if isinstance(v, bool) or not isinstance(v, int):
-        raise BusPayloadError(f"{what}: \"v\" must be an integer, got {_json_type(v)} {v!r}")
+class FrameName(enum.StrEnum):
+    """``SensorFrame.frame``: the coordinate frame of a binary frame's data."""
+
+    OPTICAL = "optical"
+    WORLD = "world"
+    BODY = "body"
+
+
+# --- JSON field types -----------------------------------------------------------------------
+SchemaVersion = Annotated[int, Meta(description="schema version, must be SCHEMA_VERSION")]
+Seconds = Annotated[float, Meta(description="simulated time, s; equals time_usec / 1e6")]
+TimeUsec = Annotated[int, Meta(ge=0, le=MAX_TIME_USEC, description="simulated time, µs")]
+Vec3 = tuple[float, float, float]
+Quat = tuple[float, float, float, float]
+MotorOutput = Annotated[float, Meta(ge=0.0, le=1.0, description="motor output, 0..1")]
+NonEmptyStr = Annotated[str, Meta(min_length=1)]
+EventName = Annotated[str, Meta(pattern=r"^[a-z][a-z0-9_]{0,63}$",
+                                description="[a-z][a-z0-9_]*, at most 64 characters")]
+#: The value of an event's own field.
+EventValue = (Annotated[str, Meta(max_length=MAX_EVENT_STRING)] | int | float | bool | None
+              | Annotated[list[float], Meta(max_length=MAX_EVENT_ARRAY)])
+
+_EVENT_FIELDS = dict[str, EventValue]
+_NAME_RE = re.compile(r"[a-z][a-z0-9_]{0,63}")
+
+
+def _check_version(v: int, what: str) -> None:
     if v != SCHEMA_VERSION:
-        raise BusPayloadError(f"{what}: unsupported schema version v={v} (this library reads "
-                              f"v={SCHEMA_VERSION})")
+        raise ValueError(f"{what}: unsupported schema version v={v} (this library reads "
+                         f"v={SCHEMA_VERSION})")
 
 
-def _check_keys(obj: dict, what: str, allowed, required) -> None:
-    missing = [k for k in required if k not in obj]
-    if missing:
-        raise BusPayloadError(f"{what}: missing field(s) {', '.join(map(repr, missing))}")
-    unknown = sorted(set(obj) - set(allowed))
-    if unknown:
-        raise BusPayloadError(f"{what}: unknown field(s) {', '.join(map(repr, unknown))} "
-                              f"(allowed: {', '.join(allowed)})")
+def _check_t(t: float, time_usec: int, what: str) -> None:
+    if abs(t - time_usec * 1e-6) > _T_TOL_S:
+        raise ValueError(f"{what}: t = {t} s disagrees with time_usec = {time_usec} "
+                         "(t must be time_usec / 1e6 to within 1 us)")
+
+
+_PATH_RE = re.compile(r" - at `\$((?:\.\w+|\[\d+\])*)`$")
+_STEP_RE = re.compile(r"\.(\w+)|\[(\d+)\]")
+
+
+def _error(what: str, exc: Exception, value=None) -> BusPayloadError:
+    """A BusPayloadError from msgspec's (or a __post_init__'s) error, prefixed with what.
+    ``value``, the input as Python objects, lets it add the offending value msgspec's
+    message leaves out (``Expected `float` <= 1.0 - at `$.motors[1]`, got 2.0``)."""
+    msg = str(exc)
+    m = _PATH_RE.search(msg)
+    if m and value is not None and ", got" not in msg and not msg.startswith("Invalid"):
+        try:
+            for key, index in _STEP_RE.findall(m.group(1)):
+                value = value[key] if key else value[int(index)]
+            shown = repr(value)
+            msg += f", got {shown if len(shown) <= 80 else shown[:76] + ' ...'}"
+        except (KeyError, IndexError, TypeError):
+            pass
+    return BusPayloadError(msg if msg.startswith(f"{what}: ") else f"{what}: {msg}")
+
+
+def _malformed(payload, what: str, exc: Exception) -> BusPayloadError:
+    """Say why a payload msgspec could not parse is not JSON (the error path only)."""
+    if not isinstance(payload, str):
+        try:
+            payload = bytes(payload).decode("utf-8")
+        except UnicodeDecodeError as err:
+            return BusPayloadError(f"{what}: payload is not UTF-8 ({err.reason} at byte "
+                                   f"{err.start})")
+    for constant in ("NaN", "Infinity", "-Infinity"):
+        if re.search(rf"[\[:,]\s*{constant}\s*[\],}}]", payload):
+            return BusPayloadError(f"{what}: JSON constant {constant} is not allowed (numbers "
+                                   f"must be finite)")
+    return BusPayloadError(f"{what}: payload is not valid JSON ({exc})")
+
+
+def _check_payload(payload, what: str) -> None:
+    """Reject what is not bytes/str or is larger than MAX_JSON_BYTES before parsing it."""
+    if isinstance(payload, bytes | bytearray | memoryview | str):
+        n = memoryview(payload).nbytes if not isinstance(payload, str) else len(payload)
+        if n > MAX_JSON_BYTES:
+            unit = "characters" if isinstance(payload, str) else "bytes"
+            raise BusPayloadError(f"{what}: payload is {n} {unit}, more than the "
+                                  f"{MAX_JSON_BYTES} allowed for JSON")
+        return
+    raise BusPayloadError(f"{what}: payload must be bytes or str, got "
+                          f"{type(payload).__name__}")
+
+
+def _decode(decoder: msgspec.json.Decoder, payload, what: str):
+    _check_payload(payload, what)
+    try:
+        return decoder.decode(payload)
+    except msgspec.ValidationError as exc:
+        try:
+            obj = msgspec.json.decode(payload)
+        except (msgspec.MsgspecError, RecursionError, UnicodeDecodeError):  # no value to show
+            obj = None
+        raise _error(what, exc, obj) from None
+    except (msgspec.DecodeError, UnicodeDecodeError) as exc:  # msgspec raises the latter for
+        raise _malformed(payload, what, exc) from None      # bad UTF-8 inside a string
+    except RecursionError:
+        raise BusPayloadError(f"{what}: payload is nested too deeply to decode") from None
+
+
+def _convert(value, type_, what: str):
+    try:
+        return msgspec.convert(value, type_)
+    except (msgspec.MsgspecError, RecursionError) as exc:
+        raise _error(what, exc, value) from None
+
+
+def _plain(value, what: str, name: str):
+    """numpy arrays (one-dimensional) and scalars as Python lists and scalars."""
+    if isinstance(value, np.ndarray):
+        if value.ndim != 1:
+            raise BusPayloadError(f"{what}: {name} must be one-dimensional, got shape "
+                                  f"{value.shape}")
+        return value.tolist()
+    if isinstance(value, np.generic):
+        return value.item()
+    if isinstance(value, list | tuple):
+        return [x.item() if isinstance(x, np.generic) else x for x in value]
+    return value
+
+
+def _check_finite(values, what: str, name: str) -> None:
+    """NaN and infinity cannot come out of JSON, but can be handed to an encoder."""
+    for i, x in enumerate(values):
+        if not math.isfinite(x):
+            raise BusPayloadError(f"{what}: {name}[{i}] must be finite, got {x!r}")
 
 
 def _finite(value, what: str, name: str) -> float:
     """A finite real number (int or float, not bool; numpy scalars accepted)."""
     if isinstance(value, bool | np.bool_) or not isinstance(value, numbers.Real):
-        raise BusPayloadError(f"{what}: {name} must be a number, got {_json_type(value)} "
-                              f"{value!r}")
+        raise BusPayloadError(f"{what}: {name} must be a number, got "
+                              f"{type(value).__name__} {value!r}")
     f = float(value)
     if not math.isfinite(f):
         raise BusPayloadError(f"{what}: {name} must be finite, got {value!r}")
@@ -185,47 +301,56 @@ def _finite(value, what: str, name: str) -> float:
 def _time_usec(value, what: str) -> int:
     if isinstance(value, bool | np.bool_) or not isinstance(value, numbers.Integral):
         raise BusPayloadError(f"{what}: time_usec must be an integer (microseconds), got "
-                              f"{_json_type(value)} {value!r}")
+                              f"{type(value).__name__} {value!r}")
     t = int(value)
     if not 0 <= t <= MAX_TIME_USEC:
         raise BusPayloadError(f"{what}: time_usec must be in [0, 2**63 - 1], got {t}")
     return t
 
 
-def _check_t(obj: dict, time_usec: int, what: str) -> None:
-    t = _finite(obj["t"], what, "t")
-    if abs(t - time_usec * 1e-6) > _T_TOL_S:
-        raise BusPayloadError(f"{what}: t = {t} s disagrees with time_usec = {time_usec} "
-                              f"(t must be time_usec / 1e6 to within 1 us)")
+def _round(values: tuple[float, ...], decimals: int) -> tuple[float, ...]:
+    return tuple(round(x, decimals) + 0.0 for x in values)  # + 0.0 turns -0.0 into 0.0
 
 
-def _vector(value, n: int | None, what: str, name: str) -> tuple[float, ...]:
-    """A sequence of finite numbers, of length n (or 1..MAX_MOTORS when n is None)."""
-    if isinstance(value, np.ndarray):
-        if value.ndim != 1:
-            raise BusPayloadError(f"{what}: {name} must be one-dimensional, got shape "
-                                  f"{value.shape}")
-        value = value.tolist()
-    if not isinstance(value, list | tuple):
-        raise BusPayloadError(f"{what}: {name} must be an array of numbers, got "
-                              f"{_json_type(value)} {value!r}")
-    if n is not None and len(value) != n:
-        raise BusPayloadError(f"{what}: {name} must have {n} elements, got {len(value)}")
-    return tuple(_finite(x, what, f"{name}[{i}]") for i, x in enumerate(value))
-
-
-def _round(values: tuple[float, ...], decimals: int) -> list[float]:
-    return [round(x, decimals) + 0.0 for x in values]  # + 0.0 turns -0.0 into 0.0
+_ENCODER = msgspec.json.Encoder()
 
 
 # --- telemetry ------------------------------------------------------------------------------
-_TELEMETRY_FIELDS = ("v", "t", "time_usec", "p_world_m", "v_world_m_s", "q_world_body",
-                     "w_body_rad_s", "motors")
+class TelemetryPayload(Struct, frozen=True, forbid_unknown_fields=True):
+    """The telemetry JSON object; every field is required, unknown fields are rejected."""
+
+    v: SchemaVersion
+    t: Seconds
+    time_usec: TimeUsec
+    #: vehicle position, world ENU, m
+    p_world_m: Vec3
+    #: velocity, world ENU, m/s
+    v_world_m_s: Vec3
+    #: attitude (w, x, y, z) rotating body FLU into world ENU; unit norm within 1e-3
+    q_world_body: Quat
+    #: body rates, FLU, rad/s
+    w_body_rad_s: Vec3
+    #: 1 to 16 motor outputs in [0, 1], PX4 motor order
+    motors: Annotated[tuple[MotorOutput, ...], Meta(min_length=1, max_length=MAX_MOTORS)]
+
+    def __post_init__(self):
+        what = "telemetry"
+        _check_version(self.v, what)
+        _check_t(self.t, self.time_usec, what)
+        norm = math.sqrt(sum(c * c for c in self.q_world_body))
+        if abs(norm - 1.0) > _Q_NORM_TOL_JSON:
+            raise ValueError(f"{what}: q_world_body must be a unit quaternion (w, x, y, z) "
+                             f"with norm 1 +- {_Q_NORM_TOL_JSON}, got norm {norm:.6g}")
+
+
+_TELEMETRY_DECODER = msgspec.json.Decoder(TelemetryPayload)
+_VECTORS = ("p_world_m", "v_world_m_s", "q_world_body", "w_body_rad_s", "motors")
 
 
 @dataclass(frozen=True)
 class Telemetry:
-    """One telemetry sample, validated on construction (BusPayloadError naming the field).
+    """One telemetry sample, validated on construction against ``TelemetryPayload``
+    (BusPayloadError naming the field).
 
     ``p_world_m`` position and ``v_world_m_s`` velocity in world ENU; ``q_world_body`` the
     attitude quaternion (w, x, y, z) rotating body FLU vectors into world ENU (unit norm
@@ -242,25 +367,25 @@ class Telemetry:
 
     def __post_init__(self):
         what = "telemetry"
-        set_ = object.__setattr__
-        set_(self, "time_usec", _time_usec(self.time_usec, what))
-        set_(self, "p_world_m", _vector(self.p_world_m, 3, what, "p_world_m"))
-        set_(self, "v_world_m_s", _vector(self.v_world_m_s, 3, what, "v_world_m_s"))
-        q = _vector(self.q_world_body, 4, what, "q_world_body")
-        norm = math.sqrt(sum(c * c for c in q))
-        if abs(norm - 1.0) > _Q_NORM_TOL_JSON:
-            raise BusPayloadError(f"{what}: q_world_body must be a unit quaternion (w, x, y, "
-                                  f"z) with norm 1 +- {_Q_NORM_TOL_JSON}, got norm {norm:.6g}")
-        set_(self, "q_world_body", q)
-        set_(self, "w_body_rad_s", _vector(self.w_body_rad_s, 3, what, "w_body_rad_s"))
-        motors = _vector(self.motors, None, what, "motors")
-        if not 1 <= len(motors) <= MAX_MOTORS:
-            raise BusPayloadError(f"{what}: motors must have 1 to {MAX_MOTORS} elements, got "
-                                  f"{len(motors)}")
-        for i, m in enumerate(motors):
-            if not 0.0 <= m <= 1.0:
-                raise BusPayloadError(f"{what}: motors[{i}] must be in [0, 1], got {m!r}")
-        set_(self, "motors", motors)
+        obj = {name: _plain(getattr(self, name), what, name) for name in _VECTORS}
+        time_usec = _plain(self.time_usec, what, "time_usec")
+        # t as the payload would carry it; when time_usec is not an int, convert names it
+        t = time_usec * 1e-6 if type(time_usec) is int else 0.0
+        checked = _convert({"v": SCHEMA_VERSION, "t": t, "time_usec": time_usec, **obj},
+                           TelemetryPayload, what)
+        for name in _VECTORS:
+            values = getattr(checked, name)
+            _check_finite(values, what, name)
+            object.__setattr__(self, name, values)
+        object.__setattr__(self, "time_usec", checked.time_usec)
+
+    @classmethod
+    def _from_payload(cls, p: TelemetryPayload) -> Telemetry:
+        """A Telemetry from a decoded (hence validated) payload, without checking again."""
+        self = object.__new__(cls)
+        for name in ("time_usec", *_VECTORS):
+            object.__setattr__(self, name, getattr(p, name))
+        return self
 
     @property
     def t(self) -> float:
@@ -272,87 +397,83 @@ def encode_telemetry(sample: Telemetry) -> bytes:
     """Compact JSON of a Telemetry sample (values rounded: 1 um, 1 um/s, 1e-9, 1e-4)."""
     if not isinstance(sample, Telemetry):
         raise BusPayloadError(f"telemetry: expected a Telemetry, got {type(sample).__name__}")
-    obj: dict[str, Any] = {"v": SCHEMA_VERSION, "t": sample.t, "time_usec": sample.time_usec}
-    for name, decimals in _DECIMALS.items():
-        obj[name] = _round(getattr(sample, name), decimals)
-    return _dumps(obj)
+    return _ENCODER.encode(TelemetryPayload(
+        SCHEMA_VERSION, sample.t, sample.time_usec,
+        *(_round(getattr(sample, name), decimals) for name, decimals in _DECIMALS.items())))
 
 
 def decode_telemetry(payload) -> Telemetry:
     """Telemetry from a JSON payload; BusPayloadError naming what was wrong."""
-    what = "telemetry"
-    obj = _loads(payload, what)
-    _check_schema_version(obj, what)
-    _check_keys(obj, what, _TELEMETRY_FIELDS, _TELEMETRY_FIELDS)
-    time_usec = _time_usec(obj["time_usec"], what)
-    _check_t(obj, time_usec, what)
-    for name in _DECIMALS:  # JSON arrays only (the constructor also takes tuples/ndarrays)
-        if not isinstance(obj[name], list):
-            raise BusPayloadError(f"{what}: {name} must be an array of numbers, got "
-                                  f"{_json_type(obj[name])} {obj[name]!r}")
-    return Telemetry(time_usec=time_usec, p_world_m=obj["p_world_m"],
-                     v_world_m_s=obj["v_world_m_s"], q_world_body=obj["q_world_body"],
-                     w_body_rad_s=obj["w_body_rad_s"], motors=obj["motors"])
+    return Telemetry._from_payload(_decode(_TELEMETRY_DECODER, payload, "telemetry"))
 
 
 # --- events ---------------------------------------------------------------------------------
-_NAME_RE = re.compile(r"[a-z][a-z0-9_]{0,63}")
-_EVENT_RESERVED = ("v", "type", "t", "time_usec")
-#: Longest string value in an event.
-MAX_EVENT_STRING = 1024
-#: Most fields (besides v, type, t, time_usec) in one event.
-MAX_EVENT_FIELDS = 32
+class EventHeader(Struct, frozen=True):
+    """The fields every event carries; the event's own fields follow at the top level."""
+
+    v: SchemaVersion
+    #: event type: an ``EventType`` or another name
+    type: EventName
+    t: Seconds
+    time_usec: TimeUsec
+
+    def __post_init__(self):
+        _check_version(self.v, "event")
+        _check_t(self.t, self.time_usec, "event")
 
 
-def _nonempty_str(value, what, name):
-    if not isinstance(value, str) or not value:
-        raise BusPayloadError(f"{what}: {name} must be a non-empty string, got "
-                              f"{_json_type(value)} {value!r}")
+_EVENT_RESERVED = tuple(EventHeader.__struct_fields__)
 
 
-def _nonneg_number(value, what, name):
-    if _finite(value, what, name) < 0.0:
-        raise BusPayloadError(f"{what}: {name} must be >= 0, got {value!r}")
+class NoFields(Struct, frozen=True):
+    """An event type that requires no fields (it may carry any)."""
 
 
-#: Known event types and their required fields (name -> check). Other types are allowed
-#: (names matching ``[a-z][a-z0-9_]*``) and carry whatever fields they like; every field
-#: value must be a string, a finite number, a boolean, null, or an array of finite numbers.
-EVENT_TYPES: dict[str, dict[str, Any]] = {
-    "armed": {},
-    "disarmed": {},
-    "mode": {"mode": _nonempty_str},                 # PX4 mode name, e.g. "OFFBOARD"
-    "collision": {"object": _nonempty_str,           # obstacle piece name
-                  "speed_m_s": _nonneg_number},      # impact speed, m/s
-    "trial_start": {},
-    "trial_end": {"outcome": _nonempty_str},         # e.g. "success", "collision", "timeout"
+class ModeFields(Struct, frozen=True):
+    """``mode``: the flight mode changed."""
+
+    #: PX4 mode name, e.g. "OFFBOARD"
+    mode: NonEmptyStr
+
+
+class CollisionFields(Struct, frozen=True):
+    """``collision``: the vehicle hit an obstacle."""
+
+    #: obstacle piece name
+    object: NonEmptyStr
+    #: impact speed, m/s
+    speed_m_s: Annotated[float, Meta(ge=0.0, description="impact speed, m/s")]
+
+
+class TrialEndFields(Struct, frozen=True):
+    """``trial_end``: a trial ended."""
+
+    #: e.g. "success", "collision", "timeout"
+    outcome: NonEmptyStr
+
+
+#: Known event types and the fields they require (a Struct each; extra fields are allowed).
+#: Other types (names matching ``[a-z][a-z0-9_]*``) carry whatever fields they like; every
+#: field value must be an ``EventValue``: a string, a finite number, a boolean, null, or an
+#: array of finite numbers.
+EVENT_TYPES: dict[EventType, type[Struct]] = {
+    EventType.ARMED: NoFields,
+    EventType.DISARMED: NoFields,
+    EventType.MODE: ModeFields,
+    EventType.COLLISION: CollisionFields,
+    EventType.TRIAL_START: NoFields,
+    EventType.TRIAL_END: TrialEndFields,
 }
 
 
-def _event_value(value, what: str, name: str):
-    """An event field value, normalised to a JSON type."""
-    if value is None or isinstance(value, bool):
+def _event_type(value) -> EventType | str:
+    if not isinstance(value, str) or not _NAME_RE.fullmatch(value):
+        raise BusPayloadError(f"event: type must match [a-z][a-z0-9_]* (at most 64 "
+                              f"characters), got {value!r}")
+    try:
+        return EventType(value)
+    except ValueError:  # another type: allowed
         return value
-    if isinstance(value, np.bool_):
-        return bool(value)
-    if isinstance(value, str):
-        if len(value) > MAX_EVENT_STRING:
-            raise BusPayloadError(f"{what}: field {name!r} is a string of {len(value)} "
-                                  f"characters, more than {MAX_EVENT_STRING}")
-        return value
-    if isinstance(value, numbers.Integral):
-        return int(value)
-    if isinstance(value, numbers.Real):
-        return _finite(value, what, f"field {name!r}")
-    if isinstance(value, list | tuple | np.ndarray):
-        vec = _vector(list(np.asarray(value).ravel()) if isinstance(value, np.ndarray)
-                      else value, None, what, f"field {name!r}")
-        if len(vec) > 64:
-            raise BusPayloadError(f"{what}: field {name!r} has {len(vec)} elements, more "
-                                  "than 64")
-        return list(vec)
-    raise BusPayloadError(f"{what}: field {name!r} must be a string, number, boolean, null "
-                          f"or array of numbers, got {_json_type(value)}")
 
 
 @dataclass(frozen=True)
@@ -360,19 +481,18 @@ class Event:
     """A discrete event at simulated time ``time_usec``: ``type`` plus its ``fields``.
 
     Validated on construction: ``type`` matches ``[a-z][a-z0-9_]*`` (at most 64
-    characters); known types (``EVENT_TYPES``) must carry their required fields, e.g.
-    ``Event("collision", 12_000_000, {"object": "tree_3", "speed_m_s": 2.1})``.
+    characters) and becomes an ``EventType`` when it is one; known types (``EVENT_TYPES``)
+    must carry their required fields, e.g.
+    ``Event(EventType.COLLISION, 12_000_000, {"object": "tree_3", "speed_m_s": 2.1})``.
     """
 
-    type: str
+    type: EventType | str
     time_usec: int
     fields: Mapping[str, Any] = field(default_factory=dict)
 
     def __post_init__(self):
-        what = f"event {self.type!r}"
-        if not isinstance(self.type, str) or not _NAME_RE.fullmatch(self.type):
-            raise BusPayloadError(f"event: type must match [a-z][a-z0-9_]* (at most 64 "
-                                  f"characters), got {self.type!r}")
+        object.__setattr__(self, "type", _event_type(self.type))
+        what = f"event {str(self.type)!r}"
         object.__setattr__(self, "time_usec", _time_usec(self.time_usec, what))
         if not isinstance(self.fields, Mapping):
             raise BusPayloadError(f"{what}: fields must be a mapping, got "
@@ -388,12 +508,45 @@ class Event:
             if name in _EVENT_RESERVED:
                 raise BusPayloadError(f"{what}: field name {name!r} is reserved "
                                       f"({', '.join(_EVENT_RESERVED)})")
-            clean[name] = _event_value(value, what, name)
-        for name, check in EVENT_TYPES.get(self.type, {}).items():
-            if name not in clean:
-                raise BusPayloadError(f"{what}: missing required field {name!r}")
-            check(clean[name], what, name)
+            if isinstance(value, np.ndarray):
+                value = value.ravel()
+            clean[name] = _plain(value, what, name)
+        try:  # one conversion of all fields; on failure, one per field to name the field
+            clean = msgspec.convert(clean, _EVENT_FIELDS)
+        except (msgspec.MsgspecError, RecursionError):
+            for name, value in clean.items():
+                _convert(value, EventValue, f"{what}: field {name!r}")
+            raise  # not reached: some field failed above
+        for name, value in clean.items():
+            if isinstance(value, float):
+                _check_finite((value,), what, f"field {name!r}")
+            elif isinstance(value, list):
+                _check_finite(value, what, f"field {name!r}")
+        required = EVENT_TYPES.get(self.type)
+        if required is not None:
+            _convert(clean, required, what)
         object.__setattr__(self, "fields", clean)
+
+    @classmethod
+    def _from_payload(cls, header: EventHeader, fields: dict[str, Any]) -> Event:
+        """An Event from a decoded header and field values already of ``EventValue`` type
+        (decoded as such): checks the names and the required fields, not the values."""
+        self = object.__new__(cls)
+        object.__setattr__(self, "type", _event_type(header.type))
+        object.__setattr__(self, "time_usec", header.time_usec)
+        what = f"event {str(self.type)!r}"
+        if len(fields) > MAX_EVENT_FIELDS:
+            raise BusPayloadError(f"{what}: {len(fields)} fields, more than "
+                                  f"{MAX_EVENT_FIELDS}")
+        for name in fields:
+            if not _NAME_RE.fullmatch(name):
+                raise BusPayloadError(f"{what}: field name {name!r} must match "
+                                      "[a-z][a-z0-9_]*")
+        required = EVENT_TYPES.get(self.type)
+        if required is not None:
+            _convert(fields, required, what)
+        object.__setattr__(self, "fields", fields)
+        return self
 
     @property
     def t(self) -> float:
@@ -401,40 +554,63 @@ class Event:
         return self.time_usec * 1e-6
 
 
+_EVENT_DECODER = msgspec.json.Decoder(dict[str, Any])
+#: Decodes an event whose every value is an EventValue (the header's are too); a decoder
+#: caches its type, msgspec.convert would rebuild it on every call.
+_EVENT_VALUES_DECODER = msgspec.json.Decoder(_EVENT_FIELDS)
+
+
 def encode_event(event: Event) -> bytes:
     """Compact JSON of an Event."""
     if not isinstance(event, Event):
         raise BusPayloadError(f"event: expected an Event, got {type(event).__name__}")
-    obj = {"v": SCHEMA_VERSION, "type": event.type, "t": event.t, "time_usec": event.time_usec}
-    obj.update(event.fields)
-    return _dumps(obj)
+    return _ENCODER.encode({"v": SCHEMA_VERSION, "type": str(event.type), "t": event.t,
+                            "time_usec": event.time_usec, **event.fields})
 
 
 def decode_event(payload) -> Event:
     """An Event from a JSON payload; BusPayloadError naming what was wrong."""
     what = "event"
-    obj = _loads(payload, what)
-    _check_schema_version(obj, what)
-    missing = [k for k in ("type", "t", "time_usec") if k not in obj]
-    if missing:
-        raise BusPayloadError(f"{what}: missing field(s) {', '.join(map(repr, missing))}")
-    time_usec = _time_usec(obj["time_usec"], what)
-    _check_t(obj, time_usec, what)
-    for name, value in obj.items():
-        if isinstance(value, dict):
-            raise BusPayloadError(f"{what}: field {name!r} must not be a JSON object")
-    fields = {k: v for k, v in obj.items() if k not in _EVENT_RESERVED}
-    return Event(type=obj["type"], time_usec=time_usec, fields=fields)
+    _check_payload(payload, what)
+    try:
+        obj = _EVENT_VALUES_DECODER.decode(payload)
+    except (msgspec.MsgspecError, RecursionError, UnicodeDecodeError):
+        # the slow path, to name what is wrong: Event() checks each value by name
+        obj = _decode(_EVENT_DECODER, payload, what)
+        header = _convert(obj, EventHeader, what)
+        fields = {k: v for k, v in obj.items() if k not in _EVENT_RESERVED}
+        return Event(type=header.type, time_usec=header.time_usec, fields=fields)
+    header = _convert(obj, EventHeader, what)
+    return Event._from_payload(header, {k: v for k, v in obj.items()
+                                        if k not in _EVENT_RESERVED})
 
 
 # --- status ---------------------------------------------------------------------------------
+class StatusPayload(Struct, frozen=True, forbid_unknown_fields=True, omit_defaults=True):
+    """The status JSON object (retained on the vehicle's status topic)."""
+
+    v: SchemaVersion
+    #: the vehicle's instance name, [A-Za-z0-9_-]{1,64}
+    vehicle: str
+    status: StatusValue
+    #: why the vehicle is offline (``OfflineReason``); absent when online
+    reason: Annotated[str, Meta(min_length=1, max_length=200)] | None = None
+
+    def __post_init__(self):
+        _check_version(self.v, "status")
+        check_vehicle(self.vehicle)  # ValueError naming the rule
+
+
+_STATUS_DECODER = msgspec.json.Decoder(StatusPayload)
+
+
 @dataclass(frozen=True)
 class Status:
     """A vehicle's bus status (retained on its status topic).
 
     ``online`` True while the simulator's publisher is connected. When it goes away the
-    status becomes offline with ``reason`` "closed" (clean shutdown) or "connection lost"
-    (the broker published the publisher's last will).
+    status becomes offline with ``reason`` ``OfflineReason.CLOSED`` (clean shutdown) or
+    ``OfflineReason.CONNECTION_LOST`` (the broker published the publisher's last will).
     """
 
     vehicle: str
@@ -442,46 +618,68 @@ class Status:
     reason: str | None = None
 
     def __post_init__(self):
-        try:
-            check_vehicle(self.vehicle)
-        except ValueError as exc:
-            raise BusPayloadError(f"status: {exc}") from None
         if not isinstance(self.online, bool):
             raise BusPayloadError(f"status: online must be a boolean, got {self.online!r}")
-        if self.reason is not None and (not isinstance(self.reason, str) or not self.reason
-                                        or len(self.reason) > 200):
-            raise BusPayloadError(f"status: reason must be a non-empty string of at most 200 "
-                                  f"characters or absent, got {self.reason!r}")
+        self._payload()
+
+    def _payload(self) -> StatusPayload:
+        state = StatusValue.ONLINE if self.online else StatusValue.OFFLINE
+        return _convert({"v": SCHEMA_VERSION, "vehicle": self.vehicle, "status": state,
+                         "reason": self.reason}, StatusPayload, "status")
 
 
 def encode_status(status: Status) -> bytes:
-    obj: dict[str, Any] = {"v": SCHEMA_VERSION, "vehicle": status.vehicle,
-                           "status": "online" if status.online else "offline"}
-    if status.reason is not None:
-        obj["reason"] = status.reason
-    return _dumps(obj)
+    """Compact JSON of a Status (``"reason"`` only when there is one)."""
+    return _ENCODER.encode(status._payload())
 
 
 def decode_status(payload) -> Status:
-    what = "status"
-    obj = _loads(payload, what)
-    _check_schema_version(obj, what)
-    _check_keys(obj, what, ("v", "vehicle", "status", "reason"), ("v", "vehicle", "status"))
-    state = obj["status"]
-    if state not in ("online", "offline"):
-        raise BusPayloadError(f"{what}: status must be \"online\" or \"offline\", got "
-                              f"{state!r}")
-    return Status(vehicle=obj["vehicle"], online=state == "online", reason=obj.get("reason"))
+    """A Status from a JSON payload; BusPayloadError naming what was wrong."""
+    p = _decode(_STATUS_DECODER, payload, "status")
+    return Status(vehicle=p.vehicle, online=p.status is StatusValue.ONLINE, reason=p.reason)
 
 
 # --- config ---------------------------------------------------------------------------------
-#: Settings a client may request on the config topic: name -> (kind, low, high, meaning).
-CONFIG_FIELDS: dict[str, tuple[str, float | None, float | None, str]] = {
-    "telemetry_rate_hz": ("number", 0.0, 1000.0,
-                          "telemetry rate in simulated Hz; 0 stops telemetry"),
-    "depth": ("bool", None, None, "publish depth frames"),
-    "points": ("bool", None, None, "publish point clouds"),
-}
+class ConfigPayload(Struct, frozen=True, forbid_unknown_fields=True, omit_defaults=True):
+    """A config request (clients -> simulator): any non-empty subset of the settings."""
+
+    v: SchemaVersion | UnsetType = UNSET
+    telemetry_rate_hz: Annotated[float, Meta(
+        ge=0.0, le=1000.0,
+        description="telemetry rate in simulated Hz; 0 stops telemetry")] | UnsetType = UNSET
+    depth: Annotated[bool, Meta(description="publish depth frames")] | UnsetType = UNSET
+    points: Annotated[bool, Meta(description="publish point clouds")] | UnsetType = UNSET
+
+    def __post_init__(self):
+        if self.v is not UNSET:
+            _check_version(self.v, "config")
+
+
+def _config_fields() -> dict[str, tuple[str, float | None, float | None, str]]:
+    out = {}
+    for f in msgspec.inspect.type_info(ConfigPayload).fields:
+        if f.name == "v":
+            continue
+        meta = f.type  # msgspec.inspect leaves UnsetType out: Metadata(type=..., ...)
+        kind = "bool" if isinstance(meta.type, msgspec.inspect.BoolType) else "number"
+        lo, hi = (meta.type.ge, meta.type.le) if kind == "number" else (None, None)
+        out[f.name] = (kind, lo, hi, meta.extra_json_schema["description"])
+    return out
+
+
+#: Settings a client may request on the config topic: name -> (kind, low, high, meaning),
+#: read off ``ConfigPayload``.
+CONFIG_FIELDS: dict[str, tuple[str, float | None, float | None, str]] = _config_fields()
+_CONFIG_DECODER = msgspec.json.Decoder(ConfigPayload)
+
+
+def _settings(p: ConfigPayload, what: str) -> dict[str, Any]:
+    out = {name: getattr(p, name) for name in CONFIG_FIELDS if getattr(p, name) is not UNSET}
+    if not out:
+        raise BusPayloadError(f"{what}: names no setting (known: {', '.join(CONFIG_FIELDS)})")
+    if "telemetry_rate_hz" in out:
+        out["telemetry_rate_hz"] = float(out["telemetry_rate_hz"])
+    return out
 
 
 def validate_config(config: Mapping[str, Any], what: str = "config") -> dict[str, Any]:
@@ -490,41 +688,19 @@ def validate_config(config: Mapping[str, Any], what: str = "config") -> dict[str
     rejected; ``"v"``, if present, must be 1."""
     if not isinstance(config, Mapping):
         raise BusPayloadError(f"{what}: must be a JSON object / mapping, got "
-                              f"{_json_type(config)}")
-    _check_schema_version(dict(config), what, required=False)
-    unknown = sorted(k for k in config if k != "v" and k not in CONFIG_FIELDS)
-    if unknown:
-        raise BusPayloadError(f"{what}: unknown setting(s) {', '.join(map(repr, unknown))} "
-                              f"(known: {', '.join(CONFIG_FIELDS)})")
-    out: dict[str, Any] = {}
-    for name, (kind, lo, hi, _meaning) in CONFIG_FIELDS.items():
-        if name not in config:
-            continue
-        value = config[name]
-        if kind == "bool":
-            if not isinstance(value, bool | np.bool_):
-                raise BusPayloadError(f"{what}: {name} must be true or false, got "
-                                      f"{_json_type(value)} {value!r}")
-            out[name] = bool(value)
-        else:
-            f = _finite(value, what, name)
-            if not lo <= f <= hi:
-                raise BusPayloadError(f"{what}: {name} must be in [{lo:g}, {hi:g}], got "
-                                      f"{value!r}")
-            out[name] = f
-    if not out:
-        raise BusPayloadError(f"{what}: names no setting (known: {', '.join(CONFIG_FIELDS)})")
-    return out
+                              f"{type(config).__name__}")
+    plain = {k: _plain(v, what, str(k)) for k, v in config.items()}
+    return _settings(_convert(plain, ConfigPayload, what), what)
 
 
 def encode_config(config: Mapping[str, Any]) -> bytes:
     """Compact JSON of a validated config request (with ``"v": 1``)."""
-    return _dumps({"v": SCHEMA_VERSION, **validate_config(config)})
+    return _ENCODER.encode({"v": SCHEMA_VERSION, **validate_config(config)})
 
 
 def decode_config(payload) -> dict[str, Any]:
     """The validated settings of a config payload (``"v"`` optional, dropped)."""
-    return validate_config(_loads(payload, "config"))
+    return _settings(_decode(_CONFIG_DECODER, payload, "config"), "config")
 
 
 # --- binary sensor frames -------------------------------------------------------------------
@@ -534,11 +710,12 @@ FRAME_MAGIC = b"FTSF"
 FRAME_VERSION = 1
 #: kind byte
 KIND_DEPTH, KIND_POINTS = 1, 2
-_KIND_NAMES = {KIND_DEPTH: "depth", KIND_POINTS: "points"}
+_KIND_NAMES = {KIND_DEPTH: FrameKind.DEPTH, KIND_POINTS: FrameKind.POINTS}
 #: frame byte: the depth image is in the camera's optical frame; points are in world ENU or
 #: body FLU coordinates
 FRAME_OPTICAL, FRAME_WORLD, FRAME_BODY = 0, 1, 2
-_FRAME_NAMES = {FRAME_OPTICAL: "optical", FRAME_WORLD: "world", FRAME_BODY: "body"}
+_FRAME_NAMES = {FRAME_OPTICAL: FrameName.OPTICAL, FRAME_WORLD: FrameName.WORLD,
+                FRAME_BODY: FrameName.BODY}
 #: Largest image side and largest depth range the uint16 millimetre encoding can carry.
 MAX_SIDE = 16384
 MAX_DEPTH_RANGE_M = 65.535
@@ -577,8 +754,8 @@ class SensorFrame:
     forward -> world ENU) and ``p_world_body`` / ``q_world_body``; quaternions (w, x, y, z).
     """
 
-    kind: str
-    frame: str
+    kind: FrameKind
+    frame: FrameName
     time_usec: int
     width: int
     height: int
@@ -618,7 +795,7 @@ class SensorFrame:
         """A ``DepthFrame`` as the camera would have produced it (depth to 0.5 mm)."""
         from ft_sitl.scenarios.camera import DepthFrame
 
-        if self.kind != "depth":
+        if self.kind != FrameKind.DEPTH:
             raise ValueError(f"to_depth_frame needs a depth frame, this is a {self.kind} frame")
         h, w = self.height, self.width
         mm = self.depth_mm.reshape(-1)
@@ -719,9 +896,9 @@ def encode_points(frame: DepthFrame, config: CameraConfig, frame_id: str = "worl
     """Binary point cloud of a ``DepthFrame``: ``points_world`` (``frame_id`` "world", ENU)
     or ``points_body`` ("body", FLU), as N x 3 float32."""
     what = "point cloud"
-    if frame_id == "world":
+    if frame_id == FrameName.WORLD:
         pts, code = frame.points_world, FRAME_WORLD
-    elif frame_id == "body":
+    elif frame_id == FrameName.BODY:
         pts, code = frame.points_body, FRAME_BODY
     else:
         raise BusPayloadError(f"{what}: frame_id must be 'world' or 'body', got {frame_id!r}")

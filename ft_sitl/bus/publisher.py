@@ -48,7 +48,7 @@ from dataclasses import dataclass
 from typing import TYPE_CHECKING, Any
 
 from ft_sitl.bus import codec
-from ft_sitl.bus.codec import BusPayloadError, Event, Status, Telemetry
+from ft_sitl.bus.codec import BusPayloadError, Event, OfflineReason, Status, Telemetry
 from ft_sitl.bus.options import BrokerOptions, TlsOptions, parse_broker_url
 from ft_sitl.bus.topics import check_vehicle, topic
 
@@ -154,8 +154,8 @@ class BusPublisher:
         self._timeout_s = float(timeout_s)
         self._close_timeout_s = float(close_timeout_s)
         self._online = codec.encode_status(Status(vehicle, True))
-        self._will = codec.encode_status(Status(vehicle, False, "connection lost"))
-        self._closed_status = codec.encode_status(Status(vehicle, False, "closed"))
+        self._will = codec.encode_status(Status(vehicle, False, OfflineReason.CONNECTION_LOST))
+        self._closed_status = codec.encode_status(Status(vehicle, False, OfflineReason.CLOSED))
 
         # shared with the bus thread, under _lock
         self._lock = threading.Lock()
