@@ -109,9 +109,11 @@ def run_demo(platform: Platform, *, altitude_m: float = 2.0, leg_m: float = 8.0)
 
 def plot_demo(result: DemoResult, path: str) -> None:
     """Save position, speed and tilt over time as a PNG (or any matplotlib format)."""
+    # matplotlib: heavy, loaded only when plotting
     import matplotlib
 
     matplotlib.use("Agg")
+    # matplotlib: heavy, loaded only when plotting
     import matplotlib.pyplot as plt
 
     rec = result.recording

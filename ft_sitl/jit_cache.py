@@ -13,7 +13,11 @@ from __future__ import annotations
 
 import hashlib
 import os
+import shutil
+import time
 from pathlib import Path
+
+import numba
 
 
 def source_hash(pkg: Path) -> str:
@@ -27,8 +31,6 @@ def source_hash(pkg: Path) -> str:
 
 
 def configure() -> Path:
-    import numba
-
     digest = source_hash(Path(__file__).resolve().parent)
     user_root = os.environ.get("NUMBA_CACHE_DIR")
     root = (os.path.join(user_root, "ft-sitl") if user_root else os.path.join(
@@ -42,8 +44,6 @@ def configure() -> Path:
 
 def _prune(root: Path, keep: Path, max_age_s: float = 14 * 86400) -> None:
     """Remove cache directories of other kernel versions unused for two weeks."""
-    import shutil
-    import time
 
     try:
         entries = list(root.iterdir())

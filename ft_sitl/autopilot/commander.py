@@ -21,6 +21,7 @@ from enum import IntEnum
 import numpy as np
 
 from ft_sitl import G
+from ft_sitl.autopilot import cascade as c
 from ft_sitl.autopilot.params import ParamSet
 from ft_sitl.autopilot.setpoints import Setpoint
 from ft_sitl.physics.platform import Platform
@@ -526,8 +527,6 @@ class Commander:
 
     @staticmethod
     def _wants_up(sp: Setpoint, s: VehicleState) -> bool:
-        from ft_sitl.autopilot import cascade as c
-
         row = sp.row
         pz, vz, az = row[c.SP_POS + 2], row[c.SP_VEL + 2], row[c.SP_ACC + 2]
         return ((math.isfinite(pz) and pz > s.position[2] + 0.1) or

@@ -32,7 +32,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from ft_sitl import G
-from ft_sitl.bridge.ardupilot import (
+from ft_sitl.bridge.ardupilot_frames import (
     PWM_FULL_US,
     PWM_OFF_US,
     ArduPilotFrame,

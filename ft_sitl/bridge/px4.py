@@ -69,6 +69,8 @@ from pymavlink.dialects.v20 import common as mav
 from ft_sitl import G, frames
 from ft_sitl.bridge.sensors import MagField, SensorNoise, SensorSuite
 from ft_sitl.bridge.vehicle import BridgeVehicle, Crash
+from ft_sitl.physics.catalog import PlatformRegistry
+from ft_sitl.physics.layouts import get_layout
 
 log = logging.getLogger(__name__)
 
@@ -147,7 +149,6 @@ def px4_motor_map(positions_flu, spins, *, platform_name: str = "platform",
 def hover_output(platform) -> float:
     """The motor output (0..1) at which all rotors together carry the platform's weight:
     rotor speed u * w_max, thrust c_T w^2 per rotor."""
-    from ft_sitl.physics.layouts import get_layout
 
     n = get_layout(platform.layout).n_rotors
     w_hover = math.sqrt(platform.mass_kg * G / (n * platform.thrust_coefficient))
@@ -168,7 +169,6 @@ def px4_parameters(platform, motor_map=None) -> dict[str, float]:
     Set them with ``param set`` in PX4's shell, or as environment variables
     ``PX4_PARAM_<NAME>=<value>`` when starting PX4 (its rcS applies those).
     """
-    from ft_sitl.physics.layouts import get_layout
 
     layout = get_layout(platform.layout)
     pos = layout.rotor_positions(platform.arm_length_m)
@@ -678,7 +678,6 @@ def run_px4_bridge(platform_name: str, scenario=None, *, instance: int = 0,
     line every ``status_every_s`` and the final counters through ``echo``; returns them.
     Raises ValueError for a bad platform/scenario/option, BridgeError if it cannot listen.
     """
-    from ft_sitl.physics.catalog import PlatformRegistry
 
     platform = PlatformRegistry(platform_files).get(platform_name)
     bridge = Px4Bridge(platform, scenario=scenario_from_spec(scenario), instance=instance,

@@ -158,7 +158,10 @@ class EmbeddedBroker:
                 loop.close()
 
     async def _serve(self) -> None:
+        # the embedded MQTT broker: loaded only when it is started
         from amqtt.broker import Broker
+
+        # the embedded MQTT broker: loaded only when it is started
         from amqtt.errors import BrokerError
 
         self._stop = asyncio.Event()

@@ -99,6 +99,7 @@ class BusClient:
         self.rejected = 0
 
     async def __aenter__(self) -> BusClient:
+        # the MQTT client: loaded only when the bus is used
         import aiomqtt
 
         o = self.options

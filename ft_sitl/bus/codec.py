@@ -49,6 +49,7 @@ from msgspec import UNSET, Meta, Struct, UnsetType
 
 from ft_sitl.bus.topics import check_vehicle
 from ft_sitl.rotations import matrix_from_quat, quat_from_matrix
+from ft_sitl.scenarios.camera import DepthFrame
 
 if TYPE_CHECKING:  # the camera module pulls in trimesh; import it only when needed
     from ft_sitl.scenarios.camera import CameraConfig, DepthFrame
@@ -793,7 +794,6 @@ class SensorFrame:
 
     def to_depth_frame(self) -> DepthFrame:
         """A ``DepthFrame`` as the camera would have produced it (depth to 0.5 mm)."""
-        from ft_sitl.scenarios.camera import DepthFrame
 
         if self.kind != FrameKind.DEPTH:
             raise ValueError(f"to_depth_frame needs a depth frame, this is a {self.kind} frame")

@@ -437,6 +437,7 @@ class BusPublisher:
     async def _session(self) -> None:
         """One connection: raises on any failure (``_session_up`` tells whether the
         connection was established), returns only after a clean close."""
+        # the MQTT client: loaded only when the bus is used
         import aiomqtt
 
         o = self.options

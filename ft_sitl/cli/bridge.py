@@ -6,7 +6,8 @@ import math
 import signal
 import sys
 
-from ft_sitl.bridge.ardupilot import FrameMatchError, run_ardupilot_bridge
+from ft_sitl.bridge.ardupilot import run_ardupilot_bridge
+from ft_sitl.bridge.ardupilot_frames import FrameMatchError
 from ft_sitl.bridge.ardupilot_params import ardupilot_params
 from ft_sitl.bridge.px4 import BridgeError, run_px4_bridge
 from ft_sitl.cli.common import CliError, platform_registry

@@ -22,7 +22,7 @@ from ft_sitl.autopilot.commander import MissionItem, Result
 from ft_sitl.autopilot.params import PARAMS, ParamError
 from ft_sitl.autopilot.setpoints import Setpoint, SetpointError
 from ft_sitl.physics import dynamics as d
-from ft_sitl.physics.quaternion import qto_euler
+from ft_sitl.physics.quaternion import qrotate_inv, qto_euler
 from ft_sitl.sim.fleet import Fleet
 
 COMPID = mav.MAV_COMP_ID_AUTOPILOT1
@@ -863,8 +863,6 @@ def _finite3(v, name: str) -> list[float]:
 
 
 def _rotate_inv(q, v):
-    from ft_sitl.physics.quaternion import qrotate_inv
-
     return qrotate_inv(np.asarray(q, dtype=float), np.asarray(v, dtype=float))
 
 

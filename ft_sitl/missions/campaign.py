@@ -13,7 +13,16 @@ the same directory skips finished trials.
 
 from __future__ import annotations
 
+import ctypes
+import functools
+import json
+import multiprocessing as mp
 import os
+import platform as pyplatform
+import shutil
+import signal
+import sys
+import tempfile
 import time
 from collections.abc import Callable, Iterator
 from concurrent.futures import FIRST_COMPLETED, ProcessPoolExecutor, wait
@@ -21,12 +30,15 @@ from concurrent.futures.process import BrokenProcessPool
 from dataclasses import dataclass
 from pathlib import Path
 
+from tqdm import tqdm
+
 from ft_sitl import __version__
 from ft_sitl.missions.campaign_file import Campaign, CampaignError
 from ft_sitl.missions.protocol import failed_row
 from ft_sitl.missions.resources import RESOURCES
 from ft_sitl.missions.results import Outcome
 from ft_sitl.missions.spec import TrialSpec, platform_for
+from ft_sitl.missions.store import ResultStore
 from ft_sitl.missions.trial import run_trial
 from ft_sitl.missions.trial_wire import run_trial_wire, worker_bus
 from ft_sitl.missions.watchdog import wall_budget_from_env
@@ -102,8 +114,6 @@ class SerialExecutor(Executor):
 
 
 def _worker_init(parent_pid: int | None = None, grid_dir: str | None = None) -> None:
-    import signal
-
     signal.signal(signal.SIGINT, signal.SIG_IGN)  # the parent handles Ctrl-C
     _die_with_parent(parent_pid)
     if grid_dir is not None:
@@ -114,12 +124,9 @@ def _die_with_parent(parent_pid: int | None) -> None:
     """On Linux, have the kernel send this worker SIGTERM when the campaign process dies
     (killed, say, by SIGTERM or SIGKILL, with no chance to stop its pool): orphaned workers
     would otherwise fly their queued trials to no one for minutes."""
-    import sys
 
     if not sys.platform.startswith("linux"):
         return
-    import ctypes
-    import signal
 
     try:
         libc = ctypes.CDLL(None, use_errno=True)
@@ -146,9 +153,6 @@ class ProcessExecutor(Executor):
         self._grid_dir: str | None = None
 
     def _new_pool(self):
-        import multiprocessing as mp
-        import tempfile
-
         if self._grid_dir is None:
             if self._grid_dir_arg is None:
                 self._grid_dir = tempfile.mkdtemp(prefix="ft-sitl-grids-")
@@ -206,7 +210,6 @@ class ProcessExecutor(Executor):
             self._pool.shutdown(wait=False, cancel_futures=True)
             self._pool = None
         if self._grid_dir is not None:
-            import shutil
 
             shutil.rmtree(self._grid_dir, ignore_errors=True)
             self._grid_dir = None
@@ -241,7 +244,6 @@ def died_row(d: dict) -> dict:
 
 def machine_info() -> dict:
     """CPU model, cores, OS and Python of this machine (for reports)."""
-    import platform as pyplatform
 
     model = pyplatform.processor() or ""
     try:
@@ -259,7 +261,6 @@ def machine_info() -> dict:
 
 def record_run(out_dir: Path, entry: dict) -> None:
     """Append one run's facts to DIR/runs.json (every run and resume of the campaign)."""
-    import json
 
     path = Path(out_dir) / "runs.json"
     runs = []
@@ -276,7 +277,6 @@ def record_run(out_dir: Path, entry: dict) -> None:
 
 def report_meta(out_dir: Path, campaign: dict) -> dict:
     """The report's run facts from DIR/runs.json."""
-    import json
 
     path = Path(out_dir) / "runs.json"
     runs = []
@@ -310,9 +310,6 @@ def run_campaign(campaign: Campaign, out_dir: str | Path, *, workers: int = 1,
                  limit: int | None = None, transport: Transport | None = None) -> RunSummary:
     """Run (or resume) a campaign into out_dir. ``limit``: stop after that many new trials
     (tests, smoke runs); ``transport``: in-process (default) or over MAVLink."""
-    import functools
-
-    from ft_sitl.missions.store import ResultStore
 
     try:
         wall_budget_from_env()  # a bad value is one clear error, not one per trial
@@ -334,7 +331,6 @@ def run_campaign(campaign: Campaign, out_dir: str | Path, *, workers: int = 1,
     started = time.strftime("%Y-%m-%dT%H:%M:%SZ", time.gmtime())
     bar = None
     if progress:
-        from tqdm import tqdm
 
         bar = tqdm(total=len(specs), initial=skipped, unit="trial", dynamic_ncols=True,
                    desc=campaign.name, smoothing=0.05)

@@ -43,6 +43,7 @@ file is read, by the scorer's own rule (:mod:`ft_sitl.missions.scoring`).
 from __future__ import annotations
 
 import hashlib
+import shlex
 from dataclasses import dataclass, field
 from importlib import resources
 from pathlib import Path
@@ -51,6 +52,12 @@ from ft_sitl.config import Table, integer, read_document
 from ft_sitl.missions import scoring
 from ft_sitl.missions.spec import TrialSpec
 from ft_sitl.navigation.base import Limits
+from ft_sitl.navigation.registry import NavigatorError, available, create
+from ft_sitl.physics.catalog import PlatformRegistry
+from ft_sitl.physics.platform import PlatformError
+from ft_sitl.scenarios.families import CATEGORY, FAMILIES, resolve_family
+from ft_sitl.scenarios.io import load_scenario
+from ft_sitl.scenarios.scenario import ScenarioError
 
 PRESETS = ("quick", "paper")
 TOP_KEYS = ("name", "trials", "seed", "scenario_seed", "platforms", "platform_files",
@@ -181,7 +188,6 @@ def parse_campaign(doc: dict, path: Path | None = None) -> Campaign:
 def _weights(t: Table, platforms, scenarios) -> dict:
     """The ``weights`` table, checked now by the scorer's rules (what the score would refuse
     after every trial has flown)."""
-    from ft_sitl.scenarios.families import CATEGORY
 
     w = t.table("weights", {})
     w.check_keys(WEIGHT_KEYS)
@@ -212,7 +218,6 @@ def _weights(t: Table, platforms, scenarios) -> dict:
 def parse_algorithms(where: str, v, notes: list[str] | None = None) -> list[AlgorithmEntry]:
     """The ``algorithms`` entries (``where`` names them in messages); what ``"all"`` leaves
     out is appended to ``notes``."""
-    from ft_sitl.navigation.registry import NavigatorError, available, create
 
     if v == "all":
         v = []
@@ -257,7 +262,6 @@ def parse_algorithms(where: str, v, notes: list[str] | None = None) -> list[Algo
 
 def _command_entry(w: str, item: dict, labels: set) -> AlgorithmEntry:
     """A user program as the navigator: ``{label = "mine", command = "python nav.py"}``."""
-    import shlex
 
     if "name" in item or "params" in item:
         raise CampaignError(f"{w}: a 'command' entry takes only 'label' and 'command'")
@@ -286,9 +290,6 @@ def _command_entry(w: str, item: dict, labels: set) -> AlgorithmEntry:
 
 
 def _platforms(t: Table, base: Path) -> list:
-    from ft_sitl.physics.catalog import PlatformRegistry
-    from ft_sitl.physics.platform import PlatformError
-
     where = t.where
     files = t.items("platform_files") if t.get("platform_files", []) else []
     try:
@@ -329,9 +330,6 @@ def _indices(t: Table, default="all") -> tuple[int, ...]:
 
 
 def _scenarios(t: Table, base: Path) -> list[ScenarioEntry]:
-    from ft_sitl.scenarios.families import FAMILIES, resolve_family
-    from ft_sitl.scenarios.scenario import ScenarioError
-
     where = t.where
     indices = _indices(t)
     if t.get("scenarios", "all") == "all":
@@ -346,7 +344,6 @@ def _scenarios(t: Table, base: Path) -> list[ScenarioEntry]:
         entry = Table(item, w, error=CampaignError)
         entry.check_keys(("family", "indices", "file"))
         if "file" in item:
-            from ft_sitl.scenarios.io import load_scenario
 
             if "indices" in item:
                 raise CampaignError(f"{w}: indices do not apply to a scenario file (it is "

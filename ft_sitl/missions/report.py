@@ -42,9 +42,11 @@ from pathlib import Path
 
 import numpy as np
 import pandas as pd
+import yaml
 
 from ft_sitl.missions import scoring
 from ft_sitl.missions.results import REASONS
+from ft_sitl.scenarios.families import FAMILIES, PAPER_NAMES
 
 #: ``meta`` keys the report reads, in the order it shows them; any other key of ``meta``
 #: is listed after them as given.
@@ -74,8 +76,6 @@ class _Tables:
     """Everything the figures and tables need, computed once."""
 
     def __init__(self, df: pd.DataFrame, B: int, seed: int, weights: Mapping | None = None):
-        from ft_sitl.scenarios.families import FAMILIES, PAPER_NAMES
-
         self.df = df
         self.algorithms = sorted(df["algorithm"].astype(str).unique())
         present = set(df["family"].astype(str).unique())
@@ -104,6 +104,7 @@ class _Tables:
         self.seed = seed
 
     def colour(self, algo: str):
+        # matplotlib: heavy, loaded only when plotting
         from matplotlib import colormaps
 
         i = self.algorithms.index(algo)
@@ -154,6 +155,7 @@ def platform_grid_layout(indicators: pd.DataFrame) -> tuple[int, int, dict[str, 
 
 # --------------------------------------------------------------------------- figures
 def _new_figure(w: float, h: float):
+    # matplotlib: heavy, loaded only when plotting
     from matplotlib.figure import Figure
 
     return Figure(figsize=(w, h), layout="constrained")
@@ -254,6 +256,7 @@ def _fig_platform_grid(t: _Tables):
         for c in range(ncols):
             if (r, c) not in used:
                 axes[nrows - 1 - r][c].set_axis_off()
+    # matplotlib: heavy, loaded only when plotting
     from matplotlib.patches import Patch
 
     fig.legend([Patch(color=t.colour(a)) for a in t.algorithms], t.algorithms,
@@ -264,6 +267,7 @@ def _fig_platform_grid(t: _Tables):
 
 
 def _fig_heatmap(t: _Tables, algo: str):
+    # matplotlib: heavy, loaded only when plotting
     from matplotlib import colormaps
 
     plats = t.platforms_by_twr
@@ -337,6 +341,7 @@ def _fractions(table: pd.DataFrame, keys: Sequence[str], groups: Sequence[tuple]
 
 
 def _reason_legend(fig):
+    # matplotlib: heavy, loaded only when plotting
     from matplotlib.patches import Patch
 
     fig.legend([Patch(color=REASON_COLOURS[r]) for r in REASONS], list(REASONS),
@@ -533,8 +538,6 @@ def _jsonable(obj):
 
 
 def _spec_text(campaign_spec: Mapping) -> str:
-    import yaml
-
     return yaml.safe_dump(_jsonable(dict(campaign_spec)), sort_keys=False,
                           default_flow_style=False, allow_unicode=True).rstrip()
 
@@ -659,6 +662,7 @@ def write_report(df: pd.DataFrame, out_dir, *, campaign_spec: Mapping, meta: Map
     if not isinstance(meta, Mapping):
         raise ValueError("write_report: meta must be a mapping")
 
+    # matplotlib: heavy, loaded only when plotting
     from matplotlib import rc_context
 
     rdir = Path(out_dir) / "report"

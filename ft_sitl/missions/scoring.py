@@ -36,6 +36,8 @@ import numpy as np
 import pandas as pd
 
 from ft_sitl.missions.results import REASONS
+from ft_sitl.physics.catalog import catalog
+from ft_sitl.scenarios.families import CATEGORY, FAMILIES
 
 #: The paper's initial scenario weights (Sec. IV, Q5) by scenario category. ``user``
 #: scenarios (imported meshes, custom families) count like theoretical ones.
@@ -246,10 +248,8 @@ def _lookup_categories(df, cells, key, cat_col) -> dict[str, str]:
         return _category_of(df.assign(**{key: df[key].astype(str)}), key, cat_col, key)
     names = sorted(cells[key].unique())
     if key == "family":
-        from ft_sitl.scenarios.families import CATEGORY as known
+        known = CATEGORY
     else:
-        from ft_sitl.physics.catalog import catalog
-
         known = {name: p.category for name, p in catalog().items()}
     unknown = [n for n in names if n not in known]
     if unknown:
@@ -343,8 +343,6 @@ def composite_score(df_or_rates: pd.DataFrame, *, scenario_weights: Mapping | No
             raise ValueError(f"all_families: the results have family(ies) "
                              f"{', '.join(map(repr, extra))} not in all_families "
                              f"{grid_families!r}")
-
-    from ft_sitl.scenarios.families import FAMILIES
 
     fam_cat = dict(cells[["family", "scenario_category"]].drop_duplicates()
                    .itertuples(index=False, name=None))

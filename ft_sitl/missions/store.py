@@ -20,9 +20,12 @@ second runner out of a directory in use.
 
 from __future__ import annotations
 
+import fcntl
 import json
 import os
 from pathlib import Path
+
+import numpy as np
 
 from ft_sitl.missions.results import check_outcome, to_frame
 
@@ -109,7 +112,6 @@ class ResultStore:
 
     def _lock(self) -> None:
         """One runner per directory: an exclusive lock on DIR/.lock, held while open."""
-        import fcntl
 
         self._lock_fh = open(self.dir / ".lock", "w")  # noqa: SIM115 - held while running
         try:
@@ -163,8 +165,6 @@ def load_rows(directory: str | Path) -> tuple[dict, list[dict]]:
 
 
 def _plain(v):
-    import numpy as np
-
     if isinstance(v, np.generic):
         return v.item()
     if isinstance(v, np.ndarray):

@@ -38,6 +38,10 @@ from pathlib import Path
 import numpy as np
 
 from ft_sitl import frames
+from ft_sitl.bus.broker import EmbeddedBroker
+from ft_sitl.bus.codec import EventType
+from ft_sitl.bus.publisher import BusPublisher
+from ft_sitl.mavlink.server import SitlServer
 from ft_sitl.missions.protocol import (
     APPROACH_TIMEOUT_S,
     Phase,
@@ -49,7 +53,10 @@ from ft_sitl.missions.protocol import (
 from ft_sitl.missions.resources import RESOURCES
 from ft_sitl.missions.results import Outcome
 from ft_sitl.missions.spec import TrialSpec, platform_for
+from ft_sitl.navigation.common import camera_config
+from ft_sitl.navigation.registry import create
 from ft_sitl.wire.navigate import ClientResult, WireTask
+from ft_sitl.wire.sitl_bus import SitlBus
 
 COMMAND = "command"  # the pseudo-navigator: a user's program
 INSTANCE_BASE = 20
@@ -94,7 +101,6 @@ def worker_bus(mqtt: str | None) -> dict:
     one started once per process."""
     global _BROKER
     if mqtt is None:
-        from ft_sitl.bus.broker import EmbeddedBroker
 
         if _BROKER is None or not _BROKER.running:
             _BROKER = EmbeddedBroker().start()
@@ -107,16 +113,11 @@ def make_bus_factory(url: str):
     trial id); the depth camera is the navigator's (the benchmark camera for a command)."""
 
     def factory(server, fleet, sc, vehicle, spec):
-        from ft_sitl.bus.publisher import BusPublisher
-        from ft_sitl.wire.sitl_bus import SitlBus
-
         camera = None
         if spec.algorithm != COMMAND:
-            from ft_sitl.navigation.registry import create
 
             camera = getattr(create(spec.algorithm, spec.algorithm_params), "camera", None)
         if camera is None:
-            from ft_sitl.navigation.common import camera_config
 
             camera = camera_config("benchmark", None, None, None)
         bus = SitlBus(lambda on_config: BusPublisher(url, vehicle, on_config=on_config),
@@ -176,7 +177,6 @@ def run_trial_wire(spec: TrialSpec, *, speed_factor: float = 2.0, mqtt: str | No
                    arm_timeout_s: float = ARM_TIMEOUT_S, log_dir: Path | None = None,
                    bus_factory=None) -> TrialOutcome:
     """Fly one trial with the navigator in another process (module docstring)."""
-    from ft_sitl.mavlink.server import SitlServer
 
     wall0 = time.perf_counter()
     sc, platform = RESOURCES.scenario(spec), platform_for(spec)
@@ -193,7 +193,7 @@ def run_trial_wire(spec: TrialSpec, *, speed_factor: float = 2.0, mqtt: str | No
                             speed_factor=speed_factor, base_instance=inst)
         bus = bus_factory(server, fleet, sc, vehicle, spec) if bus_factory else None
         if bus is not None:
-            ref.on_start = lambda: bus.event("trial_start", trial=spec.trial_id)
+            ref.on_start = lambda: bus.event(EventType.TRIAL_START, trial=spec.trial_id)
         connect = f"udpin://0.0.0.0:{server.links[0].default_remote[1]}"
         try:
             argv, env = navigator_argv(spec, wt, connect, mqtt, vehicle, speed_factor)
@@ -271,7 +271,7 @@ async def _serve(server, fleet, ref: TrialReferee, proc, spec, speed_factor: flo
     finally:
         server.close()
         if bus is not None:
-            bus.event("trial_end", trial=spec.trial_id,
+            bus.event(EventType.TRIAL_END, trial=spec.trial_id,
                       outcome=ref.outcome.value if ref.outcome is not None else "?")
             bus.close()
 

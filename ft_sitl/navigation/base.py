@@ -29,6 +29,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from ft_sitl.autopilot.setpoints import Setpoint
+from ft_sitl.navigation.mapping import LocalMap, MapConfig
 from ft_sitl.schema import Schema
 
 #: navigation starts once the vehicle is stable at the start waypoint: within
@@ -140,7 +141,6 @@ class Navigator:
 def local_map_for(task: Task, camera):
     """The planners' local map for a task: the scenario ceiling and floor, frames of
     ``camera`` taken at full resolution (the benchmark camera is already subsampled)."""
-    from ft_sitl.navigation.mapping import LocalMap, MapConfig
 
     return LocalMap(MapConfig(skip_pixel=1), task.ceiling, float(task.bounds_min[2]),
                     camera=camera, center_m=tuple(task.start[:2]))

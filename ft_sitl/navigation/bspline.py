@@ -32,6 +32,7 @@ from math import comb, factorial
 
 import numpy as np
 from numba import njit
+from scipy.interpolate import BSpline
 
 __all__ = ["Feasibility", "UniformBSpline", "basis_matrix", "fit_samples"]
 
@@ -285,7 +286,6 @@ class UniformBSpline:
 
     def to_scipy(self):
         """The same curve as a ``scipy.interpolate.BSpline`` (for checks and plotting)."""
-        from scipy.interpolate import BSpline
 
         return BSpline(self.knots, np.array(self._q), self._p, extrapolate=False)
 

@@ -7,6 +7,7 @@ from __future__ import annotations
 
 import math
 import time
+from dataclasses import replace
 
 import numpy as np
 
@@ -18,6 +19,7 @@ from ft_sitl.navigation.base import (
     Task,
     local_map_for,
 )
+from ft_sitl.scenarios.camera import CameraConfig
 from ft_sitl.schema import Param, Schema
 
 #: after a failed plan, the next attempt waits this long (simulated s), doubling with each
@@ -52,9 +54,6 @@ def camera_config(camera: str, width: int | None, height: int | None, rate_hz: f
     """The planners' depth camera: "benchmark" (160 x 120 @ 15 Hz) or "d435" (the originals'
     stream with every second pixel: 320 x 240 @ 30 Hz), optionally resized (ranges: see
     :data:`CAMERA_PARAMS`)."""
-    from dataclasses import replace
-
-    from ft_sitl.scenarios.camera import CameraConfig
 
     for key, value in (("camera", camera), ("camera_width", width),
                        ("camera_height", height), ("camera_rate_hz", rate_hz)):

@@ -49,7 +49,9 @@ import time
 import numpy as np
 
 from ft_sitl.autopilot.setpoints import Setpoint
+from ft_sitl.navigation.astar import OccupancyView
 from ft_sitl.navigation.base import Observation, Task
+from ft_sitl.navigation.bspline import UniformBSpline
 from ft_sitl.navigation.common import (  # noqa: F401 - camera_config re-exported
     HorizonPlanner,
     SplineTrajectory,
@@ -57,6 +59,8 @@ from ft_sitl.navigation.common import (  # noqa: F401 - camera_config re-exporte
     checked_setpoint,
     pursue_yaw,
 )
+from ft_sitl.navigation.ego_optim import EgoOptimizer, EgoParams, first_collision_time
+from ft_sitl.navigation.minsnap import global_reference, min_snap, one_segment_time
 
 #: estimated compute time of one EGO replan in the original C++ (optimisation ~1 ms, plus
 #: A* and map work; the paper's authors report a few ms on a desktop CPU)
@@ -93,10 +97,6 @@ class EgoPlanner(HorizonPlanner):
 
     # --- set-up ---------------------------------------------------------------------------
     def reset(self, task: Task) -> None:
-        from ft_sitl.navigation.astar import OccupancyView
-        from ft_sitl.navigation.ego_optim import EgoOptimizer, EgoParams
-        from ft_sitl.navigation.minsnap import global_reference
-
         super().reset(task)
         self.grid = OccupancyView.from_map(self.map, bounds=self.bounds)
         self.optimizer = EgoOptimizer(self.grid, EgoParams(max_vel=self.vmax,
@@ -106,9 +106,6 @@ class EgoPlanner(HorizonPlanner):
 
     # --- planning ---------------------------------------------------------------------------
     def _plan(self, obs: Observation) -> None:
-        from ft_sitl.navigation.bspline import UniformBSpline
-        from ft_sitl.navigation.minsnap import min_snap, one_segment_time
-
         t_start = time.perf_counter()
         t_eff = obs.time_s + self.latency
         vmax = self.vmax
@@ -163,7 +160,6 @@ class EgoPlanner(HorizonPlanner):
 
     def _collision_ahead(self, t: float) -> float | None:
         """Seconds until the current trajectory's first 2/3 meets an occupied voxel."""
-        from ft_sitl.navigation.ego_optim import first_collision_time
 
         tr = self.traj
         if tr is None:

@@ -89,7 +89,21 @@ import numpy as np
 
 from ft_sitl.autopilot.setpoints import Setpoint
 from ft_sitl.navigation.base import Observation, Task
+from ft_sitl.navigation.bspline import UniformBSpline
 from ft_sitl.navigation.common import HorizonPlanner, checked_setpoint, wrap_angle
+from ft_sitl.navigation.fast_optim import (
+    EsdfField,
+    FastOptimizer,
+    FastParams,
+    KnotBSpline,
+    plan_yaw,
+)
+from ft_sitl.navigation.kino_astar import (
+    KinoAstarParams,
+    KinodynamicAstar,
+    KinoStatus,
+    VoxelOccupancy,
+)
 
 #: estimated time from state to command of one Fast-Planner replan in the original C++ on
 #: a desktop CPU: kinodynamic search a few ms, B-spline optimisation <= 300 evaluations
@@ -167,9 +181,6 @@ class FastPlanner(HorizonPlanner):
 
     # --- set-up ---------------------------------------------------------------------------
     def reset(self, task: Task) -> None:
-        from ft_sitl.navigation.fast_optim import FastOptimizer, FastParams
-        from ft_sitl.navigation.kino_astar import KinoAstarParams
-
         super().reset(task)  # yaw: continuous (unwrapped) here
         self.kino_params = KinoAstarParams(max_vel=self.vmax, max_acc=self.max_acc,
                                            horizon=self.horizon)
@@ -183,10 +194,6 @@ class FastPlanner(HorizonPlanner):
         return self.map.occupied_inflated(pts)
 
     def _plan(self, obs: Observation) -> None:
-        from ft_sitl.navigation.bspline import UniformBSpline
-        from ft_sitl.navigation.fast_optim import EsdfField, KnotBSpline, plan_yaw
-        from ft_sitl.navigation.kino_astar import KinodynamicAstar, KinoStatus, VoxelOccupancy
-
         t_start = time.perf_counter()
         t_eff = obs.time_s + self.latency
         if self.traj is None or self.from_rest:

@@ -74,10 +74,11 @@ from dataclasses import dataclass
 
 import numpy as np
 from numba import njit
+from scipy.interpolate import BSpline
 
 from ft_sitl.navigation.bspline import UniformBSpline
 from ft_sitl.navigation.lbfgs import dot_rows, search_direction, store_pair
-from ft_sitl.navigation.mapping import _esdf_eval
+from ft_sitl.navigation.mapping import esdf_eval
 
 __all__ = [
     "EsdfField", "FastOptimizer", "FastParams", "FastResult", "KnotBSpline", "cost_terms",
@@ -169,7 +170,7 @@ class EsdfField:
         p = np.ascontiguousarray(np.asarray(points, dtype=np.float64).reshape(-1, 3))
         d = np.empty(len(p))
         g = np.empty((len(p), 3))
-        _esdf_eval(self.field, self.origin, 1.0 / self.resolution, p, d, g)
+        esdf_eval(self.field, self.origin, 1.0 / self.resolution, p, d, g)
         return d, g
 
 
@@ -195,7 +196,7 @@ def _smooth_acc(q, w, grad):
 @njit(cache=True)
 def _distance_acc(q, first, last, field, origin, inv_res, d0, w, grad, dist, dgrad):
     """ESDF term over control points ``first .. last - 1``."""
-    _esdf_eval(field, origin, inv_res, q, dist, dgrad)
+    esdf_eval(field, origin, inv_res, q, dist, dgrad)
     f = 0.0
     for i in range(first, last):
         e = dist[i] - d0
@@ -540,8 +541,6 @@ class KnotBSpline:
     __slots__ = ("_c", "_u", "_b", "_tck")
 
     def __init__(self, control_points, knots):
-        from scipy.interpolate import BSpline
-
         c = np.array(control_points, dtype=np.float64)
         if c.ndim == 1:
             c = c[:, None]

@@ -833,7 +833,7 @@ def trilinear_point(esdf3, origin, inv_res, px, py, pz, grad):
 
 
 @njit(cache=True)
-def _esdf_eval(esdf3, origin, inv_res, points, dist, grad):
+def esdf_eval(esdf3, origin, inv_res, points, dist, grad):
     """Trilinear ESDF value and its analytic gradient; returns the number of non-finite
     points (NaN results)."""
     bad = 0
@@ -1263,7 +1263,7 @@ class LocalMap:
         p, shape = _as_points(points)
         dist = np.empty(len(p))
         grad = np.empty((len(p), 3))
-        bad = _esdf_eval(self._esdf, self._esdf_origin, self._inv_res, p, dist, grad)
+        bad = esdf_eval(self._esdf, self._esdf_origin, self._inv_res, p, dist, grad)
         if bad:
             raise ValueError(f"points must be finite ({bad} are not)")
         return _shaped(dist, shape), grad.reshape(shape + (3,))

@@ -37,6 +37,8 @@ from dataclasses import dataclass
 from math import factorial
 
 import numpy as np
+from scipy.sparse import csc_matrix
+from scipy.sparse.linalg import splu
 
 __all__ = [
     "LocalTarget", "PiecewisePolynomial", "ego_time_allocation", "ego_waypoints",
@@ -264,8 +266,6 @@ def min_snap(waypoints, durations, v0=None, a0=None, v1=None, a1=None,
             put(b_base + mth, -float(factorial(mth)) * (T[i] / T[i + 1]) ** mth)
             eq += 1
     assert eq == m * n_c
-    from scipy.sparse import csc_matrix
-    from scipy.sparse.linalg import splu
 
     a = csc_matrix((vals, (rows, cols)), shape=(eq, eq))
     sol = splu(a).solve(rhs)

@@ -59,6 +59,7 @@ from pathlib import Path
 
 import numpy as np
 from numba import njit
+from scipy.optimize import minimize
 
 from ft_sitl.autopilot.setpoints import Setpoint
 from ft_sitl.navigation.base import Navigator, Observation, Task, local_map_for
@@ -69,6 +70,7 @@ from ft_sitl.navigation.common import (
     camera_config,
     wrap_angle,
 )
+from ft_sitl.navigation.navrl_policy import NavRLPolicy
 from ft_sitl.schema import Param, Schema
 
 ENV_VAR = "FT_SITL_NAVRL_CHECKPOINT"
@@ -120,8 +122,6 @@ NO_CHECKPOINT = (f"NavRL needs the authors' released policy checkpoint, which ft
 
 @functools.lru_cache(maxsize=4)
 def _policy(path: str, mtime_ns: int):
-    from ft_sitl.navigation.navrl_policy import NavRLPolicy
-
     return NavRLPolicy.from_checkpoint(path)
 
 
@@ -305,7 +305,6 @@ def orca_plane(agent_pos, agent_vel, agent_radius, obs_pos, obs_vel, obs_radius,
 def safe_velocity(preferred: np.ndarray, planes, max_speed: float) -> np.ndarray:
     """The velocity closest to ``preferred`` in every half-space (v - p) . n >= 0 with
     |v| <= max_speed; when there is none, the one whose worst violation is smallest."""
-    from scipy.optimize import minimize
 
     if not planes:
         return preferred

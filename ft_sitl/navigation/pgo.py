@@ -59,8 +59,10 @@ from dataclasses import dataclass, field
 
 import numpy as np
 from numba import njit
+from scipy.interpolate import BSpline
 
 from ft_sitl.autopilot.setpoints import Setpoint
+from ft_sitl.navigation.astar import OccupancyView
 from ft_sitl.navigation.base import Observation, Task
 from ft_sitl.navigation.bspline import UniformBSpline
 from ft_sitl.navigation.common import (
@@ -71,15 +73,16 @@ from ft_sitl.navigation.common import (
     planner_schema,
     pursue_yaw,
 )
+from ft_sitl.navigation.minsnap import global_reference
 from ft_sitl.navigation.topo import (
     EsdfGrid,
     TopoParams,
     TopoSearch,
-    _trilinear,
     collision_range,
     discretize_path,
     find_topo_paths,
     path_length,
+    trilinear,
 )
 from ft_sitl.schema import Param
 
@@ -172,7 +175,7 @@ def _normal_cost(q, grad, lo_i, hi_i, dt, ws, wd, wf, d0, vmax, amax, fld, origi
     fd = 0.0
     g = np.empty(3)
     for i in range(lo_i, hi_i):
-        dist = _trilinear(fld, origin, res, q[i], g)
+        dist = trilinear(fld, origin, res, q[i], g)
         gn = math.sqrt(g[0] * g[0] + g[1] * g[1] + g[2] * g[2])
         if gn > 1e-4:
             for d in range(3):
@@ -429,7 +432,6 @@ def lengthen_time(spline: UniformBSpline, ratio: float) -> tuple[np.ndarray, flo
     first two and the last two are stretched so that the duration grows by ``(ratio - 1)``
     times theirs (the curve's shape is unchanged and its start and end keep their speed);
     the result is sampled at ``N - 3 + 1`` equal time steps. Returns (points, dt)."""
-    from scipy.interpolate import BSpline
 
     n = spline.num_control_points
     knots = np.array(spline.knots)  # u_i = (i - 3) dt, i = 0 .. N + 3
@@ -645,8 +647,6 @@ class PgoPlanner(ReplanningPlanner):
 
     # --- set-up ---------------------------------------------------------------------------
     def reset(self, task: Task) -> None:
-        from ft_sitl.navigation.astar import OccupancyView
-
         super().reset(task)
         self.params = PgoParams(max_vel=self.vmax, max_acc=self.max_acc,
                                 ctrl_pt_dist=self.ctrl_pt_dist)
@@ -660,8 +660,6 @@ class PgoPlanner(ReplanningPlanner):
 
     # --- planning ---------------------------------------------------------------------------
     def _plan(self, obs: Observation) -> None:
-        from ft_sitl.navigation.minsnap import global_reference
-
         t_start = time.perf_counter()
         t_eff = obs.time_s + self.latency
         goal = np.asarray(self.task.goal, dtype=float)

@@ -19,6 +19,11 @@ from importlib.metadata import entry_points
 
 from ft_sitl.config import did_you_mean
 from ft_sitl.navigation.base import Navigator
+from ft_sitl.navigation.ego import EgoPlanner
+from ft_sitl.navigation.fast import FastPlanner
+from ft_sitl.navigation.navrl import NavRL
+from ft_sitl.navigation.pgo import PgoPlanner
+from ft_sitl.navigation.straight import StraightLine
 from ft_sitl.schema import Schema, SchemaError
 
 ENTRY_POINT_GROUP = "ft_sitl.navigators"
@@ -29,12 +34,6 @@ class NavigatorError(ValueError):
 
 
 def _builtin() -> dict[str, type[Navigator]]:
-    from ft_sitl.navigation.ego import EgoPlanner
-    from ft_sitl.navigation.fast import FastPlanner
-    from ft_sitl.navigation.navrl import NavRL
-    from ft_sitl.navigation.pgo import PgoPlanner
-    from ft_sitl.navigation.straight import StraightLine
-
     return {c.name: c for c in (StraightLine, EgoPlanner, FastPlanner, PgoPlanner, NavRL)}
 
 

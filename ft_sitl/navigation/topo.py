@@ -68,6 +68,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 from numba import njit
+from scipy.ndimage import distance_transform_edt
 
 from ft_sitl.navigation.mapping import trilinear_point
 
@@ -113,7 +114,7 @@ def _coarse(fld, origin, res, lo, hi, p):
 
 
 @njit(cache=True)
-def _trilinear(fld, origin, res, p, grad):
+def trilinear(fld, origin, res, p, grad):
     """Trilinear distance between voxel centres and its gradient (into ``grad``), with the
     clamping of ``LocalMap.esdf`` (the map's own kernel)."""
     return trilinear_point(fld, origin, 1.0 / res, p[0], p[1], p[2], grad)
@@ -267,7 +268,7 @@ def _shortcut_push(dis, fld, origin, res, lo, hi):
     for i in range(1, n):
         if not _blocked(fld, origin, res, lo, hi, out[k - 1], dis[i], res, pc):
             continue
-        _trilinear(fld, origin, res, pc, g)
+        trilinear(fld, origin, res, pc, g)
         gn = math.sqrt(g[0] * g[0] + g[1] * g[1] + g[2] * g[2])
         if gn > 1e-3:
             dvec = dis[i] - out[k - 1]
@@ -418,7 +419,6 @@ class EsdfGrid:
         """The signed field of a boolean voxel array, with the local map's conventions
         (free: distance to the nearest occupied centre; occupied: resolution minus the
         distance to the nearest free centre). For synthetic maps."""
-        from scipy.ndimage import distance_transform_edt
 
         occ = np.asarray(occupied, dtype=bool)
         res = float(resolution)
@@ -478,7 +478,7 @@ def _coarse_many(p, fld, origin, res, lo, hi):
 @njit(cache=True)
 def _trilinear_many(p, fld, origin, res, d, g):
     for i in range(p.shape[0]):
-        d[i] = _trilinear(fld, origin, res, p[i], g[i])
+        d[i] = trilinear(fld, origin, res, p[i], g[i])
 
 
 def _as_path(path) -> np.ndarray:

@@ -72,6 +72,7 @@ import trimesh
 from numba import njit
 
 from ft_sitl.rotations import matrix_from_quat
+from ft_sitl.scenarios.embree_packets import packet_scene, plane_length
 
 __all__ = [
     "NOISE_K_DEFAULT",
@@ -301,21 +302,6 @@ def _rotate_rays(dirs_optical, r_wo, origin, dirs_world, dirs32, org32, shift, s
 
 
 @njit(cache=True)
-def plane_length(t, dirs_world, k, origin, normals, plane_c, grazing):
-    """Length of ray k (unit ``dirs_world[k]`` from ``origin``) to triangle t's plane
-    (float64); inf for a miss (t < 0) or a grazing hit."""
-    if t < 0:
-        return np.inf
-    nd = (normals[t, 0] * dirs_world[k, 0] + normals[t, 1] * dirs_world[k, 1]
-          + normals[t, 2] * dirs_world[k, 2])
-    if not abs(nd) > grazing:
-        return np.inf
-    num = plane_c[t] - (normals[t, 0] * origin[0] + normals[t, 1] * origin[1]
-                        + normals[t, 2] * origin[2])
-    return num / nd
-
-
-@njit(cache=True)
 def _hit_lengths(tri, dirs_world, origin, normals, plane_c, grazing, out):
     """Ray length to the hit triangle's plane (float64); inf on a miss or a grazing hit."""
     for k in range(tri.shape[0]):
@@ -410,6 +396,7 @@ class DepthCamera:
 
         self.uses_embree = embree_available()
         if self.uses_embree:
+            # Embree/trimesh ray back ends: loaded only when a depth camera is built
             from trimesh.ray import ray_pyembree
 
             self._intersector = ray_pyembree.RayMeshIntersector(mesh)
@@ -417,6 +404,7 @@ class DepthCamera:
             warnings.warn("embreex is not importable: the depth camera falls back to trimesh's "
                           "triangle intersector (same results, orders of magnitude slower); "
                           "install embreex", RuntimeWarning, stacklevel=2)
+            # Embree/trimesh ray back ends: loaded only when a depth camera is built
             from trimesh.ray import ray_triangle
 
             self._intersector = ray_triangle.RayMeshIntersector(mesh)
@@ -432,7 +420,6 @@ class DepthCamera:
             self._tfar32 = (config.max_range_m / self.cos_axis * scale * 1.001 + 1e-6).astype(
                 np.float32)
             if packets:
-                from ft_sitl.scenarios.embree_packets import packet_scene
 
                 v32 = ((np.array(mesh.vertices, dtype=np.float64) - wrap.origin)
                        * wrap.scale).astype(np.float32)

@@ -28,8 +28,7 @@ import os
 
 import numpy as np
 from numba import njit
-
-from ft_sitl.scenarios.camera import plane_length
+from trimesh.graph import connected_component_labels
 
 __all__ = ["PacketScene", "packet_scene"]
 
@@ -68,6 +67,7 @@ def _library():
         return _LIB
     _LIB_TRIED = True
     try:
+        # Embree: loaded only when a depth camera is built
         import embreex
 
         here = os.path.dirname(embreex.__file__)
@@ -267,7 +267,6 @@ def _packet_buffers():
 def _pieces(faces: np.ndarray, n_vertices: int) -> list[np.ndarray]:
     """The faces of each connected piece (faces sharing a vertex), in face order, pieces
     ordered by their first face."""
-    from trimesh.graph import connected_component_labels
 
     f = faces.astype(np.int64)
     label = connected_component_labels(f[:, [0, 1, 1, 2]].reshape(-1, 2),
@@ -337,6 +336,21 @@ def _compile(scene: PacketScene) -> None:
 def _intersect16():
     lib = _library()
     return lib.rtcIntersect16
+
+
+@njit(cache=True)
+def plane_length(t, dirs_world, k, origin, normals, plane_c, grazing):
+    """Length of ray k (unit ``dirs_world[k]`` from ``origin``) to triangle t's plane
+    (float64); inf for a miss (t < 0) or a grazing hit."""
+    if t < 0:
+        return np.inf
+    nd = (normals[t, 0] * dirs_world[k, 0] + normals[t, 1] * dirs_world[k, 1]
+          + normals[t, 2] * dirs_world[k, 2])
+    if not abs(nd) > grazing:
+        return np.inf
+    num = plane_c[t] - (normals[t, 0] * origin[0] + normals[t, 1] * origin[1]
+                        + normals[t, 2] * origin[2])
+    return num / nd
 
 
 @njit

@@ -83,6 +83,7 @@ from dataclasses import dataclass
 
 import numpy as np
 import trimesh
+from scipy.ndimage import label
 
 from ft_sitl import __version__
 from ft_sitl.scenarios.scenario import INDEX_RANGE, Scenario, ScenarioError
@@ -995,7 +996,6 @@ def perlin(fam: Family, p: dict, rng: np.random.Generator, index: int, seed: int
     b = _MeshBuilder()
     b.boxes(np.column_stack([i0, j0, k0]) * voxel, np.column_stack([i0 + 1, j0 + 1, k1]) * voxel,
             "noise column")
-    from scipy.ndimage import label
 
     _, blobs = label(filled)
     return _make(

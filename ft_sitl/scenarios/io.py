@@ -60,6 +60,7 @@ import trimesh
 
 from ft_sitl import __version__
 from ft_sitl.config import SUFFIXES, Table, read_document
+from ft_sitl.scenarios.families import build_scenario
 from ft_sitl.scenarios.scenario import GOAL_RADIUS_M, Scenario, ScenarioError
 
 EXPORT_FORMATS = ("ply", "pcd", "obj", "dae", "sdf")
@@ -765,7 +766,6 @@ def scenario_from_spec(spec):
         return spec
     if not isinstance(spec, str):
         raise ValueError(f"scenario: {spec!r} is not FAMILY:INDEX[:SEED] or a spec file")
-    from ft_sitl.scenarios.families import build_scenario
 
     try:
         if Path(spec).suffix.lower() in (".yaml", ".yml", ".toml"):

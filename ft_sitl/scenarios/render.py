@@ -20,11 +20,14 @@ a second, a 130k-triangle mesh in about 1.5 s.
 
 from __future__ import annotations
 
+import csv
 import math
 from collections.abc import Sequence
 from pathlib import Path
 
 import numpy as np
+
+from ft_sitl.scenarios.families import PAPER_NAMES
 
 VIEWS = ("top", "perspective")
 """The views :func:`render_scenario` can draw, in the order they are usually shown."""
@@ -50,8 +53,6 @@ _VIEW_SIZE_IN = 6.4
 
 
 def _family_label(scenario) -> str:
-    from ft_sitl.scenarios.families import PAPER_NAMES
-
     prov = scenario.provenance
     paper = prov.get("paper_name") or PAPER_NAMES.get(scenario.family)
     if paper:
@@ -90,8 +91,6 @@ def _is_number(text: str) -> bool:
 
 
 def _read_csv_trajectory(path: Path) -> np.ndarray:
-    import csv
-
     with open(path, newline="", encoding="utf-8") as fh:
         rows = [(n, [c.strip() for c in row]) for n, row in enumerate(csv.reader(fh), 1)
                 if row and any(c.strip() for c in row) and not row[0].lstrip().startswith("#")]
@@ -205,7 +204,10 @@ def _height_fraction(z: np.ndarray, scenario) -> np.ndarray:
 
 
 def _draw_top(ax, scenario, traj) -> None:
+    # matplotlib: heavy, loaded only when plotting
     from matplotlib.collections import PolyCollection
+
+    # matplotlib: heavy, loaded only when plotting
     from matplotlib.patches import Circle, Rectangle
 
     tri = np.asarray(scenario.mesh.triangles, dtype=float).reshape(-1, 3, 3)
@@ -254,7 +256,10 @@ def _box_edges(lo, hi):
 
 
 def _draw_perspective(ax, scenario, traj, max_faces: int) -> None:
+    # matplotlib: heavy, loaded only when plotting
     from matplotlib.ticker import MaxNLocator
+
+    # matplotlib: heavy, loaded only when plotting
     from mpl_toolkits.mplot3d.art3d import Poly3DCollection
 
     tri = np.asarray(scenario.mesh.triangles, dtype=float).reshape(-1, 3, 3)
@@ -311,7 +316,10 @@ def _draw_perspective(ax, scenario, traj, max_faces: int) -> None:
 
 
 def _legend(fig, traj) -> None:
+    # matplotlib: heavy, loaded only when plotting
     from matplotlib.lines import Line2D
+
+    # matplotlib: heavy, loaded only when plotting
     from matplotlib.patches import Patch
 
     handles = [
@@ -339,7 +347,10 @@ def render_scenario(scenario, path=None, *, trajectory=None,
     at ``dpi`` without tight cropping, so figure pixels and saved pixels coincide.
     Raises ``ValueError`` for a bad trajectory, view or dpi.
     """
+    # matplotlib: heavy, loaded only when plotting
     from matplotlib.backends.backend_agg import FigureCanvasAgg
+
+    # matplotlib: heavy, loaded only when plotting
     from matplotlib.figure import Figure
 
     traj = _check_trajectory(trajectory)

@@ -18,6 +18,8 @@ from dataclasses import dataclass, field
 import numpy as np
 import trimesh
 
+from ft_sitl.scenarios.solvability import segment_mesh_distance
+
 CATEGORIES = ("classic", "theoretical", "user")
 INDEX_RANGE = (1, 10)
 GOAL_RADIUS_M = 2.0
@@ -177,7 +179,6 @@ class Scenario:
     def line_distance(self, cutoff: float = np.inf) -> float:
         """Exact distance from the straight start->goal segment to the obstacles
         (``inf`` when farther than ``cutoff``)."""
-        from ft_sitl.scenarios.solvability import segment_mesh_distance
 
         return segment_mesh_distance(self.mesh, self.start, self.goal, cutoff)
 

@@ -17,6 +17,7 @@ import numpy as np
 from ft_sitl import frames
 from ft_sitl.autopilot import cascade as cs
 from ft_sitl.autopilot.setpoints import Setpoint
+from ft_sitl.physics.quaternion import qto_euler
 
 
 @dataclass(frozen=True)
@@ -52,7 +53,6 @@ def to_offboard(sp: Setpoint, origin_enu) -> OffboardCommand:
             yaw_deg=math.nan if math.isnan(yaw) else math.degrees(
                 frames.wrap_pi(frames.yaw_enu_to_ned(float(yaw)))))
     if kind == cs.KIND_ATTITUDE:
-        from ft_sitl.physics.quaternion import qto_euler
 
         q = frames.q_enu_flu_to_ned_frd(row[cs.SP_Q:cs.SP_Q + 4])
         return OffboardCommand("attitude", euler_deg=_t(np.degrees(qto_euler(q))),
@@ -66,6 +66,7 @@ def to_offboard(sp: Setpoint, origin_enu) -> OffboardCommand:
 
 async def send(offboard, cmd: OffboardCommand) -> None:
     """Send ``cmd`` with a MAVSDK 4.x ``OffboardAsync``."""
+    # MAVSDK: loaded only by the navigator client that flies over it
     from mavsdk.plugins.offboard import (
         AccelerationNed,
         Attitude,

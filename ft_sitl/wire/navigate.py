@@ -32,6 +32,8 @@ from enum import StrEnum
 import numpy as np
 
 from ft_sitl import frames
+from ft_sitl.autopilot.setpoints import Setpoint
+from ft_sitl.bus.client import BusClient
 from ft_sitl.navigation.base import (
     STABLE_FOR_S,
     STABLE_POS_M,
@@ -41,6 +43,7 @@ from ft_sitl.navigation.base import (
     Observation,
     Task,
 )
+from ft_sitl.physics.quaternion import qto_euler
 from ft_sitl.wire.convert import ned_to_world, send, to_offboard
 
 log = logging.getLogger("ft_sitl.navigate")
@@ -164,12 +167,11 @@ class _State:
 
     @property
     def yaw(self) -> float:
-        from ft_sitl.physics.quaternion import qto_euler
-
         return float(qto_euler(self.q)[2])
 
 
 async def _mavsdk_state(drone, state: _State, origin) -> None:
+    # MAVSDK: loaded only by the navigator client that flies over it
     from mavsdk.asyncio.plugins.telemetry import TelemetryAsync
 
     tel = TelemetryAsync(drone)
@@ -203,9 +205,9 @@ async def _mavsdk_state(drone, state: _State, origin) -> None:
 async def _bus_state(url: str, vehicle: str, state: _State, camera) -> None:
     """Follow the vehicle's bus telemetry (and depth frames when the navigator has a
     camera); reconnect if the broker goes away."""
+    # the MQTT client: loaded only when the bus is used
     import aiomqtt
 
-    from ft_sitl.bus.client import BusClient
 
     kinds = ("telemetry", "depth") if camera is not None else ("telemetry",)
     while True:
@@ -248,11 +250,22 @@ async def fly(nav, wt: WireTask, connect: str, *, mqtt: str | None = None,
     """Fly ``nav`` through MAVSDK; returns a summary dict (``result``: success, timeout,
     gave_up, collision; ``detail``). ``real_latency``: switch the navigator's modelled
     planning latency off (a plan acts when it reaches the flight controller)."""
+    # MAVSDK: loaded only by the navigator client that flies over it
     from mavsdk import ComponentType
+
+    # MAVSDK: loaded only by the navigator client that flies over it
     from mavsdk.asyncio import Configuration, Mavsdk
+
+    # MAVSDK: loaded only by the navigator client that flies over it
     from mavsdk.asyncio.plugins.action import ActionAsync
+
+    # MAVSDK: loaded only by the navigator client that flies over it
     from mavsdk.asyncio.plugins.offboard import OffboardAsync
+
+    # MAVSDK: loaded only by the navigator client that flies over it
     from mavsdk.asyncio.plugins.telemetry import TelemetryAsync
+
+    # MAVSDK: loaded only by the navigator client that flies over it
     from mavsdk.plugins.offboard import PositionNedYaw
 
     camera = getattr(nav, "camera", None)
@@ -346,7 +359,6 @@ def _now(state: _State, t_wall0: float, speed_factor: float) -> float:
 async def _navigate(nav, wt: WireTask, off, state: _State, t_wall0: float,
                     speed_factor: float, progress, crash: list,
                     real_latency: bool = True) -> dict:
-    from ft_sitl.autopilot.setpoints import Setpoint
 
     task = wt.task()
     if real_latency and hasattr(nav, "latency"):

@@ -21,8 +21,12 @@ import threading
 
 import numpy as np
 
+from ft_sitl.bus.codec import EventType, Telemetry
 from ft_sitl.bus.publisher import BusPublisher
+from ft_sitl.bus.ratelimit import RateGate
 from ft_sitl.navigation.common import camera_config
+from ft_sitl.physics import dynamics as d
+from ft_sitl.scenarios.camera import DepthCamera
 from ft_sitl.sim.guard import GuardEventKind
 
 log = logging.getLogger("ft_sitl.bus")
@@ -31,7 +35,6 @@ log = logging.getLogger("ft_sitl.bus")
 class SitlBus:
     def __init__(self, publisher_factory, fleet, index: int = 0, *, scenario=None,
                  camera_config=None, telemetry_rate_hz: float = 50.0, seed: int = 0):
-        from ft_sitl.bus.ratelimit import RateGate
 
         self.fleet, self.i = fleet, index
         self._lock = threading.Lock()
@@ -42,7 +45,6 @@ class SitlBus:
         self.camera = None
         self.camera_config = camera_config
         if scenario is not None and camera_config is not None:
-            from ft_sitl.scenarios.camera import DepthCamera
 
             self.camera = DepthCamera(camera_config, scenario.mesh)
         self._rng = np.random.default_rng(np.random.SeedSequence([seed, 7]))
@@ -56,8 +58,6 @@ class SitlBus:
 
     # --- requests from clients (bus thread) ----------------------------------------------
     def _on_config(self, cfg: dict) -> None:
-        from ft_sitl.bus.ratelimit import RateGate
-
         with self._lock:
             if "telemetry_rate_hz" in cfg:
                 self._rate = float(cfg["telemetry_rate_hz"])
@@ -75,24 +75,22 @@ class SitlBus:
         self.pub.publish_event(event_type, int(self.fleet.time_us), **fields)
 
     def service(self) -> None:
-        from ft_sitl.bus.codec import Telemetry
-        from ft_sitl.physics import dynamics as d
-
         fleet, i = self.fleet, self.i
         t_us = int(fleet.time_us)
         cmd = fleet.commanders[i]
         if cmd.armed != self._armed:
             if self._armed is not None or cmd.armed:
-                self.event("armed" if cmd.armed else "disarmed")
+                self.event(EventType.ARMED if cmd.armed else EventType.DISARMED)
             self._armed = cmd.armed
         mode = cmd.mode_name
         if mode != self._mode:
-            self.event("mode", mode=mode)
+            self.event(EventType.MODE, mode=mode)
             self._mode = mode
         events = fleet.events
         for ev in events[self._events_seen:]:
             if ev.vehicle == i and ev.kind == GuardEventKind.COLLISION:
-                self.event("collision", object=str(ev.what), speed_m_s=float(ev.speed_m_s))
+                self.event(EventType.COLLISION, object=str(ev.what),
+                           speed_m_s=float(ev.speed_m_s))
         self._events_seen = len(events)
         with self._lock:
             gate = self._gate

@@ -17,14 +17,12 @@ import numpy as np
 import pytest
 
 from ft_sitl import G
-from ft_sitl.bridge.ardupilot import (
-    ArduPilotBridge,
+from ft_sitl.bridge.ardupilot import ArduPilotBridge, parse_servo_packet, run_ardupilot_bridge
+from ft_sitl.bridge.ardupilot_frames import (
     FrameMatchError,
     match_frame,
     motor_mapping,
     motor_mapping_for,
-    parse_servo_packet,
-    run_ardupilot_bridge,
 )
 from ft_sitl.bridge.ardupilot_params import ArduPilotParamsError, ardupilot_params, motor_fit
 from ft_sitl.frames import yaw_enu_to_ned
