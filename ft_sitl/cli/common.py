@@ -42,3 +42,15 @@ def check_out_dir(option: str, path: Path) -> None:
 
 def fmt_point(p) -> str:
     return "(" + ", ".join(f"{v:.2f}" for v in p) + ")"
+
+
+def print_schema_rows(rows: list[dict[str, str]]) -> None:
+    """A parameter schema's rows (ft_sitl.schema.Schema.rows) as an aligned text table."""
+    if not rows:
+        print("(no parameters)")
+        return
+    head = {"name": "parameter", "default": "default", "unit": "unit", "range": "allowed"}
+    width = {k: max(len(head[k]), *(len(r[k]) for r in rows)) for k in head}
+    print("  ".join(f"{head[k]:{width[k]}s}" for k in head) + "  meaning")
+    for r in rows:
+        print("  ".join(f"{r[k]:{width[k]}s}" for k in head) + f"  {r['doc']}")

@@ -6,10 +6,10 @@ import json
 import shutil
 import sys
 
-from ft_sitl.cli.common import CliError
+from ft_sitl.cli.common import CliError, print_schema_rows
 from ft_sitl.navigation.navrl import CHECKPOINT_NAME, data_dir
 from ft_sitl.navigation.navrl_policy import CheckpointError, NavRLPolicy
-from ft_sitl.navigation.registry import available, parameters
+from ft_sitl.navigation.registry import NavigatorError, available, describe, parameters
 
 
 def cmd_navigators_list(args) -> int:
@@ -40,9 +40,25 @@ def cmd_navigators_list(args) -> int:
     return 0
 
 
+def cmd_navigators_show(args) -> int:
+    """One navigator's declared parameters (its schema)."""
+    try:
+        schema = describe(args.name)
+    except NavigatorError as exc:
+        raise CliError(str(exc)) from None
+    rows = schema.rows()
+    if args.json:
+        print(json.dumps({"name": args.name, "parameters": rows}, indent=2))
+        return 0
+    n = f"{len(rows)} parameter{'s' if len(rows) != 1 else ''}"
+    print(f"navigator {args.name}: {n} (set them in a campaign's algorithms table, e.g. "
+          f"{{name = \"{args.name}\", params = {{...}}}})")
+    print_schema_rows(rows)
+    return 0
+
+
 def cmd_navigators_install(args) -> int:
     """Check a NavRL checkpoint and copy it where the navrl navigator looks."""
-
 
     if args.name != "navrl":
         raise CliError(f"install: {args.name!r} has no files to install (only navrl "

@@ -188,6 +188,11 @@ def _add_navigators(sub) -> None:
     nl = nsub.add_parser("list", help="list navigators and their parameters")
     nl.add_argument("--json", action="store_true", help="machine-readable output")
     nl.set_defaults(handler="navigators:cmd_navigators_list")
+    ns = nsub.add_parser("show", help="one navigator's parameters: default, unit, range, "
+                                      "meaning")
+    ns.add_argument("name", help="navigator name (ft-sitl navigators list)")
+    ns.add_argument("--json", action="store_true", help="machine-readable output")
+    ns.set_defaults(handler="navigators:cmd_navigators_show")
     ni = nsub.add_parser("install", help="install a navigator's model weights (navrl)",
                          description="Check a NavRL policy checkpoint (the authors' released "
                                      "navrl_checkpoint.pt) and copy it to the data directory "
@@ -299,6 +304,12 @@ def _add_scenarios(sub) -> None:
     sl = ssub.add_parser("list", help="list the scenario families")
     sl.add_argument("--json", action="store_true", help="machine-readable output")
     sl.set_defaults(handler="scenarios:cmd_scenarios_list")
+    ssh = ssub.add_parser("show", help="one family's generator parameters: default, unit, "
+                                       "range, meaning")
+    ssh.add_argument("family", metavar="FAMILY",
+                     help="family name, e.g. forest or the paper's Narrow-Gap")
+    ssh.add_argument("--json", action="store_true", help="machine-readable output")
+    ssh.set_defaults(handler="scenarios:cmd_scenarios_show")
     sb = ssub.add_parser("build", parents=[src], help="build one scenario and summarise it",
                          description="Build a scenario and print its summary.")
     sb.add_argument("--json", action="store_true", help="print Scenario.summary() as JSON")

@@ -8,12 +8,13 @@ import math
 import time
 from pathlib import Path
 
-from ft_sitl.cli.common import CliError, check_out_dir, fmt_point
+from ft_sitl.cli.common import CliError, check_out_dir, fmt_point, print_schema_rows
 from ft_sitl.scenarios.families import (
     CATEGORY,
     FAMILIES,
     PAPER_NAMES,
     build_scenario,
+    describe_family,
     resolve_family,
 )
 from ft_sitl.scenarios.io import (
@@ -73,8 +74,6 @@ def _scenario_from_args(args):
 
 
 def cmd_scenarios_list(args) -> int:
-
-
     rows = []
     for key, builder in FAMILIES.items():
         sc = build_scenario(key, 1, 0)  # the area and ceiling do not depend on index or seed
@@ -101,9 +100,25 @@ def cmd_scenarios_list(args) -> int:
     return 0
 
 
+def cmd_scenarios_show(args) -> int:
+    """One family's declared generator parameters (its schema)."""
+    try:
+        fam = describe_family(args.family)
+    except ScenarioError as exc:
+        raise CliError(str(exc)) from None
+    rows = fam.schema.rows()
+    if args.json:
+        print(json.dumps({"family": fam.name, "paper_name": fam.paper_name,
+                          "category": fam.category, "parameters": rows}, indent=2))
+        return 0
+    n = f"{len(rows)} generator parameter{'s' if len(rows) != 1 else ''}"
+    print(f"{fam.name} ({fam.paper_name}, {fam.category}): {n} (drawn per configuration "
+          f"within these ranges)")
+    print_schema_rows(rows)
+    return 0
+
+
 def cmd_scenarios_build(args) -> int:
-
-
     t0 = time.perf_counter()
     sc = _scenario_from_args(args)
     build_s = time.perf_counter() - t0

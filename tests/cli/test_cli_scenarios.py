@@ -49,6 +49,25 @@ def test_help_and_list_json_from_the_installed_script():
     assert all(r["description"] for r in rows)
 
 
+def test_show_prints_a_familys_generator_parameters(capsys):
+    from ft_sitl.scenarios.families import describe_family
+
+    rc, out, _ = cli(capsys, "show", "Narrow-Gap")
+    assert rc == 0
+    lines = out.splitlines()
+    assert lines[0].startswith("narrow_gap (Narrow-Gap, theoretical): ")
+    declared = describe_family("narrow_gap").schema.rows()
+    assert len(lines) == 2 + len(declared)
+    assert any(ln.startswith("gap_width_m ") and "[0.85, 0.9]" in ln for ln in lines)
+    rc, out, _ = cli(capsys, "show", "forest", "--json")
+    doc = json.loads(out)
+    assert doc["family"] == "forest" and doc["parameters"] == describe_family(
+        "forest").schema.rows()
+    rc, out, err = cli(capsys, "show", "forst")
+    assert (rc, out) == (2, "")
+    assert "unknown scenario family 'forst'; did you mean 'forest'?" in err
+
+
 def test_list_text(capsys):
     rc, out, _ = cli(capsys, "list")
     assert rc == 0

@@ -276,6 +276,25 @@ def test_navigators_list(capsys):
         "summary": "The straight-flight baseline (paper Sec. IV-A): no sensing, no avoidance."}
 
 
+def test_navigators_show_prints_every_declared_parameter(capsys):
+    from ft_sitl.navigation.registry import describe
+
+    rc, out, _ = cli(capsys, "navigators", "show", "ego")
+    assert rc == 0
+    lines = out.splitlines()
+    assert lines[1].split() == ["parameter", "default", "unit", "allowed", "meaning"]
+    declared = describe("ego").rows()
+    assert len(lines) == 2 + len(declared) and len(declared) >= 8
+    for row, line in zip(declared, lines[2:]):
+        assert line.split()[0] == row["name"] and row["unit"] in line and row["range"] in line
+    assert any(ln.startswith("planning_horizon_m ") and " m " in ln for ln in lines)
+    rc, out, _ = cli(capsys, "navigators", "show", "ego", "--json")
+    assert json.loads(out) == {"name": "ego", "parameters": declared}
+    rc, out, err = cli(capsys, "navigators", "show", "eggo")
+    assert (rc, out) == (2, "")
+    assert "unknown navigator 'eggo'; did you mean 'ego'?" in err
+
+
 def test_navigators_list_shows_plugins_and_broken_entry_points(capsys, plugins):
     rc, out, _ = cli(capsys, "navigators", "list")
     assert rc == 0
