@@ -125,17 +125,7 @@ def _navigate(nav, fleet, sc, platform, spec: TrialSpec, ref: TrialReferee,
     cfg = getattr(nav, "camera", None)
     camera = RESOURCES.camera(cfg, sc) if cfg is not None else None
     cam_rng = np.random.default_rng(np.random.SeedSequence([spec.seed, spec.trial, 1]))
-    try:
-        t = time.perf_counter()
-        nav.reset(task)
-        m.planner_s += time.perf_counter() - t
-    except GiveUp as exc:
-        raise TrialFailure(Outcome.TIMEOUT, f"navigator gave up: {exc}") from None
-    except (KeyboardInterrupt, WallBudgetExceeded):
-        raise
-    except BaseException as exc:  # noqa: BLE001 - even sys.exit() only fails the trial
-        raise TrialFailure(Outcome.NAVIGATOR_ERROR,
-                           f"reset raised {type(exc).__name__}: {exc}") from None
+    _call(nav.reset, task, "reset", m)
     period_us = _period_us(nav, fleet.sim.dt_us)
     next_nav_us = t_nav0_us
     next_cam_us = t_nav0_us
@@ -190,20 +180,26 @@ def _period_us(nav, dt_us: int) -> int:
     return max(1, round(1e6 / float(rate) / dt_us)) * dt_us
 
 
-def _ask(nav, obs, m) -> Setpoint:
+def _call(method, arg, what: str, m):
+    """A navigator call, timed into the planner time; GiveUp fails the trial as a timeout,
+    any other exception (even sys.exit()) as a navigator error."""
     t = time.perf_counter()
     try:
-        sp = nav.step(obs)
+        return method(arg)
     except GiveUp as exc:
         raise TrialFailure(Outcome.TIMEOUT, f"navigator gave up: {exc}") from None
     except (KeyboardInterrupt, WallBudgetExceeded):
         raise
     except BaseException as exc:  # noqa: BLE001 - even sys.exit() only fails the trial
         raise TrialFailure(Outcome.NAVIGATOR_ERROR,
-                           f"step raised {type(exc).__name__}: {exc}") from None
+                           f"{what} raised {type(exc).__name__}: {exc}") from None
     finally:
         m.planner_s += time.perf_counter() - t
-        m.planner_calls += 1
+
+
+def _ask(nav, obs, m) -> Setpoint:
+    m.planner_calls += 1
+    sp = _call(nav.step, obs, "step", m)
     why = offboard_problem(sp)
     if why:
         raise TrialFailure(Outcome.NAVIGATOR_ERROR, f"step returned {why}")
