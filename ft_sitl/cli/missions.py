@@ -14,7 +14,7 @@ from ft_sitl.missions.campaign import Transport, report_meta, run_campaign
 from ft_sitl.missions.campaign_file import CampaignError, load_campaign
 from ft_sitl.missions.report import write_report
 from ft_sitl.missions.results import rows_from_parquet, to_frame
-from ft_sitl.missions.spec import TrialSpec, TrialSpecError
+from ft_sitl.missions.spec import PROTOCOLS, TrialSpec, TrialSpecError
 from ft_sitl.missions.store import (
     PARQUET_FILE,
     SPEC_FILE,
@@ -319,6 +319,7 @@ def cmd_trial_rerun(args) -> int:
     print(f"trial {spec.trial_id}: {row['algorithm']} on {row['platform']} in "
           f"{row['scenario']} (trial {spec.trial}): {row['reason']}"
           f"{' - ' + row['detail'] if row['detail'] else ''}")
+    print(f"  flown under protocol version {spec.protocol}: {PROTOCOLS[spec.protocol]}")
     if not math.isnan(row["time_to_goal_s"]):
         print(f"  time to goal {row['time_to_goal_s']:.2f} s")
     print(f"  navigation {row['nav_time_s']:.2f} s, path {row['path_length_m']:.2f} m, "

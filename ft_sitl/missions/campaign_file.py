@@ -14,6 +14,7 @@ A campaign file (TOML or YAML) names what to run; every key is optional except
                                      # {file = "yard.yaml"} (a user scenario), or "all"
     indices = "all"                  # default configurations of each family (1..10)
     physics_hz = 1000
+    protocol = 1                     # the trial protocol's version (default: the newest)
 
     [[algorithms]]                   # or: algorithms = "all" / ["straight", ...]
     name = "straight"                # a registered navigator
@@ -50,7 +51,7 @@ from pathlib import Path
 
 from ft_sitl.config import Table, integer, read_document
 from ft_sitl.missions import scoring
-from ft_sitl.missions.spec import TrialSpec
+from ft_sitl.missions.spec import PROTOCOL_VERSION, PROTOCOLS, TrialSpec
 from ft_sitl.navigation.base import Limits
 from ft_sitl.navigation.registry import NavigatorError, available, create
 from ft_sitl.physics.catalog import PlatformRegistry
@@ -61,7 +62,7 @@ from ft_sitl.scenarios.scenario import ScenarioError
 
 PRESETS = ("quick", "paper")
 TOP_KEYS = ("name", "trials", "seed", "scenario_seed", "platforms", "platform_files",
-            "scenarios", "indices", "physics_hz", "algorithms", "limits", "weights",
+            "scenarios", "indices", "physics_hz", "protocol", "algorithms", "limits", "weights",
             "description")
 LIMIT_KEYS = ("max_speed_m_s", "timeout_s", "goal_radius_m", "hold_s")
 WEIGHT_KEYS = ("scenarios", "platforms", "beta")
@@ -97,6 +98,7 @@ class Campaign:
     limits: Limits = field(default_factory=Limits)
     weights: dict = field(default_factory=dict)
     physics_hz: int = 1000
+    protocol: int = PROTOCOL_VERSION
     source: str = ""
     doc: dict = field(default_factory=dict)
     #: what "all" left out and why (e.g. a navigator without its model weights)
@@ -113,6 +115,8 @@ class Campaign:
             "scenarios": [{"family": s.family, "indices": list(s.indices),
                            **({"file": s.file} if s.file else {})} for s in self.scenarios],
             "limits": self.limits.as_dict(), "weights": self.weights,
+            # (left out at version 1: directories written before versions resume)
+            **({"protocol": self.protocol} if self.protocol != 1 else {}),
         }
 
     def trial_specs(self) -> list[TrialSpec]:
@@ -132,7 +136,7 @@ class Campaign:
                             family=sc.family, scenario_index=index,
                             scenario_seed=self.scenario_seed, scenario_file=sc.file,
                             trial=t, seed=seed, limits=self.limits, campaign=self.name,
-                            physics_hz=self.physics_hz))
+                            physics_hz=self.physics_hz, protocol=self.protocol))
         out.sort(key=lambda s: (s.scenario_file or "", s.family, s.scenario_index))
         return out
 
@@ -168,6 +172,7 @@ def parse_campaign(doc: dict, path: Path | None = None) -> Campaign:
     physics_hz = t.integer("physics_hz", 1000, lo=100, hi=10_000)
     if 1_000_000 % physics_hz:
         raise t.fail("physics_hz", f"{physics_hz} must divide 1,000,000")
+    protocol = t.integer("protocol", PROTOCOL_VERSION, lo=min(PROTOCOLS), hi=max(PROTOCOLS))
     limits_t = t.table("limits", {})
     limits_t.check_keys(LIMIT_KEYS)
     try:
@@ -182,7 +187,7 @@ def parse_campaign(doc: dict, path: Path | None = None) -> Campaign:
         name=name, algorithms=parse_algorithms(where, doc["algorithms"], notes),
         platforms=platforms, scenarios=scenarios, trials=trials, seed=seed,
         scenario_seed=scenario_seed, limits=limits, weights=weights, physics_hz=physics_hz,
-        source=str(path) if path is not None else "", doc=doc, notes=notes)
+        protocol=protocol, source=str(path) if path is not None else "", doc=doc, notes=notes)
 
 
 def _weights(t: Table, platforms, scenarios) -> dict:

@@ -98,7 +98,8 @@ def failed_row(spec, platform, scenario, reason: Outcome, detail: str) -> dict:
     outcome and provenance; the metrics are left out (NaN in the table)."""
     row = identity_row(spec, platform, scenario)
     row.update({"success": False, "reason": Outcome(reason).value, "detail": detail,
-                "code_version": __version__, "spec": spec.to_json(),
+                "code_version": __version__, "protocol_version": spec.protocol,
+                "spec": spec.to_json(),
                 "finished_utc": utc_now()})
     return row
 
@@ -364,6 +365,7 @@ class TrialReferee:
             "sim_time_s": fleet.time_us * 1e-6,
             "wall_time_s": time.perf_counter() - wall0,
             "code_version": __version__,
+            "protocol_version": self.spec.protocol,
             "finished_utc": utc_now(),
             "spec": self.spec.to_json(),
         })

@@ -23,8 +23,10 @@ metrics (navigation phase)
     ``energy_j`` (motor mechanical energy), ``replans``, ``planner_time_s`` (navigator
     compute, wall clock), ``planner_calls``.
 run
-    ``sim_time_s``, ``wall_time_s``, ``code_version``, ``finished_utc``, ``spec`` (the
-    full trial spec as JSON: enough to rerun the trial alone).
+    ``sim_time_s``, ``wall_time_s``, ``code_version``, ``protocol_version`` (the trial
+    protocol's version, ft_sitl.missions.spec.PROTOCOLS; 1 for rows written before it was
+    recorded), ``finished_utc``, ``spec`` (the full trial spec as JSON: enough to rerun the
+    trial alone).
 """
 
 from __future__ import annotations
@@ -77,12 +79,14 @@ OUTCOME = ("success", "reason", "detail")
 METRICS = ("time_to_goal_s", "nav_time_s", "path_length_m", "mean_speed_m_s",
            "max_speed_m_s", "min_clearance_m", "max_tilt_deg", "saturation_fraction",
            "energy_j", "replans", "planner_time_s", "planner_calls")
-RUN = ("sim_time_s", "wall_time_s", "code_version", "finished_utc", "spec")
+RUN = ("sim_time_s", "wall_time_s", "code_version", "protocol_version", "finished_utc",
+       "spec")
 COLUMNS = IDENTITY + OUTCOME + METRICS + RUN
 
 CATEGORICAL = ("campaign", "algorithm", "platform", "platform_category", "family",
                "scenario_category", "scenario", "reason")
-INTEGER = ("scenario_index", "scenario_seed", "trial", "seed", "replans", "planner_calls")
+INTEGER = ("scenario_index", "scenario_seed", "trial", "seed", "replans", "planner_calls",
+           "protocol_version")
 FLOAT = ("mass_kg", "twr_max", "alpha_xy_max", "alpha_z_max") + tuple(
     m for m in METRICS if m not in ("replans", "planner_calls")) + ("sim_time_s",
                                                                      "wall_time_s")
@@ -100,6 +104,8 @@ def to_frame(rows):
     df = pd.DataFrame(rows, columns=list(COLUMNS))
     for c in INTEGER:
         df[c] = pd.to_numeric(df[c], errors="coerce").astype("Int64")
+    # rows written before the version was recorded flew protocol 1
+    df["protocol_version"] = df["protocol_version"].fillna(1)
     for c in FLOAT:
         df[c] = pd.to_numeric(df[c], errors="coerce").astype("float64")
     df["success"] = df["success"].astype(bool)

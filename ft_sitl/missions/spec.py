@@ -16,6 +16,16 @@ from ft_sitl.navigation.base import Limits
 from ft_sitl.physics.catalog import get_platform, platform_from_mapping
 from ft_sitl.physics.platform import Platform
 
+#: the versions of the trial protocol this code flies, with what each one is; a trial's
+#: spec names its version (absent: 1, the rules of every row written before versions were
+#: recorded), its row says which version made it, and ``ft-sitl trial rerun`` flies an old
+#: row by its own version's rules
+PROTOCOLS = {
+    1: "the rules of docs/results/paper (campaigns up to 2026-11-26)",
+}
+#: the version new trials and campaigns fly unless they name another
+PROTOCOL_VERSION = max(PROTOCOLS)
+
 
 class TrialSpecError(ValueError):
     """A trial spec is invalid; the message names the field."""
@@ -46,6 +56,7 @@ class TrialSpec:
     platform_def: dict | None = None
     scenario_file: str | None = None
     physics_hz: int = 1000
+    protocol: int = PROTOCOL_VERSION
 
     def __post_init__(self):
         for name in ("algorithm", "platform", "family"):
@@ -61,10 +72,13 @@ class TrialSpec:
             raise TrialSpecError("algorithm_params: must be a table of parameters")
         if not isinstance(self.limits, Limits):
             raise TrialSpecError("limits: must be a Limits")
+        check_protocol(self.protocol)
 
     # --- serialisation -------------------------------------------------------------------
     def to_dict(self) -> dict:
-        return {
+        """The canonical spec. ``protocol`` is left out at version 1, so the specs (and
+        trial ids) of rows written before versions existed stay what they were."""
+        d = {
             "algorithm": self.algorithm, "algorithm_params": self.algorithm_params,
             "platform": self.platform, "platform_def": self.platform_def,
             "family": self.family, "scenario_index": self.scenario_index,
@@ -72,6 +86,9 @@ class TrialSpec:
             "trial": self.trial, "seed": self.seed, "limits": self.limits.as_dict(),
             "campaign": self.campaign, "label": self.label, "physics_hz": self.physics_hz,
         }
+        if self.protocol != 1:
+            d["protocol"] = self.protocol
+        return d
 
     @classmethod
     def from_dict(cls, d: dict) -> TrialSpec:
@@ -79,6 +96,7 @@ class TrialSpec:
             raise TrialSpecError("a trial spec must be a table")
         d = dict(d)
         d.pop("code_version", None)
+        d.setdefault("protocol", 1)  # a spec written before versions were recorded
         try:
             limits = Limits(**d.pop("limits", {}))
         except TypeError as exc:
@@ -97,6 +115,17 @@ class TrialSpec:
     def trial_id(self) -> str:
         """16 hex digits of the SHA-256 of the canonical spec (the campaign's key)."""
         return hashlib.sha256(self.to_json().encode()).hexdigest()[:16]
+
+
+def check_protocol(version) -> int:
+    """``version`` if this code flies it, else TrialSpecError saying which versions it
+    flies (a row from a newer ft-sitl needs that one)."""
+    if isinstance(version, bool) or not isinstance(version, int) or version not in PROTOCOLS:
+        known = ", ".join(map(str, sorted(PROTOCOLS)))
+        raise TrialSpecError(f"protocol: version {version!r} is not one this ft-sitl flies "
+                             f"({known}); a trial written under another version needs the "
+                             f"ft-sitl that wrote it (its row's code_version)")
+    return version
 
 
 def platform_for(spec: TrialSpec) -> Platform:

@@ -60,9 +60,8 @@ class ResultStore:
             except (OSError, ValueError) as exc:
                 raise StoreError(f"{self.spec_path}: unreadable ({exc})") from None
             if old.get("spec") != campaign.get("spec"):
-                raise StoreError(f"{self.dir} holds the results of a different campaign "
-                                 f"({old.get('spec', {}).get('name', '?')!r}); use another "
-                                 f"--out directory, or the same campaign file to resume")
+                raise StoreError(self._mismatch(old.get("spec") or {}, campaign.get("spec")
+                                                or {}))
         else:
             tmp = self.spec_path.with_suffix(".tmp")
             tmp.write_text(json.dumps(campaign, indent=2, sort_keys=True))
@@ -75,6 +74,20 @@ class ResultStore:
         """Read the finished trials of the directory into :attr:`done` (trial id -> row)."""
         self.done = self._load()
         return self.done
+
+    def _mismatch(self, old: dict, new: dict) -> str:
+        """Why the directory's campaign is not this one; a different protocol version
+        (the same campaign otherwise) is said as such."""
+        v_old, v_new = old.get("protocol", 1), new.get("protocol", 1)
+        if v_old != v_new and {k: v for k, v in old.items() if k != "protocol"} == \
+                {k: v for k, v in new.items() if k != "protocol"}:
+            return (f"{self.dir} holds trials flown under protocol version {v_old}; this "
+                    f"run would fly version {v_new}, and the two do not mix in one result "
+                    f"directory: set protocol = {v_old} in the campaign file to resume it, or "
+                    f"use another --out directory")
+        return (f"{self.dir} holds the results of a different campaign "
+                f"({old.get('name', '?')!r}); use another --out directory, or the same "
+                f"campaign file to resume")
 
     def _load(self, repair: bool = False) -> dict[str, dict]:
         done: dict[str, dict] = {}

@@ -577,3 +577,17 @@ def test_duplicate_scenario_entries_are_refused_or_merged(tmp_path):
 def test_weights_the_score_refuses_are_refused_by_the_campaign(tmp_path, weights):
     path = campaign_file(tmp_path, "w.toml", BASE + f"[weights]\n{weights}\n")
     assert _error(path).startswith(f"{path}: weights.")
+
+
+def test_a_directory_of_another_protocol_version_is_refused_by_version(tmp_path):
+    """Rows of two protocol versions never mix in one directory; the message says which
+    version the directory holds and how to resume it."""
+    store = ResultStore(tmp_path)
+    store.open({"spec": {"name": "x", "trials": 1, "protocol": 7}})
+    store.close()
+    with pytest.raises(StoreError, match=r"holds trials flown under protocol version 7; this "
+                                         r"run would fly version 1, .*set protocol = 7 in the "
+                                         r"campaign file to resume it"):
+        ResultStore(tmp_path).open({"spec": {"name": "x", "trials": 1}})
+    with pytest.raises(StoreError, match="holds the results of a different campaign"):
+        ResultStore(tmp_path).open({"spec": {"name": "x", "trials": 2}})

@@ -12,6 +12,7 @@ import json
 import math
 import signal
 from contextlib import contextmanager
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -578,3 +579,36 @@ def test_campaign_workers_share_one_build_of_a_scenario_distance_grid(tmp_path, 
                                          wall=((1.0, 5.0, 0.0), (9.0, 5.5, 2.0)))))
     grid_of(other)
     assert len(list(tmp_path.glob("*.npz"))) == 1 and not saved[0].exists()
+
+
+# --- protocol versions -------------------------------------------------------------------------
+def test_protocol_version_is_in_the_row_and_absent_means_1():
+    from ft_sitl.missions.spec import PROTOCOL_VERSION, PROTOCOLS
+
+    spec = TrialSpec("straight", PLATFORM, "forest")
+    assert spec.protocol == PROTOCOL_VERSION and PROTOCOL_VERSION in PROTOCOLS
+    old = {k: v for k, v in spec.to_dict().items() if k != "protocol"}
+    assert TrialSpec.from_dict(old).protocol == 1
+    assert "protocol" not in TrialSpec.from_dict(old).to_dict()  # the old ids stay
+
+
+def test_a_committed_paper_row_keeps_its_trial_id_and_version():
+    """The committed results predate recorded versions: their specs read as protocol 1 and
+    hash to the ids they were stored under."""
+    import pandas as pd
+
+    paper = Path(__file__).resolve().parents[2] / "docs" / "results" / "paper"
+    df = pd.read_parquet(paper / "trials.parquet", columns=["trial_id", "spec"]).head(50)
+    for tid, doc in zip(df["trial_id"], df["spec"]):
+        spec = TrialSpec.from_dict(json.loads(doc))
+        assert spec.protocol == 1 and spec.trial_id == tid
+
+
+@pytest.mark.parametrize("version", [0, 99, "1", True])
+def test_a_spec_of_an_unknown_protocol_version_is_refused_by_name(version):
+    with pytest.raises(TrialSpecError, match=rf"protocol: version {version!r} is not one "
+                                             r"this ft-sitl flies \(1"):
+        TrialSpec("straight", PLATFORM, "forest", protocol=version)
+    doc = {**TrialSpec("straight", PLATFORM, "forest").to_dict(), "protocol": version}
+    with pytest.raises(TrialSpecError, match="needs the ft-sitl that wrote it"):
+        TrialSpec.from_dict(doc)
