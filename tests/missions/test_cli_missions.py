@@ -318,8 +318,10 @@ def test_navigators_list_shows_plugins_and_broken_entry_points(capsys, plugins):
      "quik: no such campaign file (presets: quick, paper)"),
     (["campaign", "run", "{campaign}", "--out", "{tmp}/o", "--workers", "0"],
      "--workers: 0 must be at least 1"),
-    (["campaign", "check", "{tmp}/bad.toml"], "{tmp}/bad.toml: unknown key(s) 'trails' (did "
-                                              "you mean 'trials'?); allowed: name, trials"),
+    (["campaign", "check", "{tmp}/bad.toml"],
+     "{tmp}/bad.toml: unknown key(s) 'trails' (did you mean 'trials'?); allowed: name, trials, "
+     "seed, scenario_seed, platforms, platform_files, scenarios, indices, physics_hz, protocol, "
+     "algorithms, limits, weights, description"),
     (["campaign", "report", "{tmp}"],
      "{tmp}: not a campaign result directory (no campaign.json)"),
     (["campaign", "report", "{tmp}/empty"], "{tmp}/empty: no finished trials yet"),
