@@ -28,7 +28,9 @@ from ft_sitl.physics.dynamics import X_OMEGA, X_POS, X_QUAT, X_VEL
 SP_KIND, SP_POS, SP_VEL, SP_ACC, SP_YAW, SP_YAWRATE, SP_Q, SP_RATES, SP_THRUST = (
     0, 1, 4, 7, 10, 11, 12, 16, 19,
 )
-N_SP = 20
+#: 1.0 when the setpoint came from outside (offboard), NaN for the flight controller's own
+SP_OFFBOARD = 20
+N_SP = 21
 KIND_OFF, KIND_IDLE, KIND_TRAJECTORY, KIND_ATTITUDE, KIND_RATES = 0, 1, 2, 3, 4
 #: direct motor commands (an external autopilot's outputs, autopilot-in-the-loop): u in
 #: [0, 1] per rotor in SP_MOTORS.., rotor speed command u * w_max (as Gazebo's motor model)
@@ -48,7 +50,8 @@ G_RATE_P, G_RATE_I, G_RATE_D, G_RATE_ILIM, G_TSCALE = 12, 15, 18, 21, 24
 ) = range(27, 36)
 G_RATE_MAX = 36
 G_TROT_MIN, G_TROT_MAX, G_CT, G_MASS, G_POS_DIV, G_AIRMODE = 39, 40, 41, 42, 43, 44
-N_GAINS = 45
+G_OFFB_ACC_LIM = 45  # FT_OFFB_ACC_LIM
+N_GAINS = 46
 
 # --- controller state row ---------------------------------------------------------------
 C_VEL_INT, C_RATE_INT, C_RATE_PREV, C_VEL_PREV, C_ACC_EST = 0, 3, 6, 9, 12
@@ -170,21 +173,24 @@ def position_control(x, sp, gn, cs, dt):
         else:
             cs[C_VEL_INT + i] = 0.0
             acc[i] = a_ff
-    # acceleration limits
+    # acceleration limits: MPC_ACC_* bound the flight controller's own trajectories; an
+    # offboard setpoint is bound only by the tilt and thrust limits below, as in PX4
+    # (unless FT_OFFB_ACC_LIM = 1, the rule of protocol 1)
     sat_xy = False
     sat_z = False
-    an = math.sqrt(acc[0] * acc[0] + acc[1] * acc[1])
-    if an > gn[G_AMAX_XY]:
-        s = gn[G_AMAX_XY] / an
-        acc[0] *= s
-        acc[1] *= s
-        sat_xy = True
-    if acc[2] > gn[G_AMAX_UP]:
-        acc[2] = gn[G_AMAX_UP]
-        sat_z = True
-    elif acc[2] < -gn[G_AMAX_DN]:
-        acc[2] = -gn[G_AMAX_DN]
-        sat_z = True
+    if not sp[SP_OFFBOARD] == 1.0 or gn[G_OFFB_ACC_LIM] > 0.5:
+        an = math.sqrt(acc[0] * acc[0] + acc[1] * acc[1])
+        if an > gn[G_AMAX_XY]:
+            s = gn[G_AMAX_XY] / an
+            acc[0] *= s
+            acc[1] *= s
+            sat_xy = True
+        if acc[2] > gn[G_AMAX_UP]:
+            acc[2] = gn[G_AMAX_UP]
+            sat_z = True
+        elif acc[2] < -gn[G_AMAX_DN]:
+            acc[2] = -gn[G_AMAX_DN]
+            sat_z = True
     # thrust vector: vertical first, then what is left for horizontal within the tilt limit
     fz = mass * (acc[2] + G)
     if fz < gn[G_FMIN]:

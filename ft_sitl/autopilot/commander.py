@@ -402,7 +402,7 @@ class Commander:
     # --- offboard ------------------------------------------------------------------
     def offboard_setpoint(self, sp: Setpoint) -> None:
         """A validated offboard setpoint arrived (it keeps the stream fresh)."""
-        self._offboard_sp = sp
+        self._offboard_sp = sp.offboard()
         self._offboard_t_us = self.time_us
 
     # --- mission -------------------------------------------------------------------

@@ -45,6 +45,7 @@ _DIRECT = {
     c.G_AMAX_XY: "MPC_ACC_HOR_MAX",
     c.G_AMAX_UP: "MPC_ACC_UP_MAX",
     c.G_AMAX_DN: "MPC_ACC_DOWN_MAX",
+    c.G_OFFB_ACC_LIM: "FT_OFFB_ACC_LIM",
 }
 
 

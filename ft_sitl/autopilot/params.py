@@ -92,6 +92,15 @@ _SPECS = [
         "FT_BAT_ENDURANCE", 1200.0, 10.0, 36000.0, "s",
         "hover endurance that sizes the simulated battery (ft-sitl)",
     ),
+    # --- ft-sitl: offboard acceleration limits (protocol 1 compatibility) -------------
+    ParamSpec(
+        "FT_OFFB_ACC_LIM", 0, 0, 1, "enum",
+        "0: MPC_ACC_* bound only the flight controller's own trajectories (take-off, hold, "
+        "goto, missions, RTL, land) and an offboard trajectory setpoint only the tilt and "
+        "thrust limits, as in PX4; 1: they clamp offboard acceleration too (ft-sitl before "
+        "protocol 2)",
+        is_int=True,
+    ),
     # --- ft-sitl: gain mode and rate-loop bandwidths (FT_GAIN_MODE = 0) ----------------
     ParamSpec(
         "FT_GAIN_MODE",

@@ -66,6 +66,20 @@ class Setpoint:
     def kind(self) -> int:
         return int(self.row[c.SP_KIND])
 
+    @property
+    def is_offboard(self) -> bool:
+        """Whether the setpoint came from outside the flight controller (see
+        :meth:`offboard`)."""
+        return bool(self.row[c.SP_OFFBOARD] == 1.0)
+
+    def offboard(self) -> Setpoint:
+        """This setpoint marked as coming from outside (an offboard client): the cascade
+        then bounds its acceleration only by the tilt and thrust limits, as PX4 does,
+        not by MPC_ACC_* (which shape the flight controller's own trajectories)."""
+        row = self.row.copy()
+        row[c.SP_OFFBOARD] = 1.0
+        return Setpoint(row)
+
     # --- constructors --------------------------------------------------------------
     @staticmethod
     def _base(kind: int) -> np.ndarray:

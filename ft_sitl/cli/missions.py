@@ -319,7 +319,8 @@ def cmd_trial_rerun(args) -> int:
     print(f"trial {spec.trial_id}: {row['algorithm']} on {row['platform']} in "
           f"{row['scenario']} (trial {spec.trial}): {row['reason']}"
           f"{' - ' + row['detail'] if row['detail'] else ''}")
-    print(f"  flown under protocol version {spec.protocol}: {PROTOCOLS[spec.protocol]}")
+    print(f"  flown under protocol version {spec.protocol}: "
+          f"{PROTOCOLS[spec.protocol].summary}")
     if not math.isnan(row["time_to_goal_s"]):
         print(f"  time to goal {row['time_to_goal_s']:.2f} s")
     print(f"  navigation {row['nav_time_s']:.2f} s, path {row['path_length_m']:.2f} m, "

@@ -47,6 +47,7 @@ from ft_sitl.autopilot.cascade import C_SAT_STEPS
 from ft_sitl.autopilot.params import ParamSet
 from ft_sitl.missions.resources import RESOURCES, TrialResources
 from ft_sitl.missions.results import Outcome
+from ft_sitl.missions.spec import PROTOCOLS
 from ft_sitl.navigation.base import STABLE_FOR_S, STABLE_POS_M, STABLE_SPEED_M_S
 from ft_sitl.sim.fleet import Fleet
 from ft_sitl.sim.guard import CollisionGuard, GuardEventKind
@@ -388,7 +389,9 @@ def trial_vehicle(spec, scenario, platform, resources: TrialResources = RESOURCE
     world, grid = resources.world_and_grid(scenario)
     guard = CollisionGuard(world, [platform.collision_radius_m], grid=grid,
                            names=scenario.obstacle_name)
-    params = ParamSet({"MPC_XY_VEL_MAX": spec.limits.max_speed_m_s})
+    rules = PROTOCOLS[spec.protocol]
+    params = ParamSet({"MPC_XY_VEL_MAX": spec.limits.max_speed_m_s,
+                       "FT_OFFB_ACC_LIM": int(rules.offboard_acc_clamp)})
     fleet = Fleet([platform], params=[params], spawn=[scenario.takeoff],
                   spawn_yaw=[scenario.start_yaw], physics_hz=spec.physics_hz, guard=guard)
     return guard, fleet

@@ -16,12 +16,27 @@ from ft_sitl.navigation.base import Limits
 from ft_sitl.physics.catalog import get_platform, platform_from_mapping
 from ft_sitl.physics.platform import Platform
 
-#: the versions of the trial protocol this code flies, with what each one is; a trial's
-#: spec names its version (absent: 1, the rules of every row written before versions were
-#: recorded), its row says which version made it, and ``ft-sitl trial rerun`` flies an old
-#: row by its own version's rules
+
+@dataclass(frozen=True)
+class ProtocolRules:
+    """What one version of the trial protocol decides (docs/missions.md, "Protocol
+    versions")."""
+
+    version: int
+    summary: str
+    #: MPC_ACC_* also clamp the navigator's offboard setpoints (FT_OFFB_ACC_LIM = 1)
+    offboard_acc_clamp: bool
+
+
+#: the versions of the trial protocol this code flies; a trial's spec names its version
+#: (absent: 1, the rules of every row written before versions were recorded), its row says
+#: which version made it, and ``ft-sitl trial rerun`` flies an old row by its own rules
 PROTOCOLS = {
-    1: "the rules of docs/results/paper (campaigns up to 2026-11-26)",
+    1: ProtocolRules(1, "the rules of docs/results/paper (campaigns up to 2026-11-26)",
+                     offboard_acc_clamp=True),
+    2: ProtocolRules(2, "PX4's offboard rule: MPC_ACC_* no longer clamp the navigator's "
+                        "setpoints (the tilt and thrust limits bound them)",
+                     offboard_acc_clamp=False),
 }
 #: the version new trials and campaigns fly unless they name another
 PROTOCOL_VERSION = max(PROTOCOLS)

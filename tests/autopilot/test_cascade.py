@@ -94,6 +94,46 @@ def test_acceleration_setpoint_is_limited_by_mpc_acc_hor_max():
     assert (sim.velocity(0)[0] - v0) / 0.3 == pytest.approx(3.0, rel=0.06)  # minus drag
 
 
+@pytest.mark.parametrize("name,twr", [("1.00kg-SunnySky", 6.0), ("1.20kg-JFRC", 1.4)])
+def test_offboard_acceleration_is_bounded_by_tilt_and_thrust_not_mpc_acc(name, twr):
+    """PX4 parity: a 10 m/s^2 offboard acceleration setpoint is not clamped to
+    MPC_ACC_HOR_MAX (3 m/s^2); it is followed up to the tilt limit (45 deg), and a weak
+    platform (TWR 1.4: g sqrt(TWR^2 - 1) = 9.6 m/s^2 with no thrust to spare) saturates its
+    motors getting there while a strong one (TWR 6) does not."""
+    from ft_sitl.autopilot import cascade as c
+
+    p = catalog()[name]
+    assert p.indicators().twr_max == pytest.approx(twr, abs=0.05)
+    sim = Simulation(p)
+    sim.start_hovering(0, [0.0, 0.0, 5.0])
+    sp = Setpoint.trajectory(position=[math.nan, math.nan, 5.0],
+                             acceleration=[10.0, 0.0, 0.0], yaw=0.0).offboard()
+    sim.set_setpoint(0, sp)
+    sim.run(0.3)
+    saturated = sim.ctrl[0, c.C_SAT_STEPS] / sim.steps
+    v0 = sim.velocity(0)[0]
+    sim.run(0.5)
+    achieved = (sim.velocity(0)[0] - v0) / 0.5
+    ax, _, az = sim.ctrl[0, c.C_ACC_SP:c.C_ACC_SP + 3]
+    assert math.degrees(math.atan2(ax, az + 9.80665)) == pytest.approx(45.0, abs=0.5)
+    assert achieved > 8.0  # (drag takes a little)
+    if twr > 3:
+        assert saturated == 0.0
+    else:
+        assert saturated > 0.5
+
+
+def test_offboard_acceleration_clamp_of_protocol_1():
+    """FT_OFFB_ACC_LIM = 1 (protocol 1) clamps offboard setpoints to MPC_ACC_HOR_MAX too."""
+    from ft_sitl.autopilot import cascade as c
+
+    sim = Simulation(catalog()["1.00kg-SunnySky"], params=ParamSet({"FT_OFFB_ACC_LIM": 1}))
+    sim.start_hovering(0, [0.0, 0.0, 5.0])
+    sim.set_setpoint(0, Setpoint.acceleration([10.0, 0.0, 0.0], yaw=0.0).offboard())
+    sim.run(0.3)
+    assert sim.ctrl[0, c.C_ACC_SP] == pytest.approx(3.0, rel=1e-9)
+
+
 def test_attitude_setpoint_tracks_roll():
     from ft_sitl.physics.quaternion import qfrom_euler
 

@@ -491,9 +491,10 @@ def test_spec_round_trips_through_dict_and_json():
 
 def test_trial_id_is_stable():
     spec = TrialSpec("straight", PLATFORM, "maze", scenario_index=3, scenario_seed=1, trial=2,
-                     seed=7)
+                     seed=7, protocol=1)
     # the key of every stored result: a change here orphans existing result directories
     assert spec.trial_id == "3f5892779a3fd6af"
+    assert dataclasses.replace(spec, protocol=2).trial_id == "927138a9ce742cce"
     assert spec.trial_id == hashlib.sha256(spec.to_json().encode()).hexdigest()[:16]
     assert TrialSpec(**{f.name: getattr(spec, f.name)
                         for f in dataclasses.fields(TrialSpec)}).trial_id == spec.trial_id
@@ -504,6 +505,7 @@ CHANGES = {
     "scenario_seed": 2, "trial": 3, "seed": 8, "algorithm_params": {"speed_m_s": 2.0},
     "limits": Limits(timeout_s=61.0), "campaign": "d", "label": "x",
     "platform_def": {"name": PLATFORM}, "scenario_file": "/tmp/x.yaml", "physics_hz": 1000,
+    "protocol": 1,
 }
 
 
