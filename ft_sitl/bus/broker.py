@@ -160,8 +160,6 @@ class EmbeddedBroker:
     async def _serve(self) -> None:
         # the embedded MQTT broker: loaded only when it is started
         from amqtt.broker import Broker
-
-        # the embedded MQTT broker: loaded only when it is started
         from amqtt.errors import BrokerError
 
         self._stop = asyncio.Event()

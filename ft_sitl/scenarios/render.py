@@ -206,8 +206,6 @@ def _height_fraction(z: np.ndarray, scenario) -> np.ndarray:
 def _draw_top(ax, scenario, traj) -> None:
     # matplotlib: heavy, loaded only when plotting
     from matplotlib.collections import PolyCollection
-
-    # matplotlib: heavy, loaded only when plotting
     from matplotlib.patches import Circle, Rectangle
 
     tri = np.asarray(scenario.mesh.triangles, dtype=float).reshape(-1, 3, 3)
@@ -258,8 +256,6 @@ def _box_edges(lo, hi):
 def _draw_perspective(ax, scenario, traj, max_faces: int) -> None:
     # matplotlib: heavy, loaded only when plotting
     from matplotlib.ticker import MaxNLocator
-
-    # matplotlib: heavy, loaded only when plotting
     from mpl_toolkits.mplot3d.art3d import Poly3DCollection
 
     tri = np.asarray(scenario.mesh.triangles, dtype=float).reshape(-1, 3, 3)
@@ -318,8 +314,6 @@ def _draw_perspective(ax, scenario, traj, max_faces: int) -> None:
 def _legend(fig, traj) -> None:
     # matplotlib: heavy, loaded only when plotting
     from matplotlib.lines import Line2D
-
-    # matplotlib: heavy, loaded only when plotting
     from matplotlib.patches import Patch
 
     handles = [
@@ -349,8 +343,6 @@ def render_scenario(scenario, path=None, *, trajectory=None,
     """
     # matplotlib: heavy, loaded only when plotting
     from matplotlib.backends.backend_agg import FigureCanvasAgg
-
-    # matplotlib: heavy, loaded only when plotting
     from matplotlib.figure import Figure
 
     traj = _check_trajectory(trajectory)

@@ -252,20 +252,10 @@ async def fly(nav, wt: WireTask, connect: str, *, mqtt: str | None = None,
     planning latency off (a plan acts when it reaches the flight controller)."""
     # MAVSDK: loaded only by the navigator client that flies over it
     from mavsdk import ComponentType
-
-    # MAVSDK: loaded only by the navigator client that flies over it
     from mavsdk.asyncio import Configuration, Mavsdk
-
-    # MAVSDK: loaded only by the navigator client that flies over it
     from mavsdk.asyncio.plugins.action import ActionAsync
-
-    # MAVSDK: loaded only by the navigator client that flies over it
     from mavsdk.asyncio.plugins.offboard import OffboardAsync
-
-    # MAVSDK: loaded only by the navigator client that flies over it
     from mavsdk.asyncio.plugins.telemetry import TelemetryAsync
-
-    # MAVSDK: loaded only by the navigator client that flies over it
     from mavsdk.plugins.offboard import PositionNedYaw
 
     camera = getattr(nav, "camera", None)
