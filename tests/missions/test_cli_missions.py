@@ -17,6 +17,7 @@ import pytest
 from ft_sitl.cli import main
 from ft_sitl.missions.campaign import run_campaign
 from ft_sitl.missions.campaign_file import load_campaign
+from ft_sitl.missions.spec import PROTOCOL_VERSION, PROTOCOLS
 from tests.missions.conftest import (
     PLATFORM,
     YARD_START,
@@ -150,7 +151,9 @@ def test_rerun_by_id_prefix_is_identical_and_saves_trajectory_and_render(capsys,
     assert lines[0] == (f"trial {row['trial_id']}: slow on {PLATFORM} in yard (trial 1): "
                         f"{row['reason']} - {row['detail']}")
     assert row["reason"] == "collision"
-    assert lines[1] == (f"  navigation {row['nav_time_s']:.2f} s, path "
+    assert lines[1] == (f"  flown under protocol version {PROTOCOL_VERSION}: "
+                        f"{PROTOCOLS[PROTOCOL_VERSION].summary}")
+    assert lines[2] == (f"  navigation {row['nav_time_s']:.2f} s, path "
                         f"{row['path_length_m']:.2f} m, max speed {row['max_speed_m_s']:.2f} "
                         f"m/s, min clearance {row['min_clearance_m']:.3f} m")
     assert "  identical to the stored result (all but wall-clock columns)" in lines
