@@ -133,7 +133,12 @@ def test_in_function_imports_say_why():
             for sub in ast.walk(node):
                 if isinstance(sub, (ast.Import, ast.ImportFrom)):
                     here = lines[sub.lineno - 1]
-                    above = lines[sub.lineno - 2].strip() if sub.lineno > 1 else ""
+                    # the reason stands on the line, or above it (and above the imports
+                    # of its group)
+                    k = sub.lineno - 2
+                    while k >= 0 and lines[k].strip().startswith(("from ", "import ")):
+                        k -= 1
+                    above = lines[k].strip() if k >= 0 else ""
                     if "#" not in here and not above.startswith("#"):
                         bad.append(f"{path.relative_to(PKG.parent)}:{sub.lineno}: "
                                    f"{here.strip()}")
