@@ -26,6 +26,7 @@ A campaign file (TOML or YAML) names what to run; every key is optional except
     timeout_s = 90.0
     goal_radius_m = 2.0
     hold_s = 3.0
+    max_acc_m_s2 = 3.0               # what planners plan with (protocol 3 on; default 3)
 
     [weights]                        # composite score (paper defaults)
     scenarios = { classic = 1.2, theoretical = 1.0 }
@@ -64,7 +65,7 @@ PRESETS = ("quick", "paper")
 TOP_KEYS = ("name", "trials", "seed", "scenario_seed", "platforms", "platform_files",
             "scenarios", "indices", "physics_hz", "protocol", "algorithms", "limits", "weights",
             "description")
-LIMIT_KEYS = ("max_speed_m_s", "timeout_s", "goal_radius_m", "hold_s")
+LIMIT_KEYS = ("max_speed_m_s", "timeout_s", "goal_radius_m", "hold_s", "max_acc_m_s2")
 WEIGHT_KEYS = ("scenarios", "platforms", "beta")
 
 

@@ -48,7 +48,8 @@ from ft_sitl.autopilot.params import ParamSet
 from ft_sitl.missions.resources import RESOURCES, TrialResources
 from ft_sitl.missions.results import Outcome
 from ft_sitl.missions.spec import PROTOCOLS
-from ft_sitl.navigation.base import STABLE_FOR_S, STABLE_POS_M, STABLE_SPEED_M_S
+from ft_sitl.navigation.base import STABLE_FOR_S, STABLE_POS_M, STABLE_SPEED_M_S, Task
+from ft_sitl.navigation.registry import available
 from ft_sitl.sim.fleet import Fleet
 from ft_sitl.sim.guard import CollisionGuard, GuardEventKind
 
@@ -381,6 +382,32 @@ class TrialOutcome:
     row: dict
     trajectory: np.ndarray | None = None
     scenario: object = None
+
+
+def trial_task(spec, scenario, platform) -> Task:
+    """What the navigator is told (start, goal, limits, flight volume, the platform's size
+    and indicators, its seeded random stream): the same in-process and over the wire."""
+    ind = platform.indicators()
+    return Task(start=scenario.start.copy(), start_yaw=scenario.start_yaw,
+                goal=scenario.goal.copy(), limits=spec.limits,
+                bounds_min=scenario.bounds_min.copy(), bounds_max=scenario.bounds_max.copy(),
+                collision_radius_m=platform.collision_radius_m, twr_max=ind.twr_max,
+                alpha_xy_max=ind.alpha_xy_max_rad_s2, alpha_z_max=ind.alpha_z_max_rad_s2,
+                rng=np.random.default_rng(np.random.SeedSequence([spec.seed, spec.trial])))
+
+
+def navigator_params(spec) -> dict:
+    """The navigator's parameters in this trial: the spec's, plus what the trial's protocol
+    version fixed that the navigator's defaults have changed since (versions 1 and 2 flew
+    the benchmark camera at 15 Hz)."""
+    params = dict(spec.algorithm_params)
+    rate = PROTOCOLS[spec.protocol].benchmark_camera_hz
+    cls = available().get(spec.algorithm)
+    if rate is not None and not isinstance(cls, (str, type(None))) and \
+            "camera_rate_hz" in cls.schema.names() and "camera_rate_hz" not in params and \
+            params.get("camera", "benchmark") == "benchmark":
+        params["camera_rate_hz"] = rate
+    return params
 
 
 def trial_vehicle(spec, scenario, platform, resources: TrialResources = RESOURCES):

@@ -10,7 +10,7 @@ from __future__ import annotations
 
 import hashlib
 import json
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 from ft_sitl.navigation.base import Limits
 from ft_sitl.physics.catalog import get_platform, platform_from_mapping
@@ -26,6 +26,14 @@ class ProtocolRules:
     summary: str
     #: MPC_ACC_* also clamp the navigator's offboard setpoints (FT_OFFB_ACC_LIM = 1)
     offboard_acc_clamp: bool
+    #: the benchmark depth camera's frame rate when a navigator does not set its own (Hz;
+    #: None: the camera's current one, navigation.common.BENCHMARK_CAMERA_HZ)
+    benchmark_camera_hz: float | None
+    #: the navigator is reset before arming and observes the approach (Navigator.observe)
+    observe_approach: bool
+    #: the acceleration limit planners plan with when the spec's limits set none (m/s^2;
+    #: None: each planner's own max_acc_m_s2, the rule before protocol 3)
+    max_acc_m_s2: float | None
 
 
 #: the versions of the trial protocol this code flies; a trial's spec names its version
@@ -33,10 +41,18 @@ class ProtocolRules:
 #: which version made it, and ``ft-sitl trial rerun`` flies an old row by its own rules
 PROTOCOLS = {
     1: ProtocolRules(1, "the rules of docs/results/paper (campaigns up to 2026-11-26)",
-                     offboard_acc_clamp=True),
+                     offboard_acc_clamp=True, benchmark_camera_hz=15.0,
+                     observe_approach=False, max_acc_m_s2=None),
     2: ProtocolRules(2, "PX4's offboard rule: MPC_ACC_* no longer clamp the navigator's "
                         "setpoints (the tilt and thrust limits bound them)",
-                     offboard_acc_clamp=False),
+                     offboard_acc_clamp=False, benchmark_camera_hz=15.0,
+                     observe_approach=False, max_acc_m_s2=None),
+    3: ProtocolRules(3, "perception as the originals run it (the depth camera at 30 Hz, the "
+                        "navigator observing from arming) and one acceleration limit every "
+                        "planner plans with (limits.max_acc_m_s2, default 3 m/s^2); PX4's "
+                        "offboard rule as in 2",
+                     offboard_acc_clamp=False, benchmark_camera_hz=None,
+                     observe_approach=True, max_acc_m_s2=3.0),
 }
 #: the version new trials and campaigns fly unless they name another
 PROTOCOL_VERSION = max(PROTOCOLS)
@@ -88,6 +104,14 @@ class TrialSpec:
         if not isinstance(self.limits, Limits):
             raise TrialSpecError("limits: must be a Limits")
         check_protocol(self.protocol)
+        default_acc = PROTOCOLS[self.protocol].max_acc_m_s2
+        if self.limits.max_acc_m_s2 is not None and default_acc is None:
+            raise TrialSpecError(f"limits.max_acc_m_s2: protocol version {self.protocol} has "
+                                 f"no protocol acceleration limit (each planner used its own "
+                                 f"max_acc_m_s2); it came with version 3")
+        if self.limits.max_acc_m_s2 is None and default_acc is not None:
+            # the protocol's default, written into the spec (and so into its id and row)
+            object.__setattr__(self, "limits", replace(self.limits, max_acc_m_s2=default_acc))
 
     # --- serialisation -------------------------------------------------------------------
     def to_dict(self) -> dict:

@@ -38,13 +38,15 @@ from ft_sitl.missions.protocol import (
     TrialFailure,
     TrialOutcome,
     TrialReferee,
+    navigator_params,
+    trial_task,
     trial_vehicle,
 )
 from ft_sitl.missions.resources import RESOURCES
 from ft_sitl.missions.results import Outcome
-from ft_sitl.missions.spec import TrialSpec, TrialSpecError, platform_for
+from ft_sitl.missions.spec import PROTOCOLS, TrialSpec, TrialSpecError, platform_for
 from ft_sitl.missions.watchdog import TRIAL_WALL_BUDGET_S, WallBudgetExceeded, WallWatchdog
-from ft_sitl.navigation.base import GiveUp, Observation, Task
+from ft_sitl.navigation.base import GiveUp, Observation
 from ft_sitl.navigation.registry import create
 from ft_sitl.physics import dynamics as d
 
@@ -58,11 +60,14 @@ def load_scenario_for(spec: TrialSpec):
 
 
 def run_trial(spec: TrialSpec, *, record: bool = False, navigator=None,
-              wall_budget_s: float | None = TRIAL_WALL_BUDGET_S) -> TrialOutcome:
+              wall_budget_s: float | None = TRIAL_WALL_BUDGET_S,
+              monitor=None) -> TrialOutcome:
     """Fly one trial; the row of the results table (and the trajectory when ``record``).
     ``navigator`` overrides the registry lookup (an instance; tests). A trial still running
     ``wall_budget_s`` of wall-clock time after it started (None: no limit) ends as a
-    navigator error."""
+    navigator error. ``monitor(fleet, t_nav_us)``, when given, is called after every
+    advance of the navigation phase (it reads the simulation; it must not change it):
+    what tools record beyond the row, e.g. scripts/tracking_replay.py."""
     if wall_budget_s is not None and not (isinstance(wall_budget_s, (int, float))
                                           and not isinstance(wall_budget_s, bool)
                                           and wall_budget_s > 0):
@@ -71,15 +76,20 @@ def run_trial(spec: TrialSpec, *, record: bool = False, navigator=None,
     wall0 = time.perf_counter()
     sc, platform = load_scenario_for(spec), platform_for(spec)
     nav = navigator if navigator is not None else create(spec.algorithm,
-                                                         spec.algorithm_params)
+                                                         navigator_params(spec))
     guard, fleet = trial_vehicle(spec, sc, platform)
     ref = TrialReferee(fleet, guard, spec, sc, record=record)
+    eyes = _Eyes(nav, sc, spec)
+    observing = PROTOCOLS[spec.protocol].observe_approach
     watchdog = WallWatchdog(wall0, wall_budget_s)
     try:
         with watchdog:
-            _approach(fleet, sc, ref)
+            if observing:  # the navigator sees from arming on (protocol 3)
+                _call(nav.reset, trial_task(spec, sc, platform), "reset", ref.metrics)
+            _approach(fleet, sc, ref, nav if observing else None, eyes)
             if ref.phase is Phase.NAVIGATION:
-                _navigate(nav, fleet, sc, platform, spec, ref, watchdog)
+                _navigate(nav, fleet, sc, platform, spec, ref, watchdog, eyes,
+                          reset=not observing, monitor=monitor)
     except TrialFailure as f:
         ref.end(f.reason, f.detail)
     except WallBudgetExceeded:
@@ -88,9 +98,33 @@ def run_trial(spec: TrialSpec, *, record: bool = False, navigator=None,
     return TrialOutcome(row, ref.trajectory(), sc)
 
 
-def _approach(fleet, sc, ref: TrialReferee) -> None:
+class _Eyes:
+    """The navigator's depth camera in this trial (None without one) and the random
+    stream of its noise."""
+
+    def __init__(self, nav, sc, spec: TrialSpec):
+        cfg = getattr(nav, "camera", None)
+        self.camera = RESOURCES.camera(cfg, sc) if cfg is not None else None
+        self.period_us = round(1e6 / cfg.rate_hz) if cfg is not None else 0
+        self.rng = np.random.default_rng(np.random.SeedSequence([spec.seed, spec.trial, 1]))
+
+    def frame(self, fleet, t_us: int):
+        return self.camera.capture(t_us, fleet.sim.position(0), fleet.sim.attitude(0),
+                                   rng=self.rng)
+
+
+def _observation(fleet, t_us: int, s, depth) -> Observation:
+    """What the navigator is told at ``t_us`` (its clock) with state ``s``."""
+    return Observation(time_s=t_us * 1e-6, position=s.position, velocity=s.velocity,
+                       yaw=s.yaw, attitude=fleet.sim.attitude(0),
+                       angular_velocity=fleet.sim.x[0, d.X_OMEGA:d.X_OMEGA + 3].copy(),
+                       depth=depth)
+
+
+def _approach(fleet, sc, ref: TrialReferee, observer, eyes: _Eyes) -> None:
     """Arm, take off to the start altitude, reposition to the start waypoint; until the
-    protocol finds the vehicle stable there (or ends the trial)."""
+    protocol finds the vehicle stable there (or ends the trial). ``observer`` (a navigator,
+    protocol 3 on) gets every camera frame on the way (its clock starts at arming)."""
     cmd = fleet.commanders[0]
     res = cmd.arm()
     if res.name != "ACCEPTED":
@@ -98,11 +132,21 @@ def _approach(fleet, sc, ref: TrialReferee) -> None:
         raise TrialFailure(Outcome.LOSS_OF_CONTROL,
                            f"arming refused: {texts[-1] if texts else res.name}")
     cmd.takeoff(float(sc.start[2]))
-    ref.approach.start(fleet.time_us)
+    t_arm_us = fleet.time_us
+    ref.approach.start(t_arm_us)
     tick_us = round(TICK_S * 1e6)
     repositioned = False
+    seeing = observer is not None and eyes.camera is not None
+    next_cam_us = t_arm_us
     while ref.phase is Phase.APPROACH:
-        fleet.run_us(tick_us)
+        tick_end_us = fleet.time_us + tick_us
+        while seeing and next_cam_us < tick_end_us:
+            fleet.run_us(next_cam_us - fleet.time_us)
+            t_us = fleet.time_us - t_arm_us
+            obs = _observation(fleet, t_us, fleet.state(0), eyes.frame(fleet, t_us))
+            _call(observer.observe, obs, "observe", ref.metrics)
+            next_cam_us += eyes.period_us
+        fleet.run_us(tick_end_us - fleet.time_us)
         if not repositioned and abs(fleet.state(0).position[2] - sc.start[2]) < STABLE_POS_M:
             cmd.reposition(sc.start.copy(), sc.start_yaw)
             repositioned = True
@@ -110,26 +154,18 @@ def _approach(fleet, sc, ref: TrialReferee) -> None:
 
 
 def _navigate(nav, fleet, sc, platform, spec: TrialSpec, ref: TrialReferee,
-              watchdog: WallWatchdog) -> None:
-    """Offboard flight with the navigator in the loop until the protocol's outcome."""
+              watchdog: WallWatchdog, eyes: _Eyes, *, reset: bool, monitor=None) -> None:
+    """Offboard flight with the navigator in the loop until the protocol's outcome
+    (``reset``: the navigator is reset now, as before protocol 3)."""
     cmd = fleet.commanders[0]
     m = ref.metrics
-    ind = platform.indicators()
     t_nav0_us = ref.t_nav0_us
-    task = Task(start=sc.start.copy(), start_yaw=sc.start_yaw, goal=sc.goal.copy(),
-                limits=spec.limits, bounds_min=sc.bounds_min.copy(),
-                bounds_max=sc.bounds_max.copy(),
-                collision_radius_m=platform.collision_radius_m, twr_max=ind.twr_max,
-                alpha_xy_max=ind.alpha_xy_max_rad_s2, alpha_z_max=ind.alpha_z_max_rad_s2,
-                rng=np.random.default_rng(np.random.SeedSequence([spec.seed, spec.trial])))
-    cfg = getattr(nav, "camera", None)
-    camera = RESOURCES.camera(cfg, sc) if cfg is not None else None
-    cam_rng = np.random.default_rng(np.random.SeedSequence([spec.seed, spec.trial, 1]))
-    _call(nav.reset, task, "reset", m)
+    camera = eyes.camera
+    if reset:
+        _call(nav.reset, trial_task(spec, sc, platform), "reset", m)
     period_us = _period_us(nav, fleet.sim.dt_us)
     next_nav_us = t_nav0_us
     next_cam_us = t_nav0_us
-    cam_period_us = round(1e6 / camera.config.rate_hz) if camera is not None else 0
     judge = ref.judge
     tick_us = round(TICK_S * 1e6)
     while True:
@@ -139,15 +175,9 @@ def _navigate(nav, fleet, sc, platform, spec: TrialSpec, ref: TrialReferee,
             s = judge.state_at(now)
             depth = None
             if camera is not None and now >= next_cam_us:
-                depth = camera.capture(t_nav_us, fleet.sim.position(0),
-                                       fleet.sim.attitude(0), rng=cam_rng)
-                next_cam_us += cam_period_us
-            obs = Observation(time_s=t_nav_us * 1e-6, position=s.position,
-                              velocity=s.velocity, yaw=s.yaw,
-                              attitude=fleet.sim.attitude(0),
-                              angular_velocity=fleet.sim.x[0, d.X_OMEGA:d.X_OMEGA + 3].copy(),
-                              depth=depth)
-            sp = _ask(nav, obs, m)
+                depth = eyes.frame(fleet, t_nav_us)
+                next_cam_us += eyes.period_us
+            sp = _ask(nav, _observation(fleet, t_nav_us, s, depth), m)
             fleet.offboard_setpoint(0, sp)
             if cmd.main_mode != MAIN_OFFBOARD:  # PX4: a setpoint first, then the mode
                 res = cmd.set_mode(MAIN_OFFBOARD)
@@ -158,6 +188,8 @@ def _navigate(nav, fleet, sc, platform, spec: TrialSpec, ref: TrialReferee,
             next_nav_us += period_us
         # to the next navigator step or commander tick, at least one physics step
         fleet.run_us(max(fleet.sim.dt_us, min(tick_us, next_nav_us - fleet.time_us)))
+        if monitor is not None:
+            monitor(fleet, fleet.time_us - t_nav0_us)
         if ref.after_step():
             return
         watchdog.check()

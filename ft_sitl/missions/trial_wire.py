@@ -48,11 +48,12 @@ from ft_sitl.missions.protocol import (
     TrialFailure,
     TrialOutcome,
     TrialReferee,
+    navigator_params,
     trial_vehicle,
 )
 from ft_sitl.missions.resources import RESOURCES
 from ft_sitl.missions.results import Outcome
-from ft_sitl.missions.spec import TrialSpec, platform_for
+from ft_sitl.missions.spec import PROTOCOLS, TrialSpec, platform_for
 from ft_sitl.navigation.common import camera_config
 from ft_sitl.navigation.registry import create
 from ft_sitl.wire.navigate import ClientResult, WireTask
@@ -116,7 +117,7 @@ def make_bus_factory(url: str):
         camera = None
         if spec.algorithm != COMMAND:
 
-            camera = getattr(create(spec.algorithm, spec.algorithm_params), "camera", None)
+            camera = getattr(create(spec.algorithm, navigator_params(spec)), "camera", None)
         if camera is None:
 
             camera = camera_config("benchmark", None, None, None)
@@ -139,7 +140,9 @@ def wire_task(spec: TrialSpec, sc, platform) -> WireTask:
                     bounds_max=list(sc.bounds_max),
                     collision_radius_m=platform.collision_radius_m, twr_max=ind.twr_max,
                     alpha_xy_max=ind.alpha_xy_max_rad_s2, alpha_z_max=ind.alpha_z_max_rad_s2,
-                    seed=int(np.random.SeedSequence([spec.seed, spec.trial]).generate_state(1)[0]))
+                    seed=int(np.random.SeedSequence([spec.seed, spec.trial]).generate_state(1)[0]),
+                    observe_approach=PROTOCOLS[spec.protocol].observe_approach,
+                    max_acc_m_s2=lim.max_acc_m_s2)
 
 
 def navigator_argv(spec: TrialSpec, wt: WireTask, connect: str, mqtt: str | None,
@@ -165,7 +168,7 @@ def navigator_argv(spec: TrialSpec, wt: WireTask, connect: str, mqtt: str | None
     argv = [sys.executable, "-m", "ft_sitl", "navigate", "--algorithm", spec.algorithm,
             "--connect", connect, "--vehicle", vehicle, "--task-json", wt.to_json(),
             "--speed-factor", f"{speed_factor:g}", "--quiet", "--json"]
-    for k, v in sorted(spec.algorithm_params.items()):
+    for k, v in sorted(navigator_params(spec).items()):
         argv += ["--param", f"{k}={json.dumps(v)}"]
     if mqtt:
         argv += ["--mqtt", mqtt]

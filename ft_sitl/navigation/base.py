@@ -18,6 +18,10 @@ timeout with the navigator's reason (the protocol counts "no plan" as a timeout)
 exception, or a return value that is not a valid Setpoint, fails the trial as a navigator
 error; the campaign goes on.
 
+Before navigation starts the vehicle flies the approach (arming, take-off, the start
+waypoint) under the flight controller; from protocol version 3 on the navigator is reset
+before it and gets what the camera sees on the way through :meth:`Navigator.observe`.
+
 Frames: world ENU (x east, y north, z up), metres, radians, like the rest of ft_sitl.
 """
 
@@ -47,24 +51,38 @@ class GiveUp(Exception):  # noqa: N818 - a signal, not an error
 
 @dataclass(frozen=True)
 class Limits:
-    """The benchmark's limits, identical for every algorithm (protocol Sec. IV-B)."""
+    """The benchmark's limits, identical for every algorithm (protocol Sec. IV-B).
+
+    ``max_acc_m_s2`` is the acceleration limit every planner plans with (protocol 3 on;
+    None: each planner's own ``max_acc_m_s2`` parameter, the rule before). It is a
+    planning constraint, like the paper's "acceleration constraints": the flight controller
+    does not clamp the navigator's setpoints to it (docs/control.md, stage 3)."""
 
     max_speed_m_s: float = 4.0
     timeout_s: float = 90.0
     goal_radius_m: float = 2.0
     hold_s: float = 3.0
+    max_acc_m_s2: float | None = None
 
     def __post_init__(self):
-        for name in ("max_speed_m_s", "timeout_s", "goal_radius_m", "hold_s"):
+        for name in ("max_speed_m_s", "timeout_s", "goal_radius_m", "hold_s",
+                     "max_acc_m_s2"):
             v = getattr(self, name)
+            if v is None and name == "max_acc_m_s2":
+                continue
             if isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v) \
                     or v <= 0:
                 raise ValueError(f"limits.{name}: must be a positive number, got {v!r}")
             object.__setattr__(self, name, float(v))
 
     def as_dict(self) -> dict:
-        return {"max_speed_m_s": self.max_speed_m_s, "timeout_s": self.timeout_s,
-                "goal_radius_m": self.goal_radius_m, "hold_s": self.hold_s}
+        """The limits as data (``max_acc_m_s2`` left out when None, so the specs of trials
+        written before it existed keep their ids)."""
+        d = {"max_speed_m_s": self.max_speed_m_s, "timeout_s": self.timeout_s,
+             "goal_radius_m": self.goal_radius_m, "hold_s": self.hold_s}
+        if self.max_acc_m_s2 is not None:
+            d["max_acc_m_s2"] = self.max_acc_m_s2
+        return d
 
 
 @dataclass(frozen=True, eq=False)
@@ -130,9 +148,18 @@ class Navigator:
         return None
 
     def reset(self, task: Task) -> None:
-        """Called once before the first step of a navigation phase."""
+        """Called once before the first step of a navigation phase (from protocol 3 on,
+        before the approach: :meth:`observe` then gets what the vehicle sees on its way
+        to the start)."""
         self.task = task
         self.replans = 0
+
+    def observe(self, obs: Observation) -> None:
+        """What the vehicle sees before navigation starts (protocol 3 on: from arming,
+        through take-off, the approach and the hover at the start), at the camera's rate;
+        ``obs.time_s`` counts from arming. Nothing is returned: the flight controller
+        flies the approach. The default ignores it; a navigator with a map fuses the
+        depth frames, as the originals do from the moment their camera runs."""
 
     def step(self, obs: Observation) -> Setpoint:  # pragma: no cover - abstract
         raise NotImplementedError

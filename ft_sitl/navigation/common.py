@@ -36,9 +36,13 @@ def wrap_angle(a: float) -> float:
     return (a + math.pi) % (2.0 * math.pi) - math.pi
 
 
+#: the benchmark camera's frame rate (Hz): the originals' depth stream (protocol 3 on;
+#: 15 Hz before, which trials of protocols 1 and 2 keep)
+BENCHMARK_CAMERA_HZ = 30.0
+
 CAMERA_PARAMS = Schema((
     Param("camera", "benchmark", choices=("benchmark", "d435"),
-          doc="depth camera: 'benchmark' 160 x 120 @ 15 Hz, 'd435' the originals' "
+          doc="depth camera: 'benchmark' 160 x 120 @ 30 Hz, 'd435' the originals' "
               "320 x 240 @ 30 Hz (same field of view)"),
     Param("camera_width", None, "px", (16, 1280), kind="int",
           doc="frame width (none: the camera's)"),
@@ -51,16 +55,16 @@ CAMERA_PARAMS = Schema((
 
 
 def camera_config(camera: str, width: int | None, height: int | None, rate_hz: float | None):
-    """The planners' depth camera: "benchmark" (160 x 120 @ 15 Hz) or "d435" (the originals'
-    stream with every second pixel: 320 x 240 @ 30 Hz), optionally resized (ranges: see
-    :data:`CAMERA_PARAMS`)."""
+    """The planners' depth camera: "benchmark" (160 x 120 @ 30 Hz, the originals' frame
+    rate) or "d435" (the originals' stream with every second pixel: 320 x 240 @ 30 Hz),
+    optionally resized or at another rate (ranges: see :data:`CAMERA_PARAMS`)."""
 
     for key, value in (("camera", camera), ("camera_width", width),
                        ("camera_height", height), ("camera_rate_hz", rate_hz)):
         CAMERA_PARAMS[key].check(value, "depth camera")
     base = CameraConfig(max_range_m=10.0)
     if camera == "benchmark":
-        cfg = replace(base.subsampled(4), rate_hz=15.0)
+        cfg = replace(base.subsampled(4), rate_hz=BENCHMARK_CAMERA_HZ)
     else:
         cfg = replace(base.subsampled(2), rate_hz=30.0)
     if width is not None or height is not None:
@@ -117,7 +121,8 @@ def checked_setpoint(t: float, p, v, a, yaw: float, yaw_rate: float | None = Non
 
 
 MAX_ACC = Param("max_acc_m_s2", 2.0, "m/s^2", (0.5, 20.0),
-                doc="acceleration limit of the planned trajectories")
+                doc="acceleration limit of the planned trajectories (protocol 3 on: the "
+                    "campaign's limits.max_acc_m_s2 instead)")
 LATENCY = Param("latency_s", 0.01, "s", (0.0, 1.0),
                 doc="a plan takes effect this long (simulated) after it was asked for: the "
                     "original's compute time on a desktop CPU")
@@ -160,6 +165,10 @@ class ReplanningPlanner(Navigator):
     def reset(self, task: Task) -> None:
         super().reset(task)
         self.vmax = task.limits.max_speed_m_s
+        # the protocol's acceleration limit when the trial has one (protocol 3 on), else
+        # the planner's own parameter
+        self.max_acc = (task.limits.max_acc_m_s2 if task.limits.max_acc_m_s2 is not None
+                        else float(self.settings["max_acc_m_s2"]))
         self.map = local_map_for(task, self.camera)
         self.bounds = (np.array(task.bounds_min, dtype=float),
                        np.array(task.bounds_max, dtype=float))
@@ -176,6 +185,11 @@ class ReplanningPlanner(Navigator):
         self.fail_sig = None
         self.same_failures = 0  # ... of them from the same start with the same map
         self.compute_s: list[float] = []  # wall-clock compute time of every plan
+
+    def observe(self, obs: Observation) -> None:
+        """Before navigation: fuse the depth frame into the map."""
+        if obs.depth is not None:
+            self.map.fuse(obs.depth)
 
     def _perceive(self, obs: Observation) -> bool:
         """Fuse the frame, if any, and switch to the pending plan when its time has come;

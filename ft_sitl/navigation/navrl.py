@@ -445,6 +445,11 @@ class NavRL(Navigator):
         return Setpoint.trajectory(position=[math.nan, math.nan, self.hold_z],
                                    velocity=[cmd[0], cmd[1], math.nan], yaw=self.goal_yaw)
 
+    def observe(self, obs: Observation) -> None:
+        """Before navigation: fuse the depth frame into the map the lidar is cast in."""
+        if obs.depth is not None:
+            self.map.fuse(obs.depth)
+
     def step(self, obs: Observation) -> Setpoint:
         t = obs.time_s
         if obs.depth is not None:

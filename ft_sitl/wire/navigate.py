@@ -78,6 +78,10 @@ class WireTask:
     alpha_xy_max: float = 50.0
     alpha_z_max: float = 5.0
     seed: int = 0
+    #: reset the navigator before arming and let it observe the approach (protocol 3 on)
+    observe_approach: bool = False
+    #: the acceleration limit planners plan with (protocol 3 on; None: their own)
+    max_acc_m_s2: float | None = None
 
     def __post_init__(self):
         for name in ("goal", "start", "origin", "bounds_min", "bounds_max"):
@@ -94,6 +98,13 @@ class WireTask:
                 raise ValueError(f"task {name}: {v!r} is not a finite number")
         if not isinstance(self.seed, int) or isinstance(self.seed, bool):
             raise ValueError(f"task seed: {self.seed!r} is not an integer")
+        a = self.max_acc_m_s2
+        if a is not None and (isinstance(a, bool) or not isinstance(a, (int, float))
+                              or not math.isfinite(a) or a <= 0):
+            raise ValueError(f"task max_acc_m_s2: {a!r} is not a positive number or null")
+        if not isinstance(self.observe_approach, bool):
+            raise ValueError(f"task observe_approach: {self.observe_approach!r} is not true "
+                             f"or false")
 
     def to_json(self) -> str:
         return json.dumps(asdict(self), sort_keys=True)
@@ -117,7 +128,8 @@ class WireTask:
 
     def limits(self) -> Limits:
         return Limits(max_speed_m_s=self.max_speed_m_s, timeout_s=self.timeout_s,
-                      goal_radius_m=self.goal_radius_m, hold_s=self.hold_s)
+                      goal_radius_m=self.goal_radius_m, hold_s=self.hold_s,
+                      max_acc_m_s2=self.max_acc_m_s2)
 
     def task(self) -> Task:
         return Task(start=np.array(self.start), start_yaw=self.start_yaw,
@@ -208,7 +220,6 @@ async def _bus_state(url: str, vehicle: str, state: _State, camera) -> None:
     # the MQTT client: loaded only when the bus is used
     import aiomqtt
 
-
     kinds = ("telemetry", "depth") if camera is not None else ("telemetry",)
     while True:
         try:
@@ -294,7 +305,13 @@ async def fly(nav, wt: WireTask, connect: str, *, mqtt: str | None = None,
         start_ned = frames.enu_to_ned(start - origin)
         yaw_ned_deg = math.degrees(frames.wrap_pi(frames.yaw_enu_to_ned(wt.start_yaw)))
         await action.set_takeoff_altitude(float(start[2] - origin[2]))
+        if wt.observe_approach:
+            _reset(nav, wt, real_latency)
         await action.arm()
+        observer = None
+        if wt.observe_approach:
+            observer = asyncio.create_task(_observe(nav, state, speed_factor))
+            tasks.append(observer)
         await action.takeoff()
         await first(tel.subscribe_position_velocity_ned(),
                     lambda p: abs(-p.position.down_m - (start[2] - origin[2])) < STABLE_POS_M,
@@ -330,6 +347,8 @@ async def fly(nav, wt: WireTask, connect: str, *, mqtt: str | None = None,
                     state.updated.set()
 
         tasks.append(asyncio.create_task(watch_texts()))
+        if observer is not None:
+            observer.cancel()  # navigation starts: steps take the frames from here on
         return await _navigate(nav, wt, off, state, t_wall0, speed_factor, progress, crash,
                                real_latency)
     finally:
@@ -346,18 +365,43 @@ def _now(state: _State, t_wall0: float, speed_factor: float) -> float:
     return (time.monotonic() - t_wall0) * speed_factor
 
 
-async def _navigate(nav, wt: WireTask, off, state: _State, t_wall0: float,
-                    speed_factor: float, progress, crash: list,
-                    real_latency: bool = True) -> dict:
-
-    task = wt.task()
+def _reset(nav, wt: WireTask, real_latency: bool) -> None:
+    """The navigator's reset with the trial's task."""
     if real_latency and hasattr(nav, "latency"):
         # over the wire the latency is real (compute, transport, the flight controller's
         # input): the modelled one would count it twice
         nav.latency = 0.0
         if hasattr(nav, "measured_latency"):
             nav.measured_latency = False
-    nav.reset(task)
+    nav.reset(wt.task())
+
+
+async def _observe(nav, state: _State, speed_factor: float) -> None:
+    """Before navigation (protocol 3 on): every depth frame that arrives goes to the
+    navigator's ``observe``, its clock counting from arming."""
+    t_wall0 = time.monotonic()
+    t0 = state.sim_time
+    while True:
+        await asyncio.sleep(0.005)
+        if not state.depth_new or state.position is None:
+            continue
+        depth, state.depth_new = state.depth, False
+        if t0 is None:
+            t0 = state.sim_time
+        now = _now(state, t_wall0, speed_factor)
+        obs = Observation(time_s=now - (t0 if t0 is not None else 0.0),
+                          position=state.position.copy(), velocity=state.velocity.copy(),
+                          yaw=state.yaw, attitude=state.q.copy(),
+                          angular_velocity=state.rates.copy(), depth=depth)
+        await asyncio.get_running_loop().run_in_executor(None, nav.observe, obs)
+
+
+async def _navigate(nav, wt: WireTask, off, state: _State, t_wall0: float,
+                    speed_factor: float, progress, crash: list,
+                    real_latency: bool = True) -> dict:
+
+    if not wt.observe_approach:
+        _reset(nav, wt, real_latency)
     t0 = _now(state, t_wall0, speed_factor)
     period = 1.0 / float(nav.rate_hz)
     next_step = 0.0

@@ -227,7 +227,7 @@ def test_trial_specs_cover_the_matrix(tmp_path):
         indices = (1, 2, 3) if s.family == "narrow_gap" else (4, 6)
         assert s.scenario_index == indices[s.trial % len(indices)]
         assert (s.campaign, s.scenario_seed, s.physics_hz) == ("matrix", 2, 500)
-        assert s.limits == Limits(timeout_s=30.0)
+        assert s.limits == Limits(timeout_s=30.0, max_acc_m_s2=3.0)  # (protocol 3's default)
         assert s.algorithm == "straight"
         assert s.algorithm_params == ({"speed_m_s": 2.0} if s.label == "slow" else {})
     # grouped by scenario configuration (a worker builds each collision grid once)

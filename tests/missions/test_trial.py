@@ -477,7 +477,7 @@ def test_every_reason_is_a_known_category():
 FULL = TrialSpec(algorithm="straight", platform=PLATFORM, family="maze", scenario_index=3,
                  scenario_seed=1, trial=2, seed=7, algorithm_params={"speed_m_s": 3.0},
                  limits=Limits(timeout_s=60.0), campaign="c", label="straight-3",
-                 platform_def=None, scenario_file=None, physics_hz=500)
+                 platform_def=None, scenario_file=None, physics_hz=500, protocol=2)
 
 
 def test_spec_round_trips_through_dict_and_json():
@@ -507,6 +507,7 @@ CHANGES = {
     "platform_def": {"name": PLATFORM}, "scenario_file": "/tmp/x.yaml", "physics_hz": 1000,
     "protocol": 1,
 }
+# (protocol 2 here: FULL with protocol 3 would carry 3's acceleration limit, which 1 refuses)
 
 
 def test_trial_id_changes_with_every_field():
@@ -589,7 +590,8 @@ def test_protocol_version_is_in_the_row_and_absent_means_1():
 
     spec = TrialSpec("straight", PLATFORM, "forest")
     assert spec.protocol == PROTOCOL_VERSION and PROTOCOL_VERSION in PROTOCOLS
-    old = {k: v for k, v in spec.to_dict().items() if k != "protocol"}
+    old = {k: v for k, v in TrialSpec("straight", PLATFORM, "forest", protocol=2).to_dict()
+           .items() if k != "protocol"}
     assert TrialSpec.from_dict(old).protocol == 1
     assert "protocol" not in TrialSpec.from_dict(old).to_dict()  # the old ids stay
 
@@ -614,3 +616,62 @@ def test_a_spec_of_an_unknown_protocol_version_is_refused_by_name(version):
     doc = {**TrialSpec("straight", PLATFORM, "forest").to_dict(), "protocol": version}
     with pytest.raises(TrialSpecError, match="needs the ft-sitl that wrote it"):
         TrialSpec.from_dict(doc)
+
+
+def test_a_navigators_map_at_navigation_start_holds_what_it_saw_on_the_approach():
+    """Protocol 3: the navigator is reset before arming and observes the approach, so its
+    map at the first navigation step already holds the trees seen on the way (in protocol
+    2 it held nothing yet). The camera runs at 30 Hz (15 Hz in protocols 1 and 2)."""
+    from ft_sitl.missions.protocol import navigator_params
+    from ft_sitl.navigation.ego import EgoPlanner
+    from ft_sitl.navigation.registry import create
+
+    class Spy(EgoPlanner):
+        first = None
+
+        def step(self, obs):
+            if self.first is None:
+                self.first = (obs.time_s, self.map.frames_fused, self.map.occupied_count)
+            return super().step(obs)
+
+    seen = {}
+    for protocol in (2, 3):
+        spec = TrialSpec("ego", "0.98kg-EGO Planner DIY", "forest", scenario_index=1,
+                         protocol=protocol)
+        spy = Spy(**navigator_params(spec))
+        assert spy.camera.rate_hz == (15.0 if protocol == 2 else 30.0)
+        assert create("ego", navigator_params(spec)).camera == spy.camera
+        run_trial(spec, navigator=spy, wall_budget_s=None)
+        seen[protocol] = spy.first
+    t2, frames2, occupied2 = seen[2]
+    t3, frames3, occupied3 = seen[3]
+    assert t2 == t3 == 0.0
+    assert frames2 == 0 and occupied2 == 0
+    assert frames3 > 60 and occupied3 > 50  # > 2 s of frames at 30 Hz; trees ahead
+
+
+def test_one_protocol_acceleration_limit_for_every_planner():
+    """Protocol 3: limits.max_acc_m_s2 (default 3 m/s^2, written into the spec) is what
+    every planner plans with, whatever its own max_acc_m_s2 default (EGO 3, Fast and PGO
+    2); protocols 1 and 2 have none and refuse one."""
+    from ft_sitl.navigation.registry import create
+
+    spec = TrialSpec("fast", PLATFORM, "forest", protocol=3)
+    assert spec.limits.max_acc_m_s2 == 3.0
+    assert json.loads(spec.to_json())["limits"]["max_acc_m_s2"] == 3.0
+    platform = platform_for(spec)
+    sc = load_scenario_for(spec)
+    from ft_sitl.missions.protocol import trial_task
+
+    for name, own in (("ego", 3.0), ("fast", 2.0), ("pgo", 2.0)):
+        for protocol, acc, want in ((1, None, own), (3, None, 3.0), (3, 6.5, 6.5)):
+            s = TrialSpec(name, PLATFORM, "forest", protocol=protocol,
+                          limits=Limits(max_acc_m_s2=acc))
+            nav = create(name, {})
+            nav.reset(trial_task(s, sc, platform))
+            assert nav.max_acc == want, (name, protocol, acc)
+    with pytest.raises(TrialSpecError, match="limits.max_acc_m_s2: protocol version 1 has "
+                                             "no protocol acceleration limit"):
+        TrialSpec("ego", PLATFORM, "forest", protocol=1, limits=Limits(max_acc_m_s2=3.0))
+    with pytest.raises(ValueError, match="limits.max_acc_m_s2: must be a positive number"):
+        Limits(max_acc_m_s2=-1.0)
