@@ -22,7 +22,7 @@ import ft_sitl  # noqa: F401  (first: pins the BLAS settings before numpy loads)
 import numpy as np
 
 from ft_sitl.autopilot import cascade as c
-from ft_sitl.missions.spec import TrialSpec
+from ft_sitl.missions.spec import PROTOCOL_VERSION, TrialSpec
 from ft_sitl.missions.trial import run_trial
 from ft_sitl.navigation.base import Limits
 from ft_sitl.physics import dynamics as d
@@ -54,6 +54,8 @@ def main(argv=None) -> int:
     ap.add_argument("--index", type=int, default=1)
     ap.add_argument("--max-acc", type=float, default=8.0,
                     help="the protocol acceleration limit the planner plans with (m/s^2)")
+    ap.add_argument("--protocol", type=int, default=PROTOCOL_VERSION,
+                    help="the trial protocol's version (default: the newest)")
     ap.add_argument("--weak", default="2.00kg-T-MOTOR", help="(TWR 1.4, arm 0.257 m)")
     ap.add_argument("--strong", default="2.00kg-UAV 8", help="(TWR 3.2, the same size)")
     args = ap.parse_args(argv)
@@ -61,7 +63,8 @@ def main(argv=None) -> int:
     runs = {}
     for role, platform in (("weak", args.weak), ("strong", args.strong)):
         spec = TrialSpec(args.algorithm, platform, args.family, scenario_index=args.index,
-                         limits=Limits(max_acc_m_s2=args.max_acc), campaign="tracking-twr")
+                         limits=Limits(max_acc_m_s2=args.max_acc), campaign="tracking-twr",
+                         protocol=args.protocol)
         row, s = fly(spec)
         runs[role] = (platform, row, s)
         with open(args.out / f"{role}.csv", "w", newline="") as fh:

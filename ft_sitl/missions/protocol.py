@@ -393,7 +393,9 @@ def trial_task(spec, scenario, platform) -> Task:
                 bounds_min=scenario.bounds_min.copy(), bounds_max=scenario.bounds_max.copy(),
                 collision_radius_m=platform.collision_radius_m, twr_max=ind.twr_max,
                 alpha_xy_max=ind.alpha_xy_max_rad_s2, alpha_z_max=ind.alpha_z_max_rad_s2,
-                rng=np.random.default_rng(np.random.SeedSequence([spec.seed, spec.trial])))
+                rng=np.random.default_rng(np.random.SeedSequence([spec.seed, spec.trial])),
+                footprint_m=(platform.collision_radius_m
+                             if PROTOCOLS[spec.protocol].footprint_inflation else None))
 
 
 def navigator_params(spec) -> dict:

@@ -34,6 +34,8 @@ class ProtocolRules:
     #: the acceleration limit planners plan with when the spec's limits set none (m/s^2;
     #: None: each planner's own max_acc_m_s2, the rule before protocol 3)
     max_acc_m_s2: float | None
+    #: navigators keep obstacles the platform's footprint away (Task.footprint_m)
+    footprint_inflation: bool = False
 
 
 #: the versions of the trial protocol this code flies; a trial's spec names its version
@@ -53,6 +55,11 @@ PROTOCOLS = {
                         "offboard rule as in 2",
                      offboard_acc_clamp=False, benchmark_camera_hz=None,
                      observe_approach=True, max_acc_m_s2=3.0),
+    4: ProtocolRules(4, "navigators know their vehicle: each inflates its map (NavRL: its "
+                        "shield's agent radius) by the platform's footprint, its collision "
+                        "radius; the rest as in 3",
+                     offboard_acc_clamp=False, benchmark_camera_hz=None,
+                     observe_approach=True, max_acc_m_s2=3.0, footprint_inflation=True),
 }
 #: the version new trials and campaigns fly unless they name another
 PROTOCOL_VERSION = max(PROTOCOLS)

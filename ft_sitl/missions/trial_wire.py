@@ -142,7 +142,9 @@ def wire_task(spec: TrialSpec, sc, platform) -> WireTask:
                     alpha_xy_max=ind.alpha_xy_max_rad_s2, alpha_z_max=ind.alpha_z_max_rad_s2,
                     seed=int(np.random.SeedSequence([spec.seed, spec.trial]).generate_state(1)[0]),
                     observe_approach=PROTOCOLS[spec.protocol].observe_approach,
-                    max_acc_m_s2=lim.max_acc_m_s2)
+                    max_acc_m_s2=lim.max_acc_m_s2,
+                    footprint_m=(platform.collision_radius_m
+                                 if PROTOCOLS[spec.protocol].footprint_inflation else None))
 
 
 def navigator_argv(spec: TrialSpec, wt: WireTask, connect: str, mqtt: str | None,

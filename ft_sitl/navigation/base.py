@@ -100,6 +100,10 @@ class Task:
     alpha_xy_max: float
     alpha_z_max: float
     rng: np.random.Generator = field(default_factory=lambda: np.random.default_rng(0))
+    #: how far navigators keep obstacles away (m): the platform's footprint (its collision
+    #: radius) from protocol 4 on, which each planner inflates its map by as a user sets
+    #: the original for their airframe; None: the navigator's own default (before 4)
+    footprint_m: float | None = None
 
     @property
     def ceiling(self) -> float:
@@ -169,5 +173,15 @@ def local_map_for(task: Task, camera):
     """The planners' local map for a task: the scenario ceiling and floor, frames of
     ``camera`` taken at full resolution (the benchmark camera is already subsampled)."""
 
-    return LocalMap(MapConfig(skip_pixel=1), task.ceiling, float(task.bounds_min[2]),
-                    camera=camera, center_m=tuple(task.start[:2]))
+    return LocalMap(MapConfig(skip_pixel=1, inflation_voxels=inflation_voxels(task)),
+                    task.ceiling, float(task.bounds_min[2]), camera=camera,
+                    center_m=tuple(task.start[:2]))
+
+
+def inflation_voxels(task: Task, resolution_m: float = MapConfig.resolution_m) -> int:
+    """The map's dilation radius (voxels) for a task: the footprint rounded up to whole
+    voxels, as the originals turn ``obstacles_inflation`` into their ``inflate_step``
+    (protocol 4 on); one voxel (the originals' default 0.099 m) without a footprint."""
+    if task.footprint_m is None:
+        return MapConfig.inflation_voxels
+    return max(1, math.ceil(task.footprint_m / resolution_m - 1e-9))

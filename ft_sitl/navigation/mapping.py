@@ -167,7 +167,8 @@ class MapConfig:
     max_ray_length_m              4.5        rays cut to this length (m); cut rays are misses
                                              (``max_ray_length``)
     inflation_voxels              1          dilation radius (voxels) for planning
-                                             (``obstacles_inflation`` 0.099 m -> 1)
+                                             (``obstacles_inflation`` 0.099 m -> 1; from
+                                             protocol 4 on the footprint: 0..8)
     ============================  =========  ==================================================
     """
 
@@ -256,7 +257,7 @@ class MapConfig:
         lo = num("min_depth_m", 0.0, 1e3)
         num("max_depth_m", lo, 1e3, lo_open=True)
         num("max_ray_length_m", 0.0, 1e3, lo_open=True)
-        integer("inflation_voxels", 0, 3)
+        integer("inflation_voxels", 0, 8)
 
     # log-odds
     @property

@@ -333,12 +333,13 @@ def safe_velocity(preferred: np.ndarray, planes, max_speed: float) -> np.ndarray
     return v if np.all(np.isfinite(v)) else np.zeros(3)
 
 
-def shield(position, preferred, ray_points, max_speed):
-    """NavRL's safe action for the static ray hits; returns (velocity, whether it solved)."""
+def shield(position, preferred, ray_points, max_speed, agent_radius: float = 0.0):
+    """NavRL's safe action for the static ray hits; returns (velocity, whether it solved).
+    ``agent_radius``: the vehicle's radius in the velocity obstacles (m)."""
     planes = []
     need = False
     for centre, radius in cluster_spheres(ray_points, position):
-        pl = orca_plane(position, preferred, 0.0, centre, np.zeros(3), radius)
+        pl = orca_plane(position, preferred, agent_radius, centre, np.zeros(3), radius)
         if pl is None:
             continue
         planes.append(pl)
@@ -392,6 +393,9 @@ class NavRL(Navigator):
     def reset(self, task: Task) -> None:
         super().reset(task)
         self.map = local_map_for(task, self.camera)
+        # the shield's agent radius: the platform's footprint (protocol 4 on; the
+        # original's deployment uses 0.3 m), else 0 as before
+        self.agent_radius = task.footprint_m if task.footprint_m is not None else 0.0
         self.hold_z = float(task.start[2])
         self.goal = np.array([task.goal[0], task.goal[1], self.hold_z])
         direction = self.goal - task.start
@@ -434,7 +438,8 @@ class NavRL(Navigator):
             cmd = to_goal / n * self.limit if n > 1e-9 else np.zeros(3)
         if self.use_shield:
             ends = pos + self.rays * dist[..., None]
-            cmd, solved = shield(pos, cmd, ends.reshape(-1, 3), math.sqrt(3.0) * self.limit)
+            cmd, solved = shield(pos, cmd, ends.reshape(-1, 3), math.sqrt(3.0) * self.limit,
+                                 self.agent_radius)
             self.shield_solves += int(solved)
         goal_dist = float(np.linalg.norm(pos - self.goal))
         speed = float(np.linalg.norm(cmd))

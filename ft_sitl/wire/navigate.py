@@ -82,6 +82,8 @@ class WireTask:
     observe_approach: bool = False
     #: the acceleration limit planners plan with (protocol 3 on; None: their own)
     max_acc_m_s2: float | None = None
+    #: how far the navigator keeps obstacles away (protocol 4 on; None: its own default)
+    footprint_m: float | None = None
 
     def __post_init__(self):
         for name in ("goal", "start", "origin", "bounds_min", "bounds_max"):
@@ -98,10 +100,11 @@ class WireTask:
                 raise ValueError(f"task {name}: {v!r} is not a finite number")
         if not isinstance(self.seed, int) or isinstance(self.seed, bool):
             raise ValueError(f"task seed: {self.seed!r} is not an integer")
-        a = self.max_acc_m_s2
-        if a is not None and (isinstance(a, bool) or not isinstance(a, (int, float))
-                              or not math.isfinite(a) or a <= 0):
-            raise ValueError(f"task max_acc_m_s2: {a!r} is not a positive number or null")
+        for name in ("max_acc_m_s2", "footprint_m"):
+            a = getattr(self, name)
+            if a is not None and (isinstance(a, bool) or not isinstance(a, (int, float))
+                                  or not math.isfinite(a) or a <= 0):
+                raise ValueError(f"task {name}: {a!r} is not a positive number or null")
         if not isinstance(self.observe_approach, bool):
             raise ValueError(f"task observe_approach: {self.observe_approach!r} is not true "
                              f"or false")
@@ -137,7 +140,7 @@ class WireTask:
                     bounds_min=np.array(self.bounds_min), bounds_max=np.array(self.bounds_max),
                     collision_radius_m=self.collision_radius_m, twr_max=self.twr_max,
                     alpha_xy_max=self.alpha_xy_max, alpha_z_max=self.alpha_z_max,
-                    rng=np.random.default_rng(self.seed))
+                    rng=np.random.default_rng(self.seed), footprint_m=self.footprint_m)
 
     def env(self, connect: str, mqtt: str | None, vehicle: str) -> dict:
         """The environment a user's navigator script is started with (docs/wire.md)."""

@@ -675,3 +675,44 @@ def test_one_protocol_acceleration_limit_for_every_planner():
         TrialSpec("ego", PLATFORM, "forest", protocol=1, limits=Limits(max_acc_m_s2=3.0))
     with pytest.raises(ValueError, match="limits.max_acc_m_s2: must be a positive number"):
         Limits(max_acc_m_s2=-1.0)
+
+
+def test_navigators_keep_their_platforms_footprint_from_protocol_4():
+    """Protocol 4: the task carries the platform's footprint; each planner's map is
+    inflated by it (rounded up to whole voxels, as the originals' obstacles_inflation) and
+    NavRL's shield uses it as the agent radius. Fast-Planner on a 4.5 kg platform (0.356 m)
+    in Forest 1 passed trunks 0.11 m away under protocol 3 and keeps > 0.3 m under 4."""
+    from ft_sitl.missions.protocol import trial_task
+    from ft_sitl.navigation.base import inflation_voxels, local_map_for
+    from ft_sitl.navigation.fast import FastPlanner
+
+    big = "4.50kg-UAV 14"
+    sc = load_scenario_for(TrialSpec("fast", big, "forest"))
+    for protocol, want in ((3, None), (4, platform_for(TrialSpec("fast", big, "forest"))
+                                        .collision_radius_m)):
+        task = trial_task(TrialSpec("fast", big, "forest", protocol=protocol), sc,
+                          platform_for(TrialSpec("fast", big, "forest")))
+        assert task.footprint_m == want
+        voxels = 1 if want is None else 4  # 0.356 m -> 4 voxels of 0.1 m
+        assert inflation_voxels(task) == voxels
+        assert local_map_for(task, None).config.inflation_voxels == voxels
+    clearance = {}
+    for protocol in (3, 4):
+        nav = FastPlanner()
+        row = run_trial(TrialSpec("fast", big, "forest", scenario_index=1, protocol=protocol),
+                        navigator=nav, wall_budget_s=None).row
+        assert row["reason"] == "success", row["detail"]
+        clearance[protocol] = row["min_clearance_m"]
+    assert clearance[3] < 0.2 and clearance[4] > 0.3
+
+
+def test_navrl_shield_takes_the_footprint_as_its_agent_radius():
+    """A velocity passing 0.6 m from a 0.3 m obstacle is safe for a point agent (protocols
+    1-3) and inside the velocity obstacle for an agent of 0.4 m (a footprint, protocol 4)."""
+    from ft_sitl.navigation.navrl import orca_plane
+
+    def in_vo(agent_radius):
+        return orca_plane(np.zeros(3), np.array([1.0, 0.0, 0.0]), agent_radius,
+                          np.array([1.5, 0.6, 0.0]), np.zeros(3), 0.3)[2]
+
+    assert in_vo(0.0) is False and in_vo(0.4) is True
