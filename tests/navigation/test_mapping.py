@@ -568,7 +568,7 @@ def test_esdf_before_update_raises():
     ("p_hit", 0.4), ("p_hit", 1.0), ("p_miss", 0.6), ("p_min", 0.85), ("p_max", 0.7),
     ("p_occ", 0.0), ("unknown_offset", 0.0), ("skip_pixel", 0), ("skip_pixel", 1.5),
     ("skip_pixel", True), ("depth_margin_px", -1), ("min_depth_m", -0.1),
-    ("max_depth_m", 0.1), ("max_ray_length_m", 0.0), ("inflation_voxels", 4),
+    ("max_depth_m", 0.1), ("max_ray_length_m", 0.0), ("inflation_voxels", 9),
 ])
 def test_bad_config_values_raise_naming_the_field(field, value):
     with pytest.raises(ValueError, match=f"MapConfig.{field}"):

@@ -4,6 +4,7 @@ broker; the outcome judged by the in-process protocol's code."""
 
 import asyncio
 import json
+import re
 import subprocess
 import sys
 import textwrap
@@ -116,7 +117,14 @@ def test_navigate_cli_against_sitl_cli_through_mosquitto(tmp_path):
         out, err = sitl.communicate(timeout=30)
         broker.kill()
     assert "MQTT bus (broker)" in out
-    assert "dropped: none" in err, err
+    # events and telemetry are never dropped; a depth frame (lowest priority, its queue
+    # short because a frame is stale at the next one) may be under load, rarely
+    stats = re.search(r"bus vehicle \d+: (\d+) messages sent, dropped: ([^;]*);", err)
+    assert stats, err
+    sent, dropped = int(stats.group(1)), stats.group(2)
+    counts = dict(re.findall(r"(\w+) (\d+)", dropped)) if dropped != "none" else {}
+    assert set(counts) <= {"depth"}, err
+    assert int(counts.get("depth", 0)) <= 0.01 * sent, err
 
 
 def test_broker_killed_mid_flight_the_vehicle_flies_on_and_the_bus_reconnects(tmp_path):
