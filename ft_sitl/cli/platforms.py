@@ -50,7 +50,7 @@ def cmd_platforms_show(args) -> int:
                               ("twr_max", "alpha_xy_max_rad_s2", "alpha_z_max_rad_s2")},
                "alpha_pitch_max_rad_s2": p.indicators().alpha_pitch_max_rad_s2,
                "hover_rotor_speed_rad_s": p.hover_rotor_speed_rad_s,
-               "physical": phys}
+               "physical": phys, "body": p.body().describe()}
         print(json.dumps(out, indent=2))
         return 0
     print(f"{p.name}  ({p.category}, {p.layout})")
@@ -61,6 +61,19 @@ def cmd_platforms_show(args) -> int:
         val = ", ".join(f"{x:.6g}" for x in v) if isinstance(v, list) else f"{v:.6g}"
         print(f"  {key:24s} {val:>36s} {spec.unit}")
     print(f"  {'hover rotor speed':24s} {p.hover_rotor_speed_rad_s:>36.6g} rad/s")
+    body = p.body().describe()
+    print("  collision body (protocol 5 on; * = set by the platform, else its rule):")
+    for key, label in (("body_size_m", "central body box"),
+                       ("rotor_disk_radius_m", "rotor disk radius"),
+                       ("rotor_disk_thickness_m", "rotor disk thickness"),
+                       ("rotor_height_m", "rotor plane height"),
+                       ("bounding_radius_m", "bounding radius"),
+                       ("half_span_m", "half span (footprint)"),
+                       ("half_height_m", "half height")):
+        v = body[key]
+        val = ", ".join(f"{x:.4g}" for x in v) if isinstance(v, list) else f"{v:.4g}"
+        mark = "*" if key in phys else " "
+        print(f"  {mark} {label:22s} {val:>36s} m")
     if p.source:
         print(f"  source: {p.source}")
     return 0

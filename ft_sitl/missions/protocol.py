@@ -394,8 +394,16 @@ def trial_task(spec, scenario, platform) -> Task:
                 collision_radius_m=platform.collision_radius_m, twr_max=ind.twr_max,
                 alpha_xy_max=ind.alpha_xy_max_rad_s2, alpha_z_max=ind.alpha_z_max_rad_s2,
                 rng=np.random.default_rng(np.random.SeedSequence([spec.seed, spec.trial])),
-                footprint_m=(platform.collision_radius_m
-                             if PROTOCOLS[spec.protocol].footprint_inflation else None))
+                footprint_m=footprint_m(spec, platform))
+
+
+def footprint_m(spec, platform) -> float | None:
+    """How far the trial's navigator keeps obstacles away (m; None: not told): the body's
+    half span from protocol 5, the collision radius in 4, nothing before."""
+    rules = PROTOCOLS[spec.protocol]
+    if rules.vehicle_body:
+        return platform.body().half_span_m
+    return platform.collision_radius_m if rules.footprint_inflation else None
 
 
 def navigator_params(spec) -> dict:
@@ -416,9 +424,14 @@ def trial_vehicle(spec, scenario, platform, resources: TrialResources = RESOURCE
     """The trial's collision guard and its one-vehicle Fleet, on the takeoff point facing
     the goal, the speed cap as MPC_XY_VEL_MAX (in-process and over the wire alike)."""
     world, grid = resources.world_and_grid(scenario)
-    guard = CollisionGuard(world, [platform.collision_radius_m], grid=grid,
-                           names=scenario.obstacle_name)
     rules = PROTOCOLS[spec.protocol]
+    if rules.vehicle_body:
+        body = platform.body()
+        guard = CollisionGuard(world, [body.bounding_radius_m], grid=grid,
+                               names=scenario.obstacle_name, bodies=[body])
+    else:
+        guard = CollisionGuard(world, [platform.collision_radius_m], grid=grid,
+                               names=scenario.obstacle_name)
     params = ParamSet({"MPC_XY_VEL_MAX": spec.limits.max_speed_m_s,
                        "FT_OFFB_ACC_LIM": int(rules.offboard_acc_clamp)})
     fleet = Fleet([platform], params=[params], spawn=[scenario.takeoff],

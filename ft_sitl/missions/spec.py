@@ -36,6 +36,9 @@ class ProtocolRules:
     max_acc_m_s2: float | None
     #: navigators keep obstacles the platform's footprint away (Task.footprint_m)
     footprint_inflation: bool = False
+    #: the vehicle is its body (central box and rotor disks posed by its attitude), not
+    #: its collision sphere, and its footprint is the body's half span
+    vehicle_body: bool = False
 
 
 #: the versions of the trial protocol this code flies; a trial's spec names its version
@@ -60,6 +63,13 @@ PROTOCOLS = {
                         "radius; the rest as in 3",
                      offboard_acc_clamp=False, benchmark_camera_hz=None,
                      observe_approach=True, max_acc_m_s2=3.0, footprint_inflation=True),
+    5: ProtocolRules(5, "the vehicle is its body: the central body and the rotor disks, posed "
+                        "by the full attitude, are what touches obstacles and what the "
+                        "clearance measures; the footprint navigators inflate by is the "
+                        "body's half span; the rest as in 4",
+                     offboard_acc_clamp=False, benchmark_camera_hz=None,
+                     observe_approach=True, max_acc_m_s2=3.0, footprint_inflation=True,
+                     vehicle_body=True),
 }
 #: the version new trials and campaigns fly unless they name another
 PROTOCOL_VERSION = max(PROTOCOLS)

@@ -48,6 +48,7 @@ from ft_sitl.missions.protocol import (
     TrialFailure,
     TrialOutcome,
     TrialReferee,
+    footprint_m,
     navigator_params,
     trial_vehicle,
 )
@@ -143,8 +144,7 @@ def wire_task(spec: TrialSpec, sc, platform) -> WireTask:
                     seed=int(np.random.SeedSequence([spec.seed, spec.trial]).generate_state(1)[0]),
                     observe_approach=PROTOCOLS[spec.protocol].observe_approach,
                     max_acc_m_s2=lim.max_acc_m_s2,
-                    footprint_m=(platform.collision_radius_m
-                                 if PROTOCOLS[spec.protocol].footprint_inflation else None))
+                    footprint_m=footprint_m(spec, platform))
 
 
 def navigator_argv(spec: TrialSpec, wt: WireTask, connect: str, mqtt: str | None,

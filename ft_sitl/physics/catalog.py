@@ -9,19 +9,24 @@ A user file holds one ``platform`` table or a list of them. Each is given either
   ``alpha_xy_max_rad_s2`` and ``alpha_z_max_rad_s2`` (the rest is synthesised exactly
   as for the catalog).
 
-``category`` (default ``user``) and ``source`` are optional in both forms. Anything
-else is rejected with a message naming the file, the entry and the key.
+``category`` (default ``user``) and ``source`` are optional in both forms, and so are
+the collision body's dimensions (:data:`ft_sitl.physics.platform.BODY_SCHEMA`:
+``body_size_m``, ``rotor_disk_thickness_m``, ``rotor_height_m``; omitted, they follow the
+rules of :mod:`ft_sitl.physics.body`). Anything else is rejected with a message naming
+the file, the entry and the key.
 """
 
 from __future__ import annotations
 
 import functools
 from collections.abc import Iterable
+from dataclasses import replace
 from importlib import resources
 from pathlib import Path
 
 from ft_sitl.config import Table, check_keys, did_you_mean, read_document
 from ft_sitl.physics.platform import (
+    BODY_SCHEMA,
     CATEGORIES,
     SCHEMA,
     VECTOR_FIELDS,
@@ -66,6 +71,7 @@ def platform_from_mapping(entry: dict, where: str, *, allow_paper_keys: bool = F
         allowed = set(_COMMON_REQUIRED + _COMMON_OPTIONAL) | set(SCHEMA)
         required = set(_COMMON_REQUIRED) | set(SCHEMA)
         form = "physical form"
+    allowed |= set(BODY_SCHEMA)  # optional in both forms
     if allow_paper_keys:
         allowed |= set(_PAPER_KEYS)
     name = entry.get("name")
@@ -82,16 +88,18 @@ def platform_from_mapping(entry: dict, where: str, *, allow_paper_keys: bool = F
     if not isinstance(layout, str):
         raise t.fail("layout", f"must be a string such as 'quad_x', got {layout!r}")
     source = t.string("source", "", nonempty=False)
+    body = {k: (tuple(t.vector3(k)) if k in VECTOR_FIELDS else t.number(k))
+            for k in BODY_SCHEMA if k in entry}
     try:
         if indicator_form:
             values = {k: t.number(k) for k in INDICATOR_KEYS}
-            return synthesise(
-                name, layout=layout, category=category, source=source, **values
-            )
+            p = synthesise(name, layout=layout, category=category, source=source, **values)
+            return validate(replace(p, **body), where) if body else p
         kwargs = {}
         for key in SCHEMA:
             kwargs[key] = tuple(t.vector3(key)) if key in VECTOR_FIELDS else t.number(key)
-        p = Platform(name=name, category=category, layout=layout, source=source, **kwargs)
+        p = Platform(name=name, category=category, layout=layout, source=source, **kwargs,
+                     **body)
         return validate(p, where)
     except PlatformError as exc:
         msg = str(exc)

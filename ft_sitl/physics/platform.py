@@ -15,6 +15,7 @@ from dataclasses import asdict, dataclass, fields
 import numpy as np
 
 from ft_sitl import G
+from ft_sitl.physics.body import BODY_FIELDS, VehicleBody, build_body
 from ft_sitl.physics.layouts import LAYOUTS, allocation_matrix, get_layout, max_axis_torques
 
 CATEGORIES = ("real", "virtual", "user")
@@ -65,11 +66,16 @@ SCHEMA: dict[str, FieldSpec] = {
         "kg/m", 0.0, 10.0, "quadratic body drag 0.5*rho*Cd*A per body axis [x, y, z]"
     ),
     "collision_radius_m": FieldSpec(
-        "m", 0.02, 3.0, "radius of the sphere used for collision checks"
+        "m", 0.02, 3.0, "radius of the collision sphere of trial protocols 1-4 (from "
+        "protocol 5 the vehicle's body touches the world: BODY_SCHEMA)"
     ),
 }
 
-VECTOR_FIELDS = ("inertia_kg_m2", "body_drag_coefficient")
+#: optional fields: the collision body's dimensions (ft_sitl.physics.body; omitted: its
+#: rules from the arm length and the propeller)
+BODY_SCHEMA: dict[str, FieldSpec] = {k: FieldSpec(*v) for k, v in BODY_FIELDS.items()}
+
+VECTOR_FIELDS = ("inertia_kg_m2", "body_drag_coefficient", "body_size_m")
 
 
 @dataclass(frozen=True)
@@ -104,6 +110,9 @@ class Platform:
     body_drag_coefficient: tuple[float, float, float]
     collision_radius_m: float
     source: str = ""
+    body_size_m: tuple[float, float, float] | None = None
+    rotor_disk_thickness_m: float | None = None
+    rotor_height_m: float | None = None
 
     # --- derived quantities -------------------------------------------------------
     @property
@@ -125,6 +134,11 @@ class Platform:
     @property
     def hover_rotor_speed_rad_s(self) -> float:
         return math.sqrt(self.mass_kg * G / (self.n_rotors * self.thrust_coefficient))
+
+    def body(self) -> VehicleBody:
+        """The collision body: central box and rotor disks (ft_sitl.physics.body)."""
+        return build_body(self.layout, self.arm_length_m, self.prop_diameter_m,
+                          self.body_size_m, self.rotor_disk_thickness_m, self.rotor_height_m)
 
     def allocation(self) -> np.ndarray:
         """B (4 x n) mapping rotor thrusts to [collective, tau_x, tau_y, tau_z]."""
@@ -150,10 +164,14 @@ class Platform:
         )
 
     def physical_dict(self) -> dict:
-        """The fields as plain data (tuples as lists), for files and --json."""
+        """The fields as plain data (tuples as lists), for files and --json; body
+        dimensions left to their rules are left out (so specs written before bodies
+        existed keep their ids)."""
         d = {}
         for f in fields(self):
             v = getattr(self, f.name)
+            if v is None and f.name in BODY_SCHEMA:
+                continue
             d[f.name] = list(v) if isinstance(v, tuple) else v
         return d
 
@@ -175,8 +193,10 @@ def validate(p: Platform, source: str = "") -> Platform:
         raise PlatformError(
             f"{_where(where, 'layout')}: {p.layout!r} is not one of {', '.join(sorted(LAYOUTS))}"
         )
-    for key, spec in SCHEMA.items():
+    for key, spec in (SCHEMA | BODY_SCHEMA).items():
         value = getattr(p, key)
+        if value is None and key in BODY_SCHEMA:
+            continue
         values = value if key in VECTOR_FIELDS else (value,)
         if key in VECTOR_FIELDS and len(values) != 3:
             raise PlatformError(f"{_where(where, key)}: needs 3 values [x, y, z], got {value!r}")

@@ -77,7 +77,10 @@ import fcl
 import numpy as np
 import trimesh
 
+from ft_sitl.physics.body import VehicleBody
+
 __all__ = [
+    "BodyProbe",
     "CONTACT_TOL_M",
     "KINDS",
     "MAX_CA_STEPS",
@@ -228,6 +231,21 @@ def _rotation_z_to(u: np.ndarray) -> np.ndarray:
 # --------------------------------------------------------------------------------------
 # the world
 # --------------------------------------------------------------------------------------
+
+
+class BodyProbe:
+    """A vehicle body (:class:`~ft_sitl.physics.body.VehicleBody`) as fcl shapes, posed
+    per query by :meth:`CollisionWorld.body_distance` and :meth:`CollisionWorld.body_contact`:
+    a box for the central body and a cylinder (axis along body z) per rotor disk. Not
+    thread-safe (the shapes are moved for each query)."""
+
+    def __init__(self, body: VehicleBody) -> None:
+        self.body = body
+        shapes = [fcl.Box(*body.box.size)]
+        shapes += [fcl.Cylinder(d.radius, d.thickness) for d in body.rotors]
+        self.objects = [fcl.CollisionObject(s, fcl.Transform()) for s in shapes]
+        self.offsets = [np.array(part.center, dtype=float) for part in body.parts]
+        self.bounding_radius_m = body.bounding_radius_m
 
 
 class CollisionWorld:
@@ -483,6 +501,42 @@ class CollisionWorld:
             return None, max(c_end, c_b)
         t = s / seg if seg > 0.0 else 0.0
         return self._obstacle_contact(a + (b - a) * t, r, t)[1], -math.inf
+
+    # --- vehicle bodies ---------------------------------------------------------------------
+    def body_distance(self, probe: BodyProbe, p: np.ndarray, rot: np.ndarray) -> float:
+        """Distance (m) from the body posed at position p with rotation rot (body to
+        world) to the obstacles: > contact_tol free, else touching or in contact (fcl
+        reports -1 for shapes in contact); ``inf`` without obstacles. One fcl query per
+        part."""
+        if self._obj is None:
+            return math.inf
+        best = math.inf
+        for obj, offset in zip(probe.objects, probe.offsets):
+            obj.setTransform(fcl.Transform(rot, p + rot @ offset))
+            self.queries += 1
+            best = min(best, fcl.distance(obj, self._obj, self._dreq))
+            if best <= self.contact_tol:
+                break
+        return best
+
+    def body_contact(self, probe: BodyProbe, p: np.ndarray, rot: np.ndarray) -> Contact | None:
+        """The contact of the body posed at (p, rot) with the obstacles, or None: the
+        touched point and triangle from fcl, the normal from the centre's nearest obstacle
+        point (fcl's shape-mesh normals are not reliable: module docstring)."""
+        if self._obj is None:
+            return None
+        req = fcl.CollisionRequest(num_max_contacts=1, enable_contact=True)
+        for obj, offset in zip(probe.objects, probe.offsets):
+            obj.setTransform(fcl.Transform(rot, p + rot @ offset))
+            self.queries += 1
+            res = fcl.CollisionResult()
+            if fcl.collide(obj, self._obj, req, res) and res.contacts:
+                ct = res.contacts[0]
+                normal = self._nearest(p)[2]
+                return Contact("obstacle", _ro(np.asarray(ct.pos, dtype=float)), _ro(normal),
+                               max(0.0, float(ct.penetration_depth)), max(ct.b1, ct.b2),
+                               _ro(p.copy()), 1.0)
+        return None
 
     # --- public queries -------------------------------------------------------------------
     def obstacle_distance(self, p) -> float:

@@ -50,8 +50,7 @@ class Fleet:
         self.spawn_yaw = [float(y) for y in spawn_yaw] if spawn_yaw is not None else [0.0] * n
         self.scenario = scenario
         if guard is None and scenario is not None:
-            guard = CollisionGuard.for_scenario(scenario,
-                                                [p.collision_radius_m for p in platforms])
+            guard = CollisionGuard.for_platforms(scenario, platforms)
         self.guard = guard
         if guard is not None:
             self.sim.attach_guard(guard, self._on_guard_event)

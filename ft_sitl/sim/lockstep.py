@@ -47,7 +47,7 @@ def run_steps(n_steps, dt, x, sp, gn, a, cs, prm, alloc, env, status, w_cmd, rec
                 ex, ey, ez = xi[0] - bx, xi[1] - by, xi[2] - bz
                 # inside the (convex) free ball: the whole step is, too
                 if not ex * ex + ey * ey + ez * ez < rr:
-                    trip = guard_step(gi, grid, meta, px, py, pz, xi[0], xi[1], xi[2])
+                    trip = guard_step(gi, grid, meta, px, py, pz, xi[0], xi[1], xi[2], xi)
                     bx, by, bz, rr = gi[G_BX], gi[G_BY], gi[G_BZ], gi[G_RR]
                     if trip:
                         break  # (the caller records this step once it is resolved)

@@ -716,3 +716,26 @@ def test_navrl_shield_takes_the_footprint_as_its_agent_radius():
                           np.array([1.5, 0.6, 0.0]), np.zeros(3), 0.3)[2]
 
     assert in_vo(0.0) is False and in_vo(0.4) is True
+
+
+def test_protocol_5_flies_the_vehicle_body_and_tells_its_half_span():
+    """Protocol 5: the guard checks the body (central box and rotor disks) inside the
+    bounding sphere, the row's clearance is the body's, and the footprint a navigator
+    inflates by is the body's half span (the collision radius in 4)."""
+    from ft_sitl.missions.protocol import trial_task, trial_vehicle
+
+    spec4 = TrialSpec("straight", PLATFORM, "forest", scenario_index=2, protocol=4)
+    spec5 = TrialSpec("straight", PLATFORM, "forest", scenario_index=2, protocol=5)
+    platform = platform_for(spec5)
+    sc = load_scenario_for(spec5)
+    body = platform.body()
+    g4, _ = trial_vehicle(spec4, sc, platform)
+    g5, _ = trial_vehicle(spec5, sc, platform)
+    assert g4.probes == [None] and g4.radii == [platform.collision_radius_m]
+    assert g5.probes[0].body == body and g5.radii == [body.bounding_radius_m]
+    assert trial_task(spec4, sc, platform).footprint_m == platform.collision_radius_m
+    assert trial_task(spec5, sc, platform).footprint_m == body.half_span_m
+    row = run_trial(spec5, wall_budget_s=None).row
+    assert row["protocol_version"] == 5
+    assert row["reason"] == "collision" and row["detail"].startswith("hit tree ")
+    assert row["min_clearance_m"] <= 0.0
