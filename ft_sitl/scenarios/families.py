@@ -26,7 +26,9 @@ travels north, from near the short side ``y = 0`` to near ``y = length``.
   trials and never elsewhere (Sec. IV-B, A4), which strict blocking could not reproduce.
   Urban lays its centre line along an open boulevard (walls only) with probability 0.35.
 * A collision-free path exists for the largest catalog platform's collision radius
-  (0.384 m): see :mod:`ft_sitl.scenarios.solvability` and the tests.
+  (0.384 m), and for its body held level at the start yaw (protocol 5; in Narrow-Gap it
+  fits a gap nose first, not yawed 45 degrees): see :mod:`ft_sitl.scenarios.solvability`
+  and the tests.
 * Random families keep obstacles at least 3 m (horizontally) from the takeoff/start column
   and the goal.
 

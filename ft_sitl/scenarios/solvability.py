@@ -22,6 +22,14 @@ How
    face-adjacent cells lies in the union of the two cells, so the polyline start -> cell
    centres -> goal keeps a clearance of at least ``r`` everywhere.
 
+The vehicle's body (protocol 5)
+-------------------------------
+The same grid keeps a :class:`LevelBody` clear instead of a ball: the body held level at
+one yaw, whose support function h replaces the radius in step 2 (a centre x puts the body
+on P only inside ``{x : n_i . x <= b_i + h(-n_i)}``, and the bounds shrink by h along each
+axis). A multirotor can translate at any yaw it holds, so a path found for one yaw is
+flyable; :func:`body_path` tries the start yaw first, then others.
+
 Pitch
 -----
 Cells are boxes of ``pitch`` metres per axis (a scalar or one value per axis). A passage
@@ -35,11 +43,14 @@ in its provenance (``solvability_pitch_m``), which :func:`scenario_path` uses.
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 
 import numpy as np
 from scipy.sparse import coo_matrix
 from scipy.sparse.csgraph import connected_components
+
+from ft_sitl.physics.body import VehicleBody
 
 DEFAULT_PITCH_M = 0.25
 _EPS = 1e-12
@@ -305,11 +316,50 @@ def _pitch3(pitch) -> np.ndarray:
     return p
 
 
-def occupancy_grid(mesh, bounds_min, bounds_max, radius: float,
+class LevelBody:
+    """A vehicle body (:class:`~ft_sitl.physics.body.VehicleBody`) held level at a fixed
+    ``yaw`` (rad, ENU): the shape the grid keeps clear instead of a ball. A multirotor
+    translates at any yaw it holds, so a path for the body at one yaw is a path the vehicle
+    can fly. Only the support function is needed: h(n) = max over points y of the body of
+    n . y (the parts' supports, maximised: the convex hull of the body, conservative)."""
+
+    def __init__(self, body: VehicleBody, yaw: float) -> None:
+        self.body, self.yaw = body, float(yaw)
+        c, s_ = math.cos(yaw), math.sin(yaw)
+        rot = np.array([[c, -s_, 0.0], [s_, c, 0.0], [0.0, 0.0, 1.0]])
+        self._box = (rot @ np.asarray(body.box.center, float), rot,
+                     np.asarray(body.box.size, float) / 2)
+        self._disks = [(rot @ np.asarray(d.center, float), d.radius, d.thickness / 2)
+                       for d in body.rotors]
+
+    def support(self, n) -> float:
+        n = np.asarray(n, dtype=float)
+        centre, rot, half = self._box
+        best = float(centre @ n + np.abs(rot.T @ n) @ half)
+        horizontal = math.hypot(n[0], n[1])
+        for centre, radius, half_t in self._disks:
+            best = max(best, float(centre @ n + radius * horizontal + half_t * abs(n[2])))
+        return best
+
+
+def _support(shape: float | LevelBody, n) -> float:
+    return shape.support(n) if isinstance(shape, LevelBody) else float(shape)
+
+
+def occupancy_grid(mesh, bounds_min, bounds_max, radius: float | LevelBody,
                    pitch=DEFAULT_PITCH_M) -> OccupancyGrid:
-    """The conservative free-space grid of the module docstring."""
-    if not np.isfinite(radius) or radius < 0:
+    """The conservative free-space grid of the module docstring, for a ball of ``radius``
+    or a :class:`LevelBody` (then a free cell holds the body's centre with the body clear,
+    ``OccupancyGrid.radius`` its bounding radius)."""
+    keep = radius  # what the grid keeps clear
+    if isinstance(keep, LevelBody):
+        radius = keep.body.bounding_radius_m
+    elif not np.isfinite(radius) or radius < 0:
         raise ValueError(f"radius must be a non-negative number of metres, got {radius!r}")
+    eye = np.eye(3)
+    # how far the shape reaches along +axis and -axis from its centre
+    reach_hi = np.array([_support(keep, eye[a]) for a in range(3)])
+    reach_lo = np.array([_support(keep, -eye[a]) for a in range(3)])
     bmin = np.asarray(bounds_min, dtype=float)
     bmax = np.asarray(bounds_max, dtype=float)
     p = _pitch3(pitch)
@@ -319,15 +369,16 @@ def occupancy_grid(mesh, bounds_min, bounds_max, radius: float,
     half = p / 2
     centres = [bmin[a] + (np.arange(shape[a]) + 0.5) * p[a] for a in range(3)]
     # inside the bounds, shrunk by the radius
-    inside = [(c - half[a] >= bmin[a] + radius) & (c + half[a] <= bmax[a] - radius)
+    inside = [(c - half[a] >= bmin[a] + reach_lo[a]) & (c + half[a] <= bmax[a] - reach_hi[a])
               for a, c in enumerate(centres)]
     free = inside[0][:, None, None] & inside[1][None, :, None] & inside[2][None, None, :]
     free[[0, -1], :, :] = False  # a blocked rim keeps the flat-index search in range
     free[:, [0, -1], :] = False
     free[:, :, [0, -1]] = False
     for piece in convex_pieces(mesh):
-        lo = np.floor((piece.lo - radius - bmin) / p).astype(int)
-        hi = np.ceil((piece.hi + radius - bmin) / p).astype(int)
+        # centres whose shape touches the piece lie in piece - shape
+        lo = np.floor((piece.lo - reach_hi - bmin) / p).astype(int)
+        hi = np.ceil((piece.hi + reach_lo - bmin) / p).astype(int)
         lo, hi = np.maximum(lo, 0), np.minimum(hi, shape)
         if np.any(hi <= lo):
             continue
@@ -337,7 +388,7 @@ def occupancy_grid(mesh, bounds_min, bounds_max, radius: float,
         separated = np.zeros((hi - lo), dtype=bool)
         for n, b in zip(piece.normals, piece.offsets):
             support = np.abs(n) @ half
-            separated |= (n[0] * cx + n[1] * cy + n[2] * cz) - support > b + radius
+            separated |= (n[0] * cx + n[1] * cy + n[2] * cz) - support > b + _support(keep, -n)
         free[lo[0]:hi[0], lo[1]:hi[1], lo[2]:hi[2]] &= separated
     return OccupancyGrid(bmin, p, free, float(radius))
 
@@ -384,10 +435,11 @@ def _simplify(points: np.ndarray) -> np.ndarray:
     return points[keep]
 
 
-def find_path(mesh, start, goal, bounds_min, bounds_max, radius: float,
+def find_path(mesh, start, goal, bounds_min, bounds_max, radius: float | LevelBody,
               pitch=DEFAULT_PITCH_M) -> np.ndarray | None:
-    """A polyline (N, 3) from start to goal keeping ``radius`` clear, or None if the grid
-    has none (which, the grid being conservative, does not prove that none exists)."""
+    """A polyline (N, 3) from start to goal keeping ``radius`` clear (or the level body at
+    its yaw), or None if the grid has none (which, the grid being conservative, does not
+    prove that none exists)."""
     grid = occupancy_grid(mesh, bounds_min, bounds_max, radius, pitch)
     s, g = grid.cell_of(start), grid.cell_of(goal)
     if s is None or g is None or not grid.free[s] or not grid.free[g]:
@@ -407,7 +459,7 @@ def scenario_pitch(scenario) -> np.ndarray:
     return _pitch3(scenario.provenance.get("solvability_pitch_m", DEFAULT_PITCH_M))
 
 
-def scenario_path(scenario, radius: float, pitch=None) -> np.ndarray | None:
+def scenario_path(scenario, radius: float | LevelBody, pitch=None) -> np.ndarray | None:
     """:func:`find_path` from the scenario's start to its goal within its bounds."""
     return find_path(scenario.mesh, scenario.start, scenario.goal, scenario.bounds_min,
                      scenario.bounds_max, radius,
@@ -417,3 +469,17 @@ def scenario_path(scenario, radius: float, pitch=None) -> np.ndarray | None:
 def is_solvable(scenario, radius: float, pitch=None) -> bool:
     """True when a path with clearance ``radius`` is found (a proof; False is not one)."""
     return scenario_path(scenario, radius, pitch) is not None
+
+
+def body_path(scenario, body: VehicleBody, pitch=None,
+              yaws_deg=(0.0, 45.0, 15.0, 30.0, 60.0, 75.0)) -> tuple[np.ndarray, float] | None:
+    """A path for the vehicle body held level at one yaw (the start yaw plus each of
+    ``yaws_deg`` in turn) from the scenario's start to its goal: ``(path, yaw)`` for the
+    first yaw that has one, or None. A quadrotor's body repeats every 90 degrees of yaw,
+    so 0-75 in 15-degree steps covers it."""
+    for dyaw in yaws_deg:
+        yaw = scenario.start_yaw + math.radians(dyaw)
+        path = scenario_path(scenario, LevelBody(body, yaw), pitch)
+        if path is not None:
+            return path, yaw
+    return None

@@ -13,6 +13,8 @@ import trimesh
 
 from ft_sitl import __version__
 from ft_sitl.physics.catalog import catalog
+from ft_sitl.rotations import matrix_from_quat
+from ft_sitl.scenarios.collision import BodyProbe, CollisionWorld
 from ft_sitl.scenarios.families import (
     FAMILIES,
     LINE_CORRIDOR_M,
@@ -24,6 +26,7 @@ from ft_sitl.scenarios.families import (
 )
 from ft_sitl.scenarios.scenario import Scenario, ScenarioError
 from ft_sitl.scenarios.solvability import (
+    body_path,
     find_path,
     occupancy_grid,
     polyline_clearance,
@@ -110,6 +113,33 @@ def test_solvable_for_the_largest_platform(family, index):
     assert polyline_clearance(sc.mesh, path, cutoff=R_MAX) >= R_MAX
     assert np.all(path >= sc.bounds_min + R_MAX - 1e-9)
     assert np.all(path <= sc.bounds_max - R_MAX + 1e-9)
+
+
+@pytest.mark.parametrize("family,index", [(f, i) for f in FAMILIES for i in (1, 10)])
+def test_solvable_for_the_largest_body_at_the_start_yaw(family, index):
+    """Protocol 5's vehicle is its body: the largest platform's, held level at the start
+    yaw, has a path; an exact fcl check of the body along it confirms the grid."""
+    sc = built(family, index)
+    big = max(catalog().values(), key=lambda p: p.body().bounding_radius_m)
+    found = body_path(sc, big.body(), yaws_deg=(0.0,))
+    assert found is not None, f"{sc.name}: no path for {big.name}'s body"
+    path, yaw = found
+    world = CollisionWorld(sc.mesh, sc.bounds_min, sc.bounds_max)
+    probe = BodyProbe(big.body())
+    rot = matrix_from_quat([math.cos(yaw / 2), 0.0, 0.0, math.sin(yaw / 2)])
+    for a, b in zip(path[:-1], path[1:]):
+        for t in np.linspace(0.0, 1.0, max(2, int(np.linalg.norm(b - a) / 0.05) + 1)):
+            p = a + t * (b - a)
+            assert world.body_distance(probe, p, rot) > 0.0, (sc.name, p)
+
+
+def test_narrow_gap_needs_the_largest_body_along_the_passage():
+    """An X frame is 2.56 d wide across its nose and 3.15 d along its arms: the largest
+    platform (d = 0.2956 m) passes a 0.85 m gap nose first and not yawed 45 degrees."""
+    sc = built("narrow_gap", 1)
+    big = max(catalog().values(), key=lambda p: p.body().bounding_radius_m)
+    assert body_path(sc, big.body(), yaws_deg=(0.0,)) is not None
+    assert body_path(sc, big.body(), yaws_deg=(45.0,)) is None
 
 
 @pytest.mark.parametrize("family", list(FAMILIES))
