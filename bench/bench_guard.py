@@ -22,6 +22,7 @@ one-off cost of building the distance grid. Timings are never asserted.
     .venv/bin/python bench/bench_guard.py            # ~1-2 min
     .venv/bin/python bench/bench_guard.py --quick    # smoke run
     .venv/bin/python bench/bench_guard.py --json     # results as JSON on stdout
+    .venv/bin/python bench/bench_guard.py --body     # vehicles are their bodies (protocol 5)
 """
 
 from __future__ import annotations
@@ -118,16 +119,21 @@ def fly(platform, starts, rows, guard: CollisionGuard | None):
     return time.process_time() - c0
 
 
-def bench_family(family: str, n: int, seconds: float, repeats: int) -> dict:
+def bench_family(family: str, n: int, seconds: float, repeats: int, body: bool = False) -> dict:
     sc = build_scenario(family, 10)
     p = catalog().get(PLATFORM)
     starts, rows, length, r_path = plan(sc, n, seconds)
     radius = min(VEHICLE_RADIUS_M, r_path - 0.2)  # >= 0.2 m left for tracking errors
+    bodies = None
+    if body:  # the platform's body (protocol 5), its bounding sphere the broad phase
+        bodies = [p.body()] * n
+        radius = p.body().bounding_radius_m
     t0 = time.perf_counter()
     grid = DistanceGrid.build(sc.mesh, sc.bounds_min, sc.bounds_max)
     grid_s = time.perf_counter() - t0
     world = CollisionWorld(sc.mesh, sc.bounds_min, sc.bounds_max)
-    guard = CollisionGuard(world, [radius] * n, grid=grid, names=sc.obstacle_name)
+    guard = CollisionGuard(world, [radius] * n, grid=grid, names=sc.obstacle_name,
+                           bodies=bodies)
     fly(p, starts, rows[:5], None)  # warm-up (JIT load)
     fly(p, starts, rows[:5], guard)
     plain, guarded = [], []
@@ -142,6 +148,7 @@ def bench_family(family: str, n: int, seconds: float, repeats: int) -> dict:
     return {
         "family": family, "scenario": sc.name, "triangles": int(len(sc.mesh.faces)),
         "path_m": round(length, 1), "path_radius_m": r_path, "vehicle_radius_m": radius,
+        "body": body,
         "vehicles": n, "sim_s": seconds,
         "grid_shape": list(grid.shape), "grid_pitch_m": grid.pitch,
         "grid_build_s": round(grid_s, 3),
@@ -166,6 +173,8 @@ def main(argv=None) -> int:
     ap.add_argument("--repeats", type=int, default=3)
     ap.add_argument("--cpu", type=int, default=None, help="CPU to pin to (default: last)")
     ap.add_argument("--no-pin", action="store_true")
+    ap.add_argument("--body", action="store_true",
+                    help="vehicles are their bodies (protocol 5), not 0.25 m spheres")
     args = ap.parse_args(argv)
     cpu = None if args.no_pin else pin_to_one_cpu(args.cpu)
     families = args.families or (("forest", "perlin") if args.quick else FAMILIES)
@@ -173,7 +182,7 @@ def main(argv=None) -> int:
     repeats = 1 if args.quick else args.repeats
     results = []
     for fam in families:
-        r = bench_family(fam, args.vehicles, seconds, repeats)
+        r = bench_family(fam, args.vehicles, seconds, repeats, body=args.body)
         results.append(r)
         if not args.json:
             print(f"{r['scenario']:26s} physics {r['physics_us_per_vehicle_s']:7.1f} us/veh-s  "
