@@ -110,7 +110,7 @@ def to_frame(rows):
         df[c] = pd.to_numeric(df[c], errors="coerce").astype("Int64")
     # rows written before the version was recorded flew protocol 1
     df["protocol_version"] = df["protocol_version"].fillna(1)
-    df["gains"] = df["gains"].fillna(DEFAULT_GAINS)  # (likewise: the default mode)
+    df["gains"] = df["gains"].astype(object).fillna(DEFAULT_GAINS)  # (likewise: the default)
     for c in FLOAT:
         df[c] = pd.to_numeric(df[c], errors="coerce").astype("float64")
     df["success"] = df["success"].astype(bool)
