@@ -160,6 +160,8 @@ def test_wrong_suffix_and_missing_file(tmp_path):
 def test_the_paper_preset_is_the_papers_matrix():
     c = load_campaign("paper")
     assert c.name == "paper" and c.trials == 10 and c.limits == Limits()
+    # one fixed PX4 tuning on every airframe, as the paper flew (docs/missions.md)
+    assert c.gains == "px4" and load_campaign("quick").gains == "bandwidth"
     assert len(c.platforms) == 36 and {p.name for p in c.platforms} == set(catalog())
     assert [s.family for s in c.scenarios] == list(FAMILIES)
     assert all(s.indices == tuple(range(1, 11)) for s in c.scenarios)
