@@ -9,7 +9,8 @@ gains -- and writes into ``--out``:
 * ``success_vs_indicators_<algorithm>.png``: one panel per indicator (TWR_max,
   alpha_xy,max on a log axis, alpha_z,max, the footprint = collision radius), one colour
   per condition: a marker per platform (its success rate over the trials kept) and a line
-  through the mean success of the platforms in each bin of the indicator;
+  through the mean success of the platforms in each bin of the indicator (dashed for
+  gains other than bandwidth);
 * ``success_vs_indicators.png``: the same for every algorithm, one row each;
 * ``summary.md``: the sources, the success rate per algorithm and condition (overall and
   per family), Spearman correlations of per-platform success with each indicator, and an
@@ -255,7 +256,8 @@ def _panel_row(axes, pp_alg: pd.DataFrame, conditions: list[str], colours: dict)
             x, y = g[c].to_numpy(float), g["success"].to_numpy(float)
             ax.scatter(x, y, s=14, alpha=0.45, color=colours[cond])
             bx, by = binned_means(x, y, log)
-            ax.plot(bx, by, "-o", ms=3, lw=1.6, color=colours[cond], label=cond)
+            style = "-o" if cond.endswith(f", {DEFAULT_GAINS}") else "--s"  # other gains
+            ax.plot(bx, by, style, ms=3, lw=1.6, color=colours[cond], label=cond)
         if log:
             ax.set_xscale("log")
         ax.set_xlabel(label)
