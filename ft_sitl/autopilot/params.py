@@ -125,6 +125,12 @@ _SPECS = [
 
 PARAMS: dict[str, ParamSpec] = {s.name: s for s in _SPECS}
 
+#: the controller-gain modes by name: FT_GAIN_MODE's values as a campaign's ``gains`` key and
+#: a trial spec's ``gains`` field name them (docs/control.md, "Gain modes")
+GAIN_MODES: dict[str, int] = {"bandwidth": 0, "px4": 1}
+#: the name of FT_GAIN_MODE's default (what a spec without ``gains`` flies)
+DEFAULT_GAINS: str = next(k for k, v in GAIN_MODES.items() if v == PARAMS["FT_GAIN_MODE"].default)
+
 
 class ParamSet:
     """Current parameter values, with bounds checking on every set."""

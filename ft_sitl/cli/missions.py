@@ -8,6 +8,7 @@ import random
 import sys
 from pathlib import Path
 
+from ft_sitl.autopilot.params import DEFAULT_GAINS, GAIN_MODES
 from ft_sitl.bus.options import parse_broker_url
 from ft_sitl.cli.common import CliError, option_value
 from ft_sitl.missions.campaign import Transport, report_meta, run_campaign
@@ -321,6 +322,8 @@ def cmd_trial_rerun(args) -> int:
           f"{' - ' + row['detail'] if row['detail'] else ''}")
     print(f"  flown under protocol version {spec.protocol}: "
           f"{PROTOCOLS[spec.protocol].summary}")
+    if spec.gains != DEFAULT_GAINS:
+        print(f"  controller gains: {spec.gains} (FT_GAIN_MODE {GAIN_MODES[spec.gains]})")
     if not math.isnan(row["time_to_goal_s"]):
         print(f"  time to goal {row['time_to_goal_s']:.2f} s")
     print(f"  navigation {row['nav_time_s']:.2f} s, path {row['path_length_m']:.2f} m, "

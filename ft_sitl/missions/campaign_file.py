@@ -15,6 +15,8 @@ A campaign file (TOML or YAML) names what to run; every key is optional except
     indices = "all"                  # default configurations of each family (1..10)
     physics_hz = 1000
     protocol = 1                     # the trial protocol's version (default: the newest)
+    gains = "bandwidth"              # controller-gain mode: "bandwidth" (FT_GAIN_MODE 0,
+                                     # default) or "px4" (1: PX4's normalised rate gains)
 
     [[algorithms]]                   # or: algorithms = "all" / ["straight", ...]
     name = "straight"                # a registered navigator
@@ -50,6 +52,7 @@ from dataclasses import dataclass, field
 from importlib import resources
 from pathlib import Path
 
+from ft_sitl.autopilot.params import DEFAULT_GAINS, GAIN_MODES
 from ft_sitl.config import Table, integer, read_document
 from ft_sitl.missions import scoring
 from ft_sitl.missions.spec import PROTOCOL_VERSION, PROTOCOLS, TrialSpec
@@ -63,8 +66,8 @@ from ft_sitl.scenarios.scenario import ScenarioError
 
 PRESETS = ("quick", "paper")
 TOP_KEYS = ("name", "trials", "seed", "scenario_seed", "platforms", "platform_files",
-            "scenarios", "indices", "physics_hz", "protocol", "algorithms", "limits", "weights",
-            "description")
+            "scenarios", "indices", "physics_hz", "protocol", "gains", "algorithms", "limits",
+            "weights", "description")
 LIMIT_KEYS = ("max_speed_m_s", "timeout_s", "goal_radius_m", "hold_s", "max_acc_m_s2")
 WEIGHT_KEYS = ("scenarios", "platforms", "beta")
 
@@ -100,6 +103,7 @@ class Campaign:
     weights: dict = field(default_factory=dict)
     physics_hz: int = 1000
     protocol: int = PROTOCOL_VERSION
+    gains: str = DEFAULT_GAINS
     source: str = ""
     doc: dict = field(default_factory=dict)
     #: what "all" left out and why (e.g. a navigator without its model weights)
@@ -118,6 +122,8 @@ class Campaign:
             "limits": self.limits.as_dict(), "weights": self.weights,
             # (left out at version 1: directories written before versions resume)
             **({"protocol": self.protocol} if self.protocol != 1 else {}),
+            # (left out at the default: directories written before the key existed resume)
+            **({"gains": self.gains} if self.gains != DEFAULT_GAINS else {}),
         }
 
     def trial_specs(self) -> list[TrialSpec]:
@@ -137,7 +143,8 @@ class Campaign:
                             family=sc.family, scenario_index=index,
                             scenario_seed=self.scenario_seed, scenario_file=sc.file,
                             trial=t, seed=seed, limits=self.limits, campaign=self.name,
-                            physics_hz=self.physics_hz, protocol=self.protocol))
+                            physics_hz=self.physics_hz, protocol=self.protocol,
+                            gains=self.gains))
         out.sort(key=lambda s: (s.scenario_file or "", s.family, s.scenario_index))
         return out
 
@@ -174,6 +181,10 @@ def parse_campaign(doc: dict, path: Path | None = None) -> Campaign:
     if 1_000_000 % physics_hz:
         raise t.fail("physics_hz", f"{physics_hz} must divide 1,000,000")
     protocol = t.integer("protocol", PROTOCOL_VERSION, lo=min(PROTOCOLS), hi=max(PROTOCOLS))
+    gains = t.get("gains", DEFAULT_GAINS)
+    if not isinstance(gains, str) or gains not in GAIN_MODES:
+        raise t.fail("gains", f"must be one of {', '.join(map(repr, GAIN_MODES))} (the "
+                              f"controller-gain mode, docs/missions.md), got {gains!r}")
     limits_t = t.table("limits", {})
     limits_t.check_keys(LIMIT_KEYS)
     try:
@@ -188,7 +199,8 @@ def parse_campaign(doc: dict, path: Path | None = None) -> Campaign:
         name=name, algorithms=parse_algorithms(where, doc["algorithms"], notes),
         platforms=platforms, scenarios=scenarios, trials=trials, seed=seed,
         scenario_seed=scenario_seed, limits=limits, weights=weights, physics_hz=physics_hz,
-        protocol=protocol, source=str(path) if path is not None else "", doc=doc, notes=notes)
+        protocol=protocol, gains=gains, source=str(path) if path is not None else "", doc=doc,
+        notes=notes)
 
 
 def _weights(t: Table, platforms, scenarios) -> dict:

@@ -44,7 +44,7 @@ import numpy as np
 
 from ft_sitl import __version__
 from ft_sitl.autopilot.cascade import C_SAT_STEPS
-from ft_sitl.autopilot.params import ParamSet
+from ft_sitl.autopilot.params import GAIN_MODES, ParamSet
 from ft_sitl.missions.resources import RESOURCES, TrialResources
 from ft_sitl.missions.results import Outcome
 from ft_sitl.missions.spec import PROTOCOLS
@@ -101,6 +101,7 @@ def failed_row(spec, platform, scenario, reason: Outcome, detail: str) -> dict:
     row = identity_row(spec, platform, scenario)
     row.update({"success": False, "reason": Outcome(reason).value, "detail": detail,
                 "code_version": __version__, "protocol_version": spec.protocol,
+                "gains": spec.gains,
                 "spec": spec.to_json(),
                 "finished_utc": utc_now()})
     return row
@@ -368,6 +369,7 @@ class TrialReferee:
             "wall_time_s": time.perf_counter() - wall0,
             "code_version": __version__,
             "protocol_version": self.spec.protocol,
+            "gains": self.spec.gains,
             "finished_utc": utc_now(),
             "spec": self.spec.to_json(),
         })
@@ -422,7 +424,8 @@ def navigator_params(spec) -> dict:
 
 def trial_vehicle(spec, scenario, platform, resources: TrialResources = RESOURCES):
     """The trial's collision guard and its one-vehicle Fleet, on the takeoff point facing
-    the goal, the speed cap as MPC_XY_VEL_MAX (in-process and over the wire alike)."""
+    the goal, the speed cap as MPC_XY_VEL_MAX, the spec's controller-gain mode as
+    FT_GAIN_MODE (in-process and over the wire alike)."""
     world, grid = resources.world_and_grid(scenario)
     rules = PROTOCOLS[spec.protocol]
     if rules.vehicle_body:
@@ -433,7 +436,8 @@ def trial_vehicle(spec, scenario, platform, resources: TrialResources = RESOURCE
         guard = CollisionGuard(world, [platform.collision_radius_m], grid=grid,
                                names=scenario.obstacle_name)
     params = ParamSet({"MPC_XY_VEL_MAX": spec.limits.max_speed_m_s,
-                       "FT_OFFB_ACC_LIM": int(rules.offboard_acc_clamp)})
+                       "FT_OFFB_ACC_LIM": int(rules.offboard_acc_clamp),
+                       "FT_GAIN_MODE": GAIN_MODES[spec.gains]})
     fleet = Fleet([platform], params=[params], spawn=[scenario.takeoff],
                   spawn_yaw=[scenario.start_yaw], physics_hz=spec.physics_hz, guard=guard)
     return guard, fleet

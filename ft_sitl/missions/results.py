@@ -25,7 +25,9 @@ metrics (navigation phase)
 run
     ``sim_time_s``, ``wall_time_s``, ``code_version``, ``protocol_version`` (the trial
     protocol's version, ft_sitl.missions.spec.PROTOCOLS; 1 for rows written before it was
-    recorded), ``finished_utc``, ``spec`` (the full trial spec as JSON: enough to rerun the
+    recorded), ``gains`` (the controller-gain mode the trial flew, "bandwidth" or "px4":
+    FT_GAIN_MODE 0 or 1; "bandwidth" for rows written before it was recorded),
+    ``finished_utc``, ``spec`` (the full trial spec as JSON: enough to rerun the
     trial alone).
 """
 
@@ -33,6 +35,8 @@ from __future__ import annotations
 
 import math
 from enum import StrEnum
+
+from ft_sitl.autopilot.params import DEFAULT_GAINS
 
 
 class Outcome(StrEnum):
@@ -79,12 +83,12 @@ OUTCOME = ("success", "reason", "detail")
 METRICS = ("time_to_goal_s", "nav_time_s", "path_length_m", "mean_speed_m_s",
            "max_speed_m_s", "min_clearance_m", "max_tilt_deg", "saturation_fraction",
            "energy_j", "replans", "planner_time_s", "planner_calls")
-RUN = ("sim_time_s", "wall_time_s", "code_version", "protocol_version", "finished_utc",
-       "spec")
+RUN = ("sim_time_s", "wall_time_s", "code_version", "protocol_version", "gains",
+       "finished_utc", "spec")
 COLUMNS = IDENTITY + OUTCOME + METRICS + RUN
 
 CATEGORICAL = ("campaign", "algorithm", "platform", "platform_category", "family",
-               "scenario_category", "scenario", "reason")
+               "scenario_category", "scenario", "reason", "gains")
 INTEGER = ("scenario_index", "scenario_seed", "trial", "seed", "replans", "planner_calls",
            "protocol_version")
 FLOAT = ("mass_kg", "twr_max", "alpha_xy_max", "alpha_z_max") + tuple(
@@ -106,6 +110,7 @@ def to_frame(rows):
         df[c] = pd.to_numeric(df[c], errors="coerce").astype("Int64")
     # rows written before the version was recorded flew protocol 1
     df["protocol_version"] = df["protocol_version"].fillna(1)
+    df["gains"] = df["gains"].astype(object).fillna(DEFAULT_GAINS)  # (likewise: the default)
     for c in FLOAT:
         df[c] = pd.to_numeric(df[c], errors="coerce").astype("float64")
     df["success"] = df["success"].astype(bool)

@@ -12,6 +12,7 @@ import hashlib
 import json
 from dataclasses import dataclass, field, replace
 
+from ft_sitl.autopilot.params import DEFAULT_GAINS, GAIN_MODES
 from ft_sitl.navigation.base import Limits
 from ft_sitl.physics.catalog import get_platform, platform_from_mapping
 from ft_sitl.physics.platform import Platform
@@ -105,6 +106,7 @@ class TrialSpec:
     scenario_file: str | None = None
     physics_hz: int = 1000
     protocol: int = PROTOCOL_VERSION
+    gains: str = DEFAULT_GAINS  # the controller-gain mode (GAIN_MODES: FT_GAIN_MODE)
 
     def __post_init__(self):
         for name in ("algorithm", "platform", "family"):
@@ -121,6 +123,7 @@ class TrialSpec:
         if not isinstance(self.limits, Limits):
             raise TrialSpecError("limits: must be a Limits")
         check_protocol(self.protocol)
+        check_gains(self.gains)
         default_acc = PROTOCOLS[self.protocol].max_acc_m_s2
         if self.limits.max_acc_m_s2 is not None and default_acc is None:
             raise TrialSpecError(f"limits.max_acc_m_s2: protocol version {self.protocol} has "
@@ -132,8 +135,9 @@ class TrialSpec:
 
     # --- serialisation -------------------------------------------------------------------
     def to_dict(self) -> dict:
-        """The canonical spec. ``protocol`` is left out at version 1, so the specs (and
-        trial ids) of rows written before versions existed stay what they were."""
+        """The canonical spec. ``protocol`` is left out at version 1 and ``gains`` at the
+        default, so the specs (and trial ids) of rows written before either existed stay
+        what they were."""
         d = {
             "algorithm": self.algorithm, "algorithm_params": self.algorithm_params,
             "platform": self.platform, "platform_def": self.platform_def,
@@ -144,6 +148,8 @@ class TrialSpec:
         }
         if self.protocol != 1:
             d["protocol"] = self.protocol
+        if self.gains != DEFAULT_GAINS:
+            d["gains"] = self.gains
         return d
 
     @classmethod
@@ -182,6 +188,16 @@ def check_protocol(version) -> int:
                              f"({known}); a trial written under another version needs the "
                              f"ft-sitl that wrote it (its row's code_version)")
     return version
+
+
+def check_gains(name) -> str:
+    """``name`` if it names a controller-gain mode, else TrialSpecError naming the key and
+    the modes."""
+    if not isinstance(name, str) or name not in GAIN_MODES:
+        known = ", ".join(repr(k) for k in GAIN_MODES)
+        raise TrialSpecError(f"gains: {name!r} is not a controller-gain mode ({known}: "
+                             f"FT_GAIN_MODE {', '.join(map(str, GAIN_MODES.values()))})")
+    return name
 
 
 def platform_for(spec: TrialSpec) -> Platform:

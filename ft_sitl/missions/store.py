@@ -27,6 +27,7 @@ from pathlib import Path
 
 import numpy as np
 
+from ft_sitl.autopilot.params import DEFAULT_GAINS
 from ft_sitl.missions.results import check_outcome, to_frame
 
 SPEC_FILE = "campaign.json"
@@ -85,6 +86,12 @@ class ResultStore:
                     f"run would fly version {v_new}, and the two do not mix in one result "
                     f"directory: set protocol = {v_old} in the campaign file to resume it, or "
                     f"use another --out directory")
+        g_old, g_new = old.get("gains", DEFAULT_GAINS), new.get("gains", DEFAULT_GAINS)
+        if g_old != g_new and {k: v for k, v in old.items() if k != "gains"} == \
+                {k: v for k, v in new.items() if k != "gains"}:
+            return (f"{self.dir} holds trials flown with gains = {g_old!r}; this run would "
+                    f"fly gains = {g_new!r}: set gains = {g_old!r} in the campaign file to "
+                    f"resume it, or use another --out directory")
         return (f"{self.dir} holds the results of a different campaign "
                 f"({old.get('name', '?')!r}); use another --out directory, or the same "
                 f"campaign file to resume")

@@ -92,6 +92,9 @@ ERRORS = [
     (BASE + "trials = 0", "trials: must be an integer 1..10000, got 0"),
     (BASE + "seed = -1", "seed: must be an integer >= 0, got -1"),
     (BASE + "physics_hz = 333", "physics_hz: 333 must divide 1,000,000"),
+    (BASE + 'gains = "PX4"', "gains: must be one of 'bandwidth', 'px4' (the controller-gain "
+     "mode, docs/missions.md), got 'PX4'"),
+    (BASE + "gains = 1", "gains: must be one of 'bandwidth', 'px4'"),
     (BASE + 'name = ""', "name: must be a non-empty string"),
     (BASE + "limits = 3", "limits: must be a table, got 3"),
     (BASE + "[limits]\ntimeout_s = -1", "limits.timeout_s: must be a positive number, got -1"),
@@ -157,6 +160,8 @@ def test_wrong_suffix_and_missing_file(tmp_path):
 def test_the_paper_preset_is_the_papers_matrix():
     c = load_campaign("paper")
     assert c.name == "paper" and c.trials == 10 and c.limits == Limits()
+    # one fixed PX4 tuning on every airframe, as the paper flew (docs/missions.md)
+    assert c.gains == "px4" and load_campaign("quick").gains == "bandwidth"
     assert len(c.platforms) == 36 and {p.name for p in c.platforms} == set(catalog())
     assert [s.family for s in c.scenarios] == list(FAMILIES)
     assert all(s.indices == tuple(range(1, 11)) for s in c.scenarios)
@@ -577,6 +582,34 @@ def test_duplicate_scenario_entries_are_refused_or_merged(tmp_path):
 def test_weights_the_score_refuses_are_refused_by_the_campaign(tmp_path, weights):
     path = campaign_file(tmp_path, "w.toml", BASE + f"[weights]\n{weights}\n")
     assert _error(path).startswith(f"{path}: weights.")
+
+
+def test_the_gains_key_reaches_every_trial_and_is_left_out_at_the_default(tmp_path):
+    body = BASE + 'platforms = ["1.00kg-SunnySky"]\nscenarios = ["forest"]\nindices = [1]\n' \
+                  "trials = 1\n"
+    plain = load_campaign(campaign_file(tmp_path, "plain.toml", body))
+    bandwidth = load_campaign(campaign_file(tmp_path, "plain.yaml", "gains: bandwidth\n" +
+                                            "algorithms: [straight]\nplatforms: "
+                                            "[1.00kg-SunnySky]\nscenarios: [forest]\n"
+                                            "indices: [1]\ntrials: 1\n"))
+    px4 = load_campaign(campaign_file(tmp_path, "px4.toml", body + 'gains = "px4"\n'))
+    assert (plain.gains, bandwidth.gains, px4.gains) == ("bandwidth", "bandwidth", "px4")
+    # the default leaves the campaign and its trials as they were before the key existed
+    assert "gains" not in plain.spec_dict() and plain.spec_dict() == bandwidth.spec_dict()
+    assert [s.trial_id for s in plain.trial_specs()] == \
+        [s.trial_id for s in bandwidth.trial_specs()]
+    assert px4.spec_dict()["gains"] == "px4"
+    (spec,) = px4.trial_specs()
+    assert spec.gains == "px4" and spec.trial_id != plain.trial_specs()[0].trial_id
+
+
+def test_a_directory_of_other_gains_is_refused_naming_them(tmp_path):
+    store = ResultStore(tmp_path)
+    store.open({"spec": {"name": "x", "trials": 1, "gains": "px4"}})
+    store.close()
+    with pytest.raises(StoreError, match=r"holds trials flown with gains = 'px4'; this run "
+                                         r"would fly gains = 'bandwidth': set gains = 'px4'"):
+        ResultStore(tmp_path).open({"spec": {"name": "x", "trials": 1}})
 
 
 def test_a_directory_of_another_protocol_version_is_refused_by_version(tmp_path):

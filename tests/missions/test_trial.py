@@ -477,7 +477,8 @@ def test_every_reason_is_a_known_category():
 FULL = TrialSpec(algorithm="straight", platform=PLATFORM, family="maze", scenario_index=3,
                  scenario_seed=1, trial=2, seed=7, algorithm_params={"speed_m_s": 3.0},
                  limits=Limits(timeout_s=60.0), campaign="c", label="straight-3",
-                 platform_def=None, scenario_file=None, physics_hz=500, protocol=2)
+                 platform_def=None, scenario_file=None, physics_hz=500, protocol=2,
+                 gains="px4")
 
 
 def test_spec_round_trips_through_dict_and_json():
@@ -505,7 +506,7 @@ CHANGES = {
     "scenario_seed": 2, "trial": 3, "seed": 8, "algorithm_params": {"speed_m_s": 2.0},
     "limits": Limits(timeout_s=61.0), "campaign": "d", "label": "x",
     "platform_def": {"name": PLATFORM}, "scenario_file": "/tmp/x.yaml", "physics_hz": 1000,
-    "protocol": 1,
+    "protocol": 1, "gains": "bandwidth",
 }
 # (protocol 2 here: FULL with protocol 3 would carry 3's acceleration limit, which 1 refuses)
 
@@ -526,6 +527,7 @@ def test_trial_id_changes_with_every_field():
     ("algorithm", ""), ("platform", None), ("family", 3), ("scenario_index", 0),
     ("scenario_index", 1.0), ("scenario_seed", -1), ("trial", True), ("seed", "1"),
     ("physics_hz", 0), ("algorithm_params", [1]), ("limits", {"timeout_s": 5.0}),
+    ("gains", "PX4"), ("gains", 1), ("gains", None),
 ])
 def test_bad_spec_fields_are_refused_by_name(field, value):
     with pytest.raises(TrialSpecError, match=f"^{field}: "):
@@ -594,6 +596,38 @@ def test_protocol_version_is_in_the_row_and_absent_means_1():
            .items() if k != "protocol"}
     assert TrialSpec.from_dict(old).protocol == 1
     assert "protocol" not in TrialSpec.from_dict(old).to_dict()  # the old ids stay
+
+
+# --- controller-gain mode ----------------------------------------------------------------------
+def test_the_default_gain_mode_is_left_out_of_the_spec_so_old_ids_stay():
+    spec = TrialSpec("straight", PLATFORM, "maze", scenario_index=3, scenario_seed=1, trial=2,
+                     seed=7, protocol=1)
+    assert spec.gains == "bandwidth" and "gains" not in spec.to_dict()
+    assert spec.trial_id == "3f5892779a3fd6af"  # (test_trial_id_is_stable's)
+    px4 = dataclasses.replace(spec, gains="px4")
+    assert px4.to_dict()["gains"] == "px4" and px4.trial_id != spec.trial_id
+    assert TrialSpec.from_dict(json.loads(px4.to_json())) == px4
+
+
+def test_a_bad_gain_mode_is_refused_naming_the_key_and_the_modes():
+    with pytest.raises(TrialSpecError, match=r"^gains: 'PX4' is not a controller-gain mode "
+                                             r"\('bandwidth', 'px4'"):
+        TrialSpec("straight", PLATFORM, "forest", gains="PX4")
+
+
+def test_the_gain_mode_reaches_the_vehicle_and_the_row(yard):
+    """The spec's gains set FT_GAIN_MODE on the trial's vehicle (trial_vehicle, both
+    transports) and are written into the row."""
+    from ft_sitl.autopilot.params import GAIN_MODES
+    from ft_sitl.missions.protocol import trial_vehicle
+
+    for gains, mode in GAIN_MODES.items():
+        spec = yard_spec(yard, gains=gains)
+        _, fleet = trial_vehicle(spec, load_scenario_for(spec), platform_for(spec))
+        assert fleet.params[0]["FT_GAIN_MODE"] == mode
+    row = run_trial(yard_spec(yard, gains="px4")).row
+    assert row["gains"] == "px4" and json.loads(row["spec"])["gains"] == "px4"
+    assert run_trial(yard_spec(yard)).row["gains"] == "bandwidth"
 
 
 def test_a_committed_paper_row_keeps_its_trial_id_and_version():
