@@ -65,9 +65,13 @@ from ft_sitl.scenarios.distance_grid import GM_H, GRID_META_N, DistanceGrid, gri
 # is the body's own (G_BMODE 1): G_ANCHOR is then the body's clearance at the anchor pose
 # (position G_O*, attitude G_QW..G_QZ), and no free ball is kept (the kernel bounds the
 # motion of every body point by |dp| + 2 R sin(dtheta / 2) at each step instead).
+# In body mode the free ball also has an attitude: the kernel stays silent while the centre
+# is inside the ball and the attitude within the rotation budget of G_BQW..G_BQZ
+# (<q_ball, q>^2 > G_DOT2), which together keep every body point inside the anchor's reach.
 (G_ON, G_R, G_ANCHOR, G_OX, G_OY, G_OZ, G_BX, G_BY, G_BZ, G_RR, G_AX, G_AY, G_AZ, G_LBA,
- G_OUT, G_BOUNDS, G_TRIP, G_BODY, G_BMODE, G_QW, G_QX, G_QY, G_QZ) = range(23)
-G_N = 23
+ G_OUT, G_BOUNDS, G_TRIP, G_BODY, G_BMODE, G_QW, G_QX, G_QY, G_QZ, G_BQW, G_BQX, G_BQY,
+ G_BQZ, G_DOT2) = range(28)
+G_N = 28
 # guard meta row: the distance grid's layout first (origin (3), pitch, shape (3): what
 # grid_lower_bound reads), then the flight volume lo x/y, hi x/y/z and the margin (m)
 (M_LOX, M_LOY, M_HIX, M_HIY, M_HIZ, M_MARGIN) = range(GRID_META_N, GRID_META_N + 6)
@@ -95,8 +99,16 @@ def guard_step(g, grid, meta, px, py, pz, qx, qy, qz, x):
     free = np.inf
     if g[G_ON] > 0.0 and g[G_BMODE] > 0.0:
         margin = meta[M_MARGIN]
-        if g[G_ANCHOR] - body_motion_bound(g, x, qx, qy, qz) > 2.0 * margin:
-            free = -1.0  # the body anchor covers this pose: check again next step
+        left = g[G_ANCHOR] - body_motion_bound(g, x, qx, qy, qz) - 2.0 * margin
+        if left > 0.0:
+            # the body anchor covers this pose with `left` to spare: half of it for the
+            # centre (the ball), half for the rotation from this attitude (chord lengths
+            # add up, so every body point stays within the anchor's clearance)
+            free = 0.5 * left
+            for k in range(4):
+                g[G_BQW + k] = x[d.X_QUAT + k]
+            s = 0.25 * left / g[G_R] if g[G_R] > 0.0 else 1.0
+            g[G_DOT2] = 1.0 - s * s if s < 1.0 else 0.0
         else:
             seg = np.sqrt((qx - px) ** 2 + (qy - py) ** 2 + (qz - pz) ** 2)
             lb = grid_lower_bound(grid, meta, qx, qy, qz) - g[G_R]

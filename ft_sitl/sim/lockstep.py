@@ -22,7 +22,24 @@ from ft_sitl.physics import dynamics as d
 from ft_sitl.physics.platform import Platform
 from ft_sitl.physics.quaternion import qfrom_euler, qto_euler
 from ft_sitl.scenarios.distance_grid import GM_H
-from ft_sitl.sim.guard import G_BOUNDS, G_BX, G_BY, G_BZ, G_N, G_ON, G_RR, G_TRIP, M_N, guard_step
+from ft_sitl.sim.guard import (
+    G_BMODE,
+    G_BOUNDS,
+    G_BQW,
+    G_BQX,
+    G_BQY,
+    G_BQZ,
+    G_BX,
+    G_BY,
+    G_BZ,
+    G_DOT2,
+    G_N,
+    G_ON,
+    G_RR,
+    G_TRIP,
+    M_N,
+    guard_step,
+)
 
 
 @njit(cache=True)
@@ -37,6 +54,7 @@ def run_steps(n_steps, dt, x, sp, gn, a, cs, prm, alloc, env, status, w_cmd, rec
         prmi, alloci, envi, sti, gi = prm[i], alloc[i], env[i], status[i], gd[i]
         guarded = gi[G_ON] > 0.0 or gi[G_BOUNDS] > 0.0
         bx, by, bz, rr = gi[G_BX], gi[G_BY], gi[G_BZ], gi[G_RR]
+        body = gi[G_BMODE] > 0.0
         k = k_done[i]
         while k < n_steps:
             px, py, pz = xi[0], xi[1], xi[2]
@@ -46,9 +64,16 @@ def run_steps(n_steps, dt, x, sp, gn, a, cs, prm, alloc, env, status, w_cmd, rec
             if guarded:
                 ex, ey, ez = xi[0] - bx, xi[1] - by, xi[2] - bz
                 # inside the (convex) free ball: the whole step is, too
-                if not ex * ex + ey * ey + ez * ez < rr:
+                inside = ex * ex + ey * ey + ez * ez < rr
+                if inside and body:  # and a body within its rotation budget
+                    dot = (gi[G_BQW] * xi[d.X_QUAT] + gi[G_BQX] * xi[d.X_QUAT + 1]
+                           + gi[G_BQY] * xi[d.X_QUAT + 2]
+                           + gi[G_BQZ] * xi[d.X_QUAT + 3])
+                    inside = dot * dot > gi[G_DOT2]
+                if not inside:
                     trip = guard_step(gi, grid, meta, px, py, pz, xi[0], xi[1], xi[2], xi)
                     bx, by, bz, rr = gi[G_BX], gi[G_BY], gi[G_BZ], gi[G_RR]
+                    body = gi[G_BMODE] > 0.0
                     if trip:
                         break  # (the caller records this step once it is resolved)
             if rec_every > 0 and k % rec_every == 0:
