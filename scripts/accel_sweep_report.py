@@ -7,7 +7,8 @@ Reads result directories (``ft-sitl campaign run`` output, or a directory holdin
 gains -- and writes into ``--out``:
 
 * ``success_vs_indicators_<algorithm>.png``: one panel per indicator (TWR_max,
-  alpha_xy,max on a log axis, alpha_z,max, the footprint = collision radius), one colour
+  alpha_xy,max on a log axis, alpha_z,max, the footprint: what the trial told its
+  navigator, the body's half span from protocol 5, else the collision radius), one colour
   per condition: a marker per platform (its success rate over the trials kept) and a line
   through the mean success of the platforms in each bin of the indicator (dashed for
   gains other than bandwidth);
@@ -51,6 +52,7 @@ import pandas as pd  # noqa: E402
 from scipy import stats  # noqa: E402
 
 from ft_sitl.autopilot.params import DEFAULT_GAINS  # noqa: E402
+from ft_sitl.missions.protocol import footprint_m  # noqa: E402
 from ft_sitl.missions.results import rows_from_parquet, to_frame  # noqa: E402
 from ft_sitl.missions.spec import TrialSpec, platform_for  # noqa: E402
 from ft_sitl.missions.store import load_rows  # noqa: E402
@@ -61,7 +63,8 @@ INDICATORS = (
     ("twr_max", "TWR_max", False),
     ("alpha_xy_max", "alpha_xy,max (rad/s^2)", True),
     ("alpha_z_max", "alpha_z,max (rad/s^2)", False),
-    ("footprint_m", "footprint: collision radius (m)", False),
+    ("footprint_m", "footprint (m): body half span (protocol 5), collision radius (1-4)",
+     False),
 )
 ALGORITHM_ORDER = ("straight", "ego", "fast", "pgo", "navrl")
 
@@ -101,7 +104,7 @@ def load_sweep(dirs, families=CLASSIC) -> pd.DataFrame:
     ``gains``, ``condition``), the footprint (``footprint_m``) and the source directory.
     A directory must hold one condition; two directories may not hold the same one."""
     frames, seen = [], {}
-    footprint: dict[str, float] = {}
+    footprint: dict[tuple[str, int], float] = {}
     for d in dirs:
         df = read_dir(d)
         specs = [json.loads(s) for s in df["spec"]]
@@ -115,17 +118,24 @@ def load_sweep(dirs, families=CLASSIC) -> pd.DataFrame:
         if label in seen:
             raise SweepError(f"{d}: condition {label!r} is also {seen[label]}")
         seen[label] = d
+        keys = []
         for s in specs:
-            name = s["platform"]
-            if name not in footprint:
-                footprint[name] = platform_for(TrialSpec.from_dict(s)).collision_radius_m
+            key = (s["platform"], s.get("protocol", 1))
+            if key not in footprint:
+                spec = TrialSpec.from_dict(s)
+                platform = platform_for(spec)
+                # what the trial told its navigator (protocol 4: the collision radius; 5:
+                # the body's half span); before 4 nothing, so the collision radius
+                told = footprint_m(spec, platform)
+                footprint[key] = told if told is not None else platform.collision_radius_m
+            keys.append(key)
+        df["footprint_m"] = [footprint[k] for k in keys]
         df = df[df["family"].astype(str).isin(families)].copy()
         if df.empty:
             raise SweepError(f"{d}: no trials in the families {', '.join(families)}")
         df["max_acc_m_s2"] = acc
         df["condition"] = label
         df["source"] = str(d)
-        df["footprint_m"] = df["platform"].astype(str).map(footprint)
         frames.append(df)
     out = pd.concat(frames, ignore_index=True)
     for c in ("algorithm", "platform", "family", "condition"):
