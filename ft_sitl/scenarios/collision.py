@@ -1,7 +1,9 @@
 """Collision world: a vehicle's collision sphere against the scenario mesh and its bounds.
 
-World frame ENU (x east, y north, z up), metres. Each vehicle is a sphere of its platform's
-``collision_radius_m`` centred on the body origin. What it can hit:
+World frame ENU (x east, y north, z up), metres. A vehicle is a sphere (its platform's
+``collision_radius_m``, protocols 1-4, or its body's bounding sphere) centred on the body
+origin; from protocol 5 its body (:class:`BodyProbe`: a box and the rotor disks, see
+:meth:`CollisionWorld.body_distance`) settles what the sphere may touch. What it can hit:
 
 * ``"obstacle"``: the scenario's triangle mesh (obstacles only), through one python-fcl
   bounding-volume hierarchy (``fcl.BVHModel``) built once in the constructor;

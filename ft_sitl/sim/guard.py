@@ -31,6 +31,16 @@ first contact of each vehicle is reported as a ``COLLISION`` :class:`GuardEvent`
 what was hit. The fleet turns that into a crash (motors stopped, STATUSTEXT). Later contacts
 of a crashed vehicle (sliding down a wall as it falls) are answered the same way, silently.
 
+Vehicles with a body (``bodies``; trial protocol 5 on, and every Fleet): the sphere above
+is the body's bounding sphere, the broad phase. Where the sphere may touch something,
+:meth:`CollisionGuard.resolve` measures the body itself (its central box and rotor disks,
+posed by the vehicle's attitude: :meth:`CollisionWorld.body_distance`); a free body becomes
+a *body anchor* (its clearance c at a pose), and the compiled loop carries on while every
+body point provably stays within c: the centre inside a free ball and the attitude within a
+rotation budget (a point at distance R from the centre moves 2 R sin(dtheta / 2) under a
+rotation dtheta). Once the bounding sphere is clear again, it is the sphere's check again.
+A body contact puts the vehicle back at the step's start, with the same velocity response.
+
 The flight volume (the scenario's area and ceiling; the floor belongs to the plant's ground
 contact) is checked on the vehicle's *centre*: ``LEFT_VOLUME`` when it crosses out,
 ``ENTERED_VOLUME`` when it comes back; the benchmark scores the former as out of bounds.
