@@ -973,6 +973,7 @@ class LocalMap:
         self.last_t_us: int | None = None
         self.last_camera_m: np.ndarray | None = None
         self._esdf: np.ndarray | None = None
+        self._esdf_key: tuple | None = None
         self._esdf_origin: np.ndarray | None = None
         self._esdf_frame = -1
 
@@ -1252,6 +1253,10 @@ class LocalMap:
         centre's z (``center_m`` given as (x, y, z), else the last camera position): the
         originals' local update box is +-4.5 m high; a 10 m ceiling otherwise doubles the
         cost.
+
+        Asked again for the same box with the planning occupancy unchanged (the same
+        ``revision``), it returns the field it computed then, the same array: callers must
+        not modify it.
         """
         nx, ny, nz = self.shape
         x0, x1, y0, y1 = 0, nx, 0, ny
@@ -1286,11 +1291,18 @@ class LocalMap:
             x0, x1, y0, y1 = self._esdf_box_xy(c, h)
             if x1 - x0 < 2 or y1 - y0 < 2:
                 raise ValueError("the ESDF box does not overlap the window (by >= 2 voxels)")
+        key = (self._revision, int(self._origin[0]), int(self._origin[1]), x0, x1, y0, y1,
+               z0, z1)
+        if self._esdf is not None and key == self._esdf_key:
+            # the same box of the same planning occupancy: the same field
+            self._esdf_frame = self._frames
+            return self._esdf
         plan = np.ascontiguousarray(self.planning_grid()[x0:x1, y0:y1, z0:z1])
         pos = np.empty(plan.shape)
         _signed_esdf(plan, self.resolution_m, np.empty(plan.shape, np.float32),
                      np.empty(plan.shape, np.float32), pos)
         self._esdf = pos
+        self._esdf_key = key
         self._esdf_origin = self._origin + np.array([x0, y0, z0])
         self._esdf_frame = self._frames
         return pos

@@ -624,3 +624,21 @@ def test_lattice_query_and_revision_follow_the_planning_occupancy():
     assert got.sum() > 27
     m.shift_to(m.origin_index[:2] + 3)
     assert m.revision != r1
+
+
+def test_esdf_is_recomputed_only_when_the_planning_occupancy_or_box_changes():
+    c = np.array([2.05, 0.05, 1.55])
+    cam = DepthCamera(SMALL, box(c - 0.3, c + 0.3))
+    m = LocalMap(None, CEILING, camera=SMALL)
+    fuse_frames(m, cam, MapConfig().hits_to_occupy())
+    first = m.update_esdf(P0, 2.0, 1.5)
+    again = m.update_esdf(P0, 2.0, 1.5)
+    assert again is first  # same revision, same box: the stored field
+    other = m.update_esdf(P0, 2.5, 1.5)
+    assert other is not first
+    fresh = LocalMap(None, CEILING, camera=SMALL)
+    fuse_frames(fresh, cam, MapConfig().hits_to_occupy())
+    np.testing.assert_array_equal(fresh.update_esdf(P0, 2.5, 1.5), other)
+    m.clear()
+    cleared = m.update_esdf(P0, 2.5, 1.5)
+    assert cleared is not other and not np.array_equal(cleared, other)
