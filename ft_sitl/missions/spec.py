@@ -36,6 +36,12 @@ class ProtocolRules:
     max_acc_m_s2: float | None
     #: navigators keep obstacles the platform's footprint away (Task.footprint_m)
     footprint_inflation: bool = False
+    #: a navigation that has not come STALL_PROGRESS_M closer to the goal than it had
+    #: been for this long (simulated s) ends as a timeout at once (None: only
+    #: limits.timeout_s ends it). It changes results: a stalled flight's row ends early
+    #: (nav_time_s, path, energy), and a flight that would have got going again later
+    #: and reached the goal is a timeout (docs/benchmarks.md, "Stalled flights")
+    stall_timeout_s: float | None = None
 
 
 #: the versions of the trial protocol this code flies; a trial's spec names its version
