@@ -354,15 +354,20 @@ class AStarMemo:
     settings and the occupancy of the boxes it read, so a stored answer is returned when
     the view's ``revision`` is the one it was found at, or else when every box it read
     still has the same occupancy (read again and compared voxel for voxel: ~1 ms against
-    the tens of ms of a search that exhausts its expansions). At most ``max_entries``
-    answers (the oldest are dropped)."""
+    the tens of ms of a search that exhausts its expansions). Only answers that took at
+    least ``check_above`` expansions are checked that way: a cheaper search costs about
+    what the check does, and the check is wasted when the map has changed. At most
+    ``max_entries`` answers (the oldest are dropped)."""
 
-    def __init__(self, max_entries: int = 64):
+    def __init__(self, max_entries: int = 64, check_above: int = 10_000):
         self.max_entries = int(max_entries)
+        self.check_above = int(check_above)
         self._grid: OccupancyView | None = None
         self._answers: dict = {}  # key -> [revision, boxes read, result]
         self.hits = 0
         self.misses = 0
+        self.checks = 0  # answers checked against the boxes they read
+        self.stale = 0  # ... that the map had changed
 
     def get(self, grid: OccupancyView, key) -> AStarResult | None:
         if grid is not self._grid:
@@ -372,11 +377,16 @@ class AStarMemo:
         if entry is not None:
             rev = grid.revision() if grid.revision is not None else None
             if rev is None or entry[0] != rev:
-                if not all(np.array_equal(grid.box_occupancy(lo, shape), occ)
-                           for lo, shape, occ in entry[1]):
+                if entry[2].expansions < self.check_above:
                     entry = None
                 else:
-                    entry[0] = rev
+                    self.checks += 1
+                    if not all(np.array_equal(grid.box_occupancy(lo, shape), occ)
+                               for lo, shape, occ in entry[1]):
+                        self.stale += 1
+                        entry = None
+                    else:
+                        entry[0] = rev
         if entry is None:
             self.misses += 1
             return None

@@ -223,7 +223,7 @@ def test_memo_answers_repeated_searches_as_a_new_search_would():
 
     grid = OccupancyView(occupied, RES, bounds=(np.zeros(3), np.array(blocked.shape) * RES),
                          revision=lambda: state["rev"])
-    memo = AStarMemo()
+    memo = AStarMemo(check_above=0)  # check every answer against its boxes
     ends = [([0.05, 0.05, 0.05], [3.95, 2.95, 1.15]), ([0.55, 1.05, 0.35], [3.05, 0.15, 0.95])]
 
     def check():
@@ -244,4 +244,11 @@ def test_memo_answers_repeated_searches_as_a_new_search_would():
     state["blocked"][20, 10, 6] = False
     state["rev"] += 1
     check()
-    assert memo.misses == 4
+    assert memo.misses == 4 and memo.stale >= 1 and memo.checks == 2 + memo.stale
+    # a cheap answer is searched again instead of checked
+    cheap = AStarMemo(check_above=10**9)
+    a, b = ends[0]
+    search(a, b, grid, max_expansions=3000, memo=cheap)
+    state["rev"] += 1
+    search(a, b, grid, max_expansions=3000, memo=cheap)
+    assert cheap.hits == 0 and cheap.misses == 2 and cheap.checks == 0
