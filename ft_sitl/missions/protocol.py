@@ -54,6 +54,9 @@ from ft_sitl.sim.fleet import Fleet
 from ft_sitl.sim.guard import CollisionGuard, GuardEventKind
 
 APPROACH_TIMEOUT_S = 30.0
+#: the progress toward the goal (m) that resets the stall clock of a protocol with
+#: ``stall_timeout_s`` (ProtocolRules)
+STALL_PROGRESS_M = 0.5
 #: the in-process runner's check interval (the commander's tick, s)
 TICK_S = 0.02
 MAX_TILT_RAD = math.pi / 2
@@ -247,6 +250,10 @@ class NavigationJudge:
         self.entered_us = None
         self.timeout_us = round(spec.limits.timeout_s * 1e6)
         self.hold_us = round(spec.limits.hold_s * 1e6)
+        stall_s = PROTOCOLS[spec.protocol].stall_timeout_s
+        self.stall_us = None if stall_s is None else round(stall_s * 1e6)
+        self.best_dist = math.inf  # the closest to the goal so far, less STALL_PROGRESS_M
+        self.best_us = 0
 
     def state_at(self, time_us: int):
         """The vehicle's state at ``time_us``: the one the last check read when the
@@ -282,6 +289,15 @@ class NavigationJudge:
             raise TrialFailure(Outcome.TIMEOUT,
                                f"not in the goal sphere after {spec.limits.timeout_s:g} s "
                                f"({dist:.1f} m away)")
+        if self.stall_us is not None and self.entered_us is None:
+            if dist < self.best_dist:
+                self.best_dist = dist - STALL_PROGRESS_M
+                self.best_us = t_nav_us
+            elif t_nav_us - self.best_us >= self.stall_us:
+                raise TrialFailure(Outcome.TIMEOUT,
+                                   f"stalled: no {STALL_PROGRESS_M:g} m of progress toward "
+                                   f"the goal in {self.stall_us * 1e-6:g} s ({dist:.1f} m "
+                                   f"away)")
         return False
 
 

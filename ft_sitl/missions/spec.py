@@ -40,6 +40,12 @@ class ProtocolRules:
     #: the vehicle is its body (central box and rotor disks posed by its attitude), not
     #: its collision sphere, and its footprint is the body's half span
     vehicle_body: bool = False
+    #: a navigation that has not come STALL_PROGRESS_M closer to the goal than it had
+    #: been for this long (simulated s) ends as a timeout at once (None: only
+    #: limits.timeout_s ends it). It changes results: a stalled flight's row ends early
+    #: (nav_time_s, path, energy), and a flight that would have got going again later
+    #: and reached the goal is a timeout (docs/benchmarks.md, "Stalled flights")
+    stall_timeout_s: float | None = None
 
 
 #: the versions of the trial protocol this code flies; a trial's spec names its version

@@ -41,7 +41,8 @@ from dataclasses import dataclass, field
 import numpy as np
 from numba import njit
 
-__all__ = ["AStarResult", "AStarStatus", "OccupancyView", "astar_path", "search"]
+__all__ = ["AStarMemo", "AStarResult", "AStarStatus", "OccupancyView", "astar_path",
+           "search"]
 
 # kernel return codes
 _FOUND, _EXHAUSTED, _BUDGET = 0, 1, 2
@@ -62,6 +63,15 @@ class OccupancyView:
     lattice (bounds not applied), which must agree with ``occupied`` at the voxel centres.
     A map that stores a voxel array can answer it with one slice, instead of the ~0.1 us per
     point of ``occupied`` on generated centres (tens of ms for a 100 x 100 x 40 box).
+
+    ``lattice`` is another optional fast path: ``lattice(xs, ys, zs) -> bool array (len(xs),
+    len(ys), len(zs))``, ``occupied`` at every point of the product of three coordinate
+    vectors; A* then asks it for the box's voxel centres, computed as for ``occupied``, so
+    the answer is the same point by point (``LocalMap.occupied_inflated_lattice``).
+
+    ``revision`` is optional: ``revision() -> int``, a value that changes whenever
+    ``occupied`` may have changed; an :class:`AStarMemo` then reuses an answer found at the
+    same revision without reading the map again.
     """
 
     occupied: Callable[[np.ndarray], np.ndarray]
@@ -69,6 +79,8 @@ class OccupancyView:
     bounds: tuple[np.ndarray, np.ndarray] | None = None
     origin: np.ndarray = field(default_factory=lambda: np.zeros(3))
     block: Callable[[np.ndarray, np.ndarray], np.ndarray] | None = None
+    lattice: Callable[[np.ndarray, np.ndarray, np.ndarray], np.ndarray] | None = None
+    revision: Callable[[], int] | None = None
 
     def __post_init__(self):
         if not callable(self.occupied):
@@ -88,8 +100,12 @@ class OccupancyView:
     def from_map(cls, local_map, bounds=None) -> OccupancyView:
         """View of the ``LocalMap`` of ``ft_sitl.navigation.mapping`` (duck-typed: its
         ``occupied_inflated(points)`` and ``resolution_m``; its voxels are world-aligned,
-        centres at ``(i + 0.5) * resolution``, which is this view's default lattice)."""
-        return cls(local_map.occupied_inflated, local_map.resolution_m, bounds=bounds)
+        centres at ``(i + 0.5) * resolution``, which is this view's default lattice; its
+        ``occupied_inflated_lattice`` and ``revision`` when it has them)."""
+        lattice = getattr(local_map, "occupied_inflated_lattice", None)
+        revision = (lambda: local_map.revision) if hasattr(local_map, "revision") else None
+        return cls(local_map.occupied_inflated, local_map.resolution_m, bounds=bounds,
+                   lattice=lattice, revision=revision)
 
     def is_occupied(self, points) -> np.ndarray:
         """``occupied(points)`` with the bounds applied: bool ``(N,)``."""
@@ -109,6 +125,12 @@ class OccupancyView:
             occ = np.asarray(self.block(lo, np.array(shape)), dtype=bool)
             if occ.shape != shape:
                 raise ValueError(f"block returned shape {occ.shape}, expected {shape}")
+        elif self.lattice is not None:
+            axes = [self.origin[d] + (lo[d] + 0.5 + np.arange(shape[d])) * self.resolution
+                    for d in range(3)]
+            occ = np.asarray(self.lattice(*axes), dtype=bool)
+            if occ.shape != shape:
+                raise ValueError(f"lattice returned shape {occ.shape}, expected {shape}")
         else:
             pts = np.empty(shape + (3,))
             for d in range(3):
@@ -324,10 +346,71 @@ def _touches_open_face(state: np.ndarray, lo, hi, b_lo, b_hi) -> bool:
     return False
 
 
+class AStarMemo:
+    """Answers of :func:`search` for one view, to answer a repeated search (same start and
+    goal voxel, same settings, no time limit) without searching again.
+
+    A search without a time limit is a deterministic function of its endpoint voxels, its
+    settings and the occupancy of the boxes it read, so a stored answer is returned when
+    the view's ``revision`` is the one it was found at, or else when every box it read
+    still has the same occupancy (read again and compared voxel for voxel: ~1 ms against
+    the tens of ms of a search that exhausts its expansions). Only answers that took at
+    least ``check_above`` expansions are checked that way: a cheaper search costs about
+    what the check does, and the check is wasted when the map has changed. At most
+    ``max_entries`` answers (the oldest are dropped)."""
+
+    def __init__(self, max_entries: int = 64, check_above: int = 10_000):
+        self.max_entries = int(max_entries)
+        self.check_above = int(check_above)
+        self._grid: OccupancyView | None = None
+        self._answers: dict = {}  # key -> [revision, boxes read, result]
+        self.hits = 0
+        self.misses = 0
+        self.checks = 0  # answers checked against the boxes they read
+        self.stale = 0  # ... that the map had changed
+
+    def get(self, grid: OccupancyView, key) -> AStarResult | None:
+        if grid is not self._grid:
+            self._grid = grid
+            self._answers.clear()
+        entry = self._answers.get(key)
+        if entry is not None:
+            rev = grid.revision() if grid.revision is not None else None
+            if rev is None or entry[0] != rev:
+                if entry[2].expansions < self.check_above:
+                    entry = None
+                else:
+                    self.checks += 1
+                    if not all(np.array_equal(grid.box_occupancy(lo, shape), occ)
+                               for lo, shape, occ in entry[1]):
+                        self.stale += 1
+                        entry = None
+                    else:
+                        entry[0] = rev
+        if entry is None:
+            self.misses += 1
+            return None
+        self.hits += 1
+        return entry[2]
+
+    def put(self, grid: OccupancyView, key, boxes: list, result: AStarResult) -> None:
+        if grid is not self._grid:
+            self._grid = grid
+            self._answers.clear()
+        self._answers.pop(key, None)
+        while len(self._answers) >= self.max_entries:
+            self._answers.pop(next(iter(self._answers)))
+        self._answers[key] = [grid.revision() if grid.revision is not None else None, boxes,
+                              result]
+
+
 def search(start, goal, grid: OccupancyView, *, max_expansions: int = 100_000,
            time_limit_s: float | None = None, margins_m: tuple[float, ...] = (1.0, 2.5, 5.0),
-           tie_breaker: float = 1e-4, chunk: int = 4096) -> AStarResult:
-    """A* from ``start`` to ``goal`` (world points) on ``grid``'s voxel lattice."""
+           tie_breaker: float = 1e-4, chunk: int = 4096,
+           memo: AStarMemo | None = None) -> AStarResult:
+    """A* from ``start`` to ``goal`` (world points) on ``grid``'s voxel lattice. With a
+    ``memo``, a search without a time limit that was already done between the same voxels
+    on the same occupancy returns the stored answer (:class:`AStarMemo`)."""
     t0 = time.perf_counter()
     if max_expansions < 1:
         raise ValueError(f"max_expansions must be >= 1, got {max_expansions}")
@@ -342,6 +425,27 @@ def search(start, goal, grid: OccupancyView, *, max_expansions: int = 100_000,
     if np.array_equal(sv, gv):
         return AStarResult(AStarStatus.FOUND, grid.centre_of(sv[None, :]), 0,
                            time.perf_counter() - t0)
+    if memo is None or time_limit_s is not None:
+        return _search_boxes(sv, gv, grid, t0, max_expansions, time_limit_s, margins_m,
+                             tie_breaker, chunk)
+    key = (tuple(int(v) for v in sv), tuple(int(v) for v in gv), int(max_expansions),
+           tuple(float(m) for m in margins_m), float(tie_breaker))
+    found = memo.get(grid, key)
+    if found is None:
+        boxes: list = []
+        found = _search_boxes(sv, gv, grid, t0, max_expansions, None, margins_m,
+                              tie_breaker, chunk, boxes)
+        memo.put(grid, key, boxes, found)
+    return AStarResult(found.status, None if found.path is None else found.path.copy(),
+                       found.expansions, time.perf_counter() - t0)
+
+
+def _search_boxes(sv, gv, grid: OccupancyView, t0: float, max_expansions: int,
+                  time_limit_s: float | None, margins_m, tie_breaker: float,
+                  chunk: int, boxes: list | None = None) -> AStarResult:
+    """:func:`search` from the free start voxel ``sv`` to the free goal voxel ``gv``
+    (distinct) through the boxes of ``margins_m``; the boxes read and their occupancy are
+    appended to ``boxes`` as ``(lo, shape, occupancy)``."""
     res = grid.resolution
     b_lo = b_hi = None
     if grid.bounds is not None:
@@ -363,6 +467,8 @@ def search(start, goal, grid: OccupancyView, *, max_expansions: int = 100_000,
             break  # clipped by the bounds: a larger margin gives the same box
         last_shape = (shape, lo)
         occ = grid.box_occupancy(lo, shape)
+        if boxes is not None:
+            boxes.append((lo.copy(), shape.copy(), occ))
         # padded by one blocked voxel on every side
         nx, ny, nz = (int(v) + 2 for v in shape)
         blocked = np.ones((nx, ny, nz), dtype=np.uint8)

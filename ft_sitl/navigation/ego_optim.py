@@ -91,7 +91,7 @@ from dataclasses import dataclass, field
 import numpy as np
 from numba import njit
 
-from ft_sitl.navigation.astar import OccupancyView, search
+from ft_sitl.navigation.astar import AStarMemo, OccupancyView, search
 from ft_sitl.navigation.bspline import Feasibility, UniformBSpline
 from ft_sitl.navigation.lbfgs import dot_rows, search_direction, store_pair
 
@@ -695,10 +695,14 @@ class EgoOptimizer:
                             "resolution)")
         self.grid = grid
         self.params = params if params is not None else EgoParams()
+        # searches repeated on an unchanged map (the rounds and rebounds of one
+        # optimisation, failed plans retried from the same place) are answered once
+        self.astar_memo = AStarMemo()
 
     # ---- helpers -----------------------------------------------------------------------
     def _astar(self, a: np.ndarray, b: np.ndarray):
-        return search(a, b, self.grid, max_expansions=self.params.astar_max_expansions)
+        return search(a, b, self.grid, max_expansions=self.params.astar_max_expansions,
+                      memo=self.astar_memo)
 
     def _add_segments(self, q: np.ndarray, segments, anchors: Anchors, stats: dict) -> int:
         """A* + anchors for each stretch; stretches whose A* fails are skipped. Returns the

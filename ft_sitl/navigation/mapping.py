@@ -380,7 +380,7 @@ def _integrate(pts, hit, n_rays, cam, inv_res, origin, box_lo, box_hi, dims, log
 
     Positions are world metres; origin (3,) is the window's first global voxel index;
     box_lo/box_hi (3,) the clip box in grid coordinates. Returns (voxels updated,
-    change in occupied count, hit rays after clipping).
+    change in occupied count, hit rays after clipping, voxels whose occupancy flipped).
     """
     nx, ny, nz = dims[0], dims[1], dims[2]
     c = np.empty(3)
@@ -491,6 +491,7 @@ def _integrate(pts, hit, n_rays, cam, inv_res, origin, box_lo, box_hi, dims, log
             flags[idx] = f | _TRAV
     # one log-odds update per touched voxel; hits win
     d_occ = 0
+    n_flip = 0
     for k in range(nt):
         idx = touched[k]
         f = flags[idx]
@@ -508,8 +509,9 @@ def _integrate(pts, hit, n_rays, cam, inv_res, origin, box_lo, box_hi, dims, log
         if was != now:
             delta = 1 if now else -1
             d_occ += delta
+            n_flip += 1
             _add_inflation(infl, nx, ny, nz, idx, infl_r, delta)
-    return nt, d_occ, n_hit
+    return nt, d_occ, n_hit, n_flip
 
 
 @njit(cache=True)
@@ -740,6 +742,41 @@ def _query(points, inv_res, origin, logodds3, infl3, kind, l_occ, l_known, k_flo
 
 
 @njit(cache=True)
+def _query_lattice(xs, ys, zs, inv_res, origin, infl3, k_floor, k_ceil, out3):
+    """Planning occupancy (``_query`` kind 1) at every point ``(xs[a], ys[b], zs[c])`` of
+    a lattice, into ``out3[a, b, c]``: the same per-point test, the axes done once."""
+    nx, ny, nz = infl3.shape
+    ix = np.empty(xs.shape[0], np.int64)
+    iy = np.empty(ys.shape[0], np.int64)
+    iz = np.empty(zs.shape[0], np.int64)
+    for a in range(xs.shape[0]):
+        x = int(math.floor(xs[a] * inv_res)) - origin[0]
+        ix[a] = x if 0 <= x < nx else -1
+    for b in range(ys.shape[0]):
+        y = int(math.floor(ys[b] * inv_res)) - origin[1]
+        iy[b] = y if 0 <= y < ny else -1
+    for c in range(zs.shape[0]):
+        gz = int(math.floor(zs[c] * inv_res))
+        if gz < k_floor or gz >= k_ceil:
+            iz[c] = -2  # floor or ceiling: occupied everywhere
+        else:
+            z = gz - origin[2]
+            iz[c] = z if 0 <= z < nz else -1
+    for a in range(xs.shape[0]):
+        x = ix[a]
+        for b in range(ys.shape[0]):
+            y = iy[b]
+            for c in range(zs.shape[0]):
+                z = iz[c]
+                if z == -2:
+                    out3[a, b, c] = 1
+                elif x < 0 or y < 0 or z < 0:
+                    out3[a, b, c] = 0
+                else:
+                    out3[a, b, c] = 1 if infl3[x, y, z] > 0 else 0
+
+
+@njit(cache=True)
 def _march(position, dirs, dists, max_range, inv_res, origin, infl3, k_floor, k_ceil, out):
     """Per ray: the first of ``dists`` along it whose point is planning-occupied (as
     ``_query`` kind 1), else ``max_range``."""
@@ -931,10 +968,12 @@ class LocalMap:
         self._hit = np.empty(max(self.max_rays, 1), dtype=np.uint8)
 
         self._occupied_count = 0
+        self._revision = 0
         self._frames = 0
         self.last_t_us: int | None = None
         self.last_camera_m: np.ndarray | None = None
         self._esdf: np.ndarray | None = None
+        self._esdf_key: tuple | None = None
         self._esdf_origin: np.ndarray | None = None
         self._esdf_frame = -1
 
@@ -943,6 +982,14 @@ class LocalMap:
     def occupied_count(self) -> int:
         """Occupied voxels (raw, not inflated) in the window."""
         return self._occupied_count
+
+    @property
+    def revision(self) -> int:
+        """A counter that changes whenever the planning occupancy
+        (:meth:`occupied_inflated`) may have changed anywhere: a voxel became occupied or
+        free, the window moved, the map was cleared. Equal revisions of one map mean the
+        same planning occupancy (what planners may cache results on)."""
+        return self._revision
 
     @property
     def frames_fused(self) -> int:
@@ -1033,6 +1080,7 @@ class LocalMap:
         self._spare_logodds, self._logodds = self._logodds, new_l
         self._spare_infl, self._infl = self._infl, new_i
         self._origin[0], self._origin[1] = ox, oy
+        self._revision += 1
         self._occupied_count = int(np.count_nonzero(self._logodds > self._l["l_occ"]))
 
     def project(self, frame: DepthFrame) -> tuple[np.ndarray, np.ndarray]:
@@ -1078,12 +1126,14 @@ class LocalMap:
         hi = np.minimum((p + self._range) * self._inv_res - self._origin,
                         dims.astype(np.float64))
         L = self._l
-        nt, d_occ, n_hit = _integrate(
+        nt, d_occ, n_hit, n_flip = _integrate(
             self._pts, self._hit, n, p, self._inv_res, self._origin, lo, hi, dims,
             self._logodds.reshape(-1), self._flags, self._touched, self._infl.reshape(-1),
             bool(early_stop), L["l_hit"], L["l_miss"], L["l_min"], L["l_max"], L["l_occ"],
             self.config.inflation_voxels)
         self._occupied_count += int(d_occ)
+        if n_flip:
+            self._revision += 1
         self._frames += 1
         self.last_t_us = int(frame.t_us)
         self.last_camera_m = p.copy()
@@ -1095,6 +1145,7 @@ class LocalMap:
         self._logodds.fill(self._l["l_unknown"])
         self._infl.fill(0)
         self._occupied_count = 0
+        self._revision += 1
         self._esdf = None
         self._esdf_origin = None
         self._esdf_frame = -1
@@ -1120,6 +1171,20 @@ class LocalMap:
         above the ceiling voxel) and the floor (z below floor_m); unknown is free, and so is
         everything outside the window between floor and ceiling."""
         return self._ask(points, _Q_PLAN)
+
+    def occupied_inflated_lattice(self, xs, ys, zs) -> np.ndarray:
+        """:meth:`occupied_inflated` at every point ``(xs[a], ys[b], zs[c])`` of the lattice
+        of the coordinate vectors ``xs``, ``ys``, ``zs`` (finite, m): bool array
+        ``(len(xs), len(ys), len(zs))``, the same answer point by point, without building
+        the points (A* reads boxes of voxel centres this way)."""
+        axes = [np.ascontiguousarray(np.asarray(v, dtype=np.float64).reshape(-1))
+                for v in (xs, ys, zs)]
+        if not all(np.all(np.isfinite(a)) for a in axes):
+            raise ValueError("lattice coordinates must be finite")
+        out = np.empty(tuple(len(a) for a in axes), dtype=np.uint8)
+        _query_lattice(axes[0], axes[1], axes[2], self._inv_res, self._origin, self._infl,
+                       self.k_floor, self.k_ceil, out)
+        return out.view(np.bool_)
 
     def first_occupied(self, position, directions, step_m: float, max_range_m: float):
         """Per ray from ``position`` (3,) along unit ``directions`` (..., 3): the first
@@ -1188,6 +1253,10 @@ class LocalMap:
         centre's z (``center_m`` given as (x, y, z), else the last camera position): the
         originals' local update box is +-4.5 m high; a 10 m ceiling otherwise doubles the
         cost.
+
+        Asked again for the same box with the planning occupancy unchanged (the same
+        ``revision``), it returns the field it computed then, the same array: callers must
+        not modify it.
         """
         nx, ny, nz = self.shape
         x0, x1, y0, y1 = 0, nx, 0, ny
@@ -1222,11 +1291,18 @@ class LocalMap:
             x0, x1, y0, y1 = self._esdf_box_xy(c, h)
             if x1 - x0 < 2 or y1 - y0 < 2:
                 raise ValueError("the ESDF box does not overlap the window (by >= 2 voxels)")
+        key = (self._revision, int(self._origin[0]), int(self._origin[1]), x0, x1, y0, y1,
+               z0, z1)
+        if self._esdf is not None and key == self._esdf_key:
+            # the same box of the same planning occupancy: the same field
+            self._esdf_frame = self._frames
+            return self._esdf
         plan = np.ascontiguousarray(self.planning_grid()[x0:x1, y0:y1, z0:z1])
         pos = np.empty(plan.shape)
         _signed_esdf(plan, self.resolution_m, np.empty(plan.shape, np.float32),
                      np.empty(plan.shape, np.float32), pos)
         self._esdf = pos
+        self._esdf_key = key
         self._esdf_origin = self._origin + np.array([x0, y0, z0])
         self._esdf_frame = self._frames
         return pos

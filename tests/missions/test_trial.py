@@ -288,6 +288,28 @@ def test_hovering_times_out(yard):
     assert math.isnan(row["time_to_goal_s"]) and row["path_length_m"] < 0.5
 
 
+def test_a_protocol_with_a_stall_timeout_ends_a_hover_early_and_no_flight(yard, yard_path,
+                                                                          monkeypatch):
+    from ft_sitl.missions import spec as spec_module
+
+    rules = dataclasses.replace(spec_module.PROTOCOLS[4], version=99, stall_timeout_s=1.0)
+    monkeypatch.setitem(spec_module.PROTOCOLS, 99, rules)
+    spec = yard_spec(yard, limits=Limits(timeout_s=5.0), protocol=99)
+    row = run_trial(spec, navigator=Hover()).row
+    assert row["reason"] == "timeout"
+    assert row["detail"] == ("stalled: no 0.5 m of progress toward the goal in 1 s "
+                             "(16.0 m away)")
+    assert 1.0 <= row["nav_time_s"] <= 1.0 + TICK_S
+    # a flight that keeps getting closer is not touched
+    monkeypatch.setitem(spec_module.PROTOCOLS, 98, dataclasses.replace(rules, version=98,
+                                                                      stall_timeout_s=5.0))
+    flying = run_trial(yard_spec(yard, protocol=98), navigator=Carrot(yard_path)).row
+    before = run_trial(yard_spec(yard, protocol=4), navigator=Carrot(yard_path)).row
+    assert flying["reason"] == "success"
+    for k in ("time_to_goal_s", "nav_time_s", "path_length_m", "energy_j"):
+        assert flying[k] == before[k], k
+
+
 class Hung(Exception):
     """The trial did not end in time (wall clock)."""
 

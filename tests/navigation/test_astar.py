@@ -209,3 +209,46 @@ def test_view_of_a_local_map_uses_its_inflated_occupancy_and_resolution():
     view = OccupancyView.from_map(StubMap())
     assert view.resolution == 0.1
     np.testing.assert_array_equal(view.is_occupied([[0.5, 0, 0], [1.5, 0, 0]]), [False, True])
+
+
+def test_memo_answers_repeated_searches_as_a_new_search_would():
+    from ft_sitl.navigation.astar import AStarMemo
+
+    rng = np.random.default_rng(5)
+    blocked = rng.random((40, 30, 12)) < 0.25
+    state = {"blocked": blocked.copy(), "rev": 0}
+
+    def occupied(p):
+        return _grid_map(state["blocked"]).occupied(p)
+
+    grid = OccupancyView(occupied, RES, bounds=(np.zeros(3), np.array(blocked.shape) * RES),
+                         revision=lambda: state["rev"])
+    memo = AStarMemo(check_above=0)  # check every answer against its boxes
+    ends = [([0.05, 0.05, 0.05], [3.95, 2.95, 1.15]), ([0.55, 1.05, 0.35], [3.05, 0.15, 0.95])]
+
+    def check():
+        for a, b in ends:
+            fresh = search(a, b, grid, max_expansions=3000)
+            kept = search(a, b, grid, max_expansions=3000, memo=memo)
+            assert fresh.status == kept.status and fresh.expansions == kept.expansions
+            if fresh.found:
+                np.testing.assert_array_equal(fresh.path, kept.path)
+
+    check()
+    check()
+    assert memo.hits == 2 and memo.misses == 2
+    state["rev"] += 1  # a new revision with the same occupancy: validated, still hits
+    check()
+    assert memo.hits == 4
+    state["blocked"][10:30, :, :] = True  # the occupancy changes: searched again
+    state["blocked"][20, 10, 6] = False
+    state["rev"] += 1
+    check()
+    assert memo.misses == 4 and memo.stale >= 1 and memo.checks == 2 + memo.stale
+    # a cheap answer is searched again instead of checked
+    cheap = AStarMemo(check_above=10**9)
+    a, b = ends[0]
+    search(a, b, grid, max_expansions=3000, memo=cheap)
+    state["rev"] += 1
+    search(a, b, grid, max_expansions=3000, memo=cheap)
+    assert cheap.hits == 0 and cheap.misses == 2 and cheap.checks == 0

@@ -600,3 +600,45 @@ def test_esdf_box_limited_in_height_matches_the_full_field_inside_it():
     assert d_full == pytest.approx(pts[:, 2], abs=0.11)  # the floor, to within a voxel
     with pytest.raises(ValueError, match="half_extent_z_m"):
         m.update_esdf(half_extent_z_m=-1.0)
+
+
+def test_lattice_query_and_revision_follow_the_planning_occupancy():
+    c = np.array([2.05, 0.05, 1.55])
+    cam = DepthCamera(SMALL, box(c - 0.02, c + 0.02))
+    m = LocalMap(None, CEILING, camera=SMALL)
+    r0 = m.revision
+    fuse_frames(m, cam, MapConfig().hits_to_occupy() - 1)
+    assert m.revision == r0  # nothing occupied yet: the planning occupancy is unchanged
+    fuse_frames(m, cam, 1)
+    assert m.revision != r0
+    r1 = m.revision
+    fuse_frames(m, cam, 3)  # saturating hits flip nothing
+    assert m.revision == r1
+    # the lattice answer is the point answer, inside and outside the window, floor, ceiling
+    xs = np.arange(-80, 90) * 0.1 + 0.05
+    ys = np.concatenate([np.arange(-5, 5) * 0.1 + 0.05, [700.05]])
+    zs = np.arange(-3, 33) * 0.1 + 0.05
+    got = m.occupied_inflated_lattice(xs, ys, zs)
+    assert got.shape == (len(xs), len(ys), len(zs)) and got.dtype == bool
+    np.testing.assert_array_equal(got.reshape(-1), m.occupied_inflated(grid(xs, ys, zs)))
+    assert got.sum() > 27
+    m.shift_to(m.origin_index[:2] + 3)
+    assert m.revision != r1
+
+
+def test_esdf_is_recomputed_only_when_the_planning_occupancy_or_box_changes():
+    c = np.array([2.05, 0.05, 1.55])
+    cam = DepthCamera(SMALL, box(c - 0.3, c + 0.3))
+    m = LocalMap(None, CEILING, camera=SMALL)
+    fuse_frames(m, cam, MapConfig().hits_to_occupy())
+    first = m.update_esdf(P0, 2.0, 1.5)
+    again = m.update_esdf(P0, 2.0, 1.5)
+    assert again is first  # same revision, same box: the stored field
+    other = m.update_esdf(P0, 2.5, 1.5)
+    assert other is not first
+    fresh = LocalMap(None, CEILING, camera=SMALL)
+    fuse_frames(fresh, cam, MapConfig().hits_to_occupy())
+    np.testing.assert_array_equal(fresh.update_esdf(P0, 2.5, 1.5), other)
+    m.clear()
+    cleared = m.update_esdf(P0, 2.5, 1.5)
+    assert cleared is not other and not np.array_equal(cleared, other)
