@@ -246,7 +246,7 @@ def test_platform_grid_layout_places_by_alpha_xy_rows_and_twr_columns():
 
 def test_full_catalog_campaign_report_has_every_file_and_a_36_platform_grid(tmp_path):
     # 36 platforms x 7 families x 10 trials, one algorithm: the size of a paper campaign
-    # (how long the report takes, ~20 s, is measured in bench/bench_search.py)
+    # (how long the report takes, seconds, is measured in bench/bench_search.py)
     df = to_frame(_rows(["ego"], list(catalog().values()), list(FAMILIES), 10, seed=2))
     assert len(df) == 2520 and df["platform"].nunique() == 36
     paths = write_report(df, tmp_path, campaign_spec=SPEC, meta=META)

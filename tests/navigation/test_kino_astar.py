@@ -290,7 +290,7 @@ def test_voxel_occupancy_lookup():
 
 
 def test_typical_wall_search_reaches_the_goal_within_2000_expansions(wall_planner):
-    # (how long it takes, ~30 ms, is measured in bench/bench_search.py, not asserted here)
+    # (how long it takes, tens of ms, is measured in bench/bench_search.py, not asserted)
     args = ([0, 0, 1.5], [0, 0, 0], [0, 0, 0], [6.0, 0.0, 1.5])
     r = wall_planner.search(*args)
     assert r.status is KinoStatus.REACHED_GOAL and r.found
