@@ -1,7 +1,5 @@
 """EGO-Planner's optimiser: cost gradients, anchors, rebound optimisation, refinement."""
 
-import time
-
 import numpy as np
 import pytest
 from scipy.optimize import minimize
@@ -369,16 +367,21 @@ def test_params_are_validated():
         EgoOptimizer(_box_world()).rebound(sp.derivative())
 
 
-def test_optimisation_of_a_local_trajectory_with_one_obstacle_is_fast():
+def test_a_local_trajectory_past_one_obstacle_takes_one_solve_of_at_most_350_evaluations():
+    # (how long it takes, target well under 20 ms, is measured in bench/bench_search.py)
     sp, vel = _straight_spline()
     assert 20 <= sp.num_control_points <= 25
-    opt = EgoOptimizer(_box_world(), EgoParams(max_vel=4.0, max_acc=3.0))
-    opt.optimize(sp, vel, vel, ZERO, ZERO)  # warm up
-    times = []
-    for _ in range(15):
-        t0 = time.perf_counter()
-        res = opt.optimize(sp, vel, vel, ZERO, ZERO)
-        times.append(time.perf_counter() - t0)
-    assert res.success
-    # target: well under 20 ms median; generous here against a loaded test machine
-    assert np.median(times) < 0.04, times
+    grid = _box_world()
+    opt = EgoOptimizer(grid, EgoParams(max_vel=4.0, max_acc=3.0))
+    res = opt.optimize(sp, vel, vel, ZERO, ZERO)
+    assert res.success and res.feasibility.ok
+    t = np.linspace(0.0, res.spline.duration, 3000)
+    assert not grid.is_occupied(res.spline.position(t)).any()
+    # the work, deterministic: one A* call, one L-BFGS solve, no rebound, no refinement;
+    # the solve ran 200 iterations (its cap) and 262 cost evaluations on 2026-11-26
+    assert (res.astar_calls, res.rounds, res.rebounds, res.refined) == (1, 1, 0, False)
+    assert res.evaluations <= 350, res.evaluations
+    # a second call on the same optimiser does the same work
+    again = opt.optimize(sp, vel, vel, ZERO, ZERO)
+    assert (again.iterations, again.evaluations) == (res.iterations, res.evaluations)
+    np.testing.assert_array_equal(again.spline.control_points, res.spline.control_points)

@@ -217,7 +217,7 @@ def test_enclosed_goal_stops_at_the_expansion_cap():
 
 
 @pytest.mark.parametrize("grid", [False, True])
-def test_wall_clock_cap(grid):
+def test_wall_clock_cap_ends_the_search_after_its_deadline(grid):
     walls = shell([4.0, 0.0, 1.5], inner_half=1.3)
     small = (np.array([-1.0, -3.0, 0.0]), np.array([5.9, 3.0, 3.0]))
     params = KinoAstarParams(max_expansions=10**6, max_nodes=10**6, max_time_s=0.05)
@@ -225,7 +225,10 @@ def test_wall_clock_cap(grid):
     planner = KinodynamicAstar(occ, 0.1, bounds=small, params=params)
     r = planner.search([0, 0, 1.5], [0, 0, 0], [0, 0, 0], [4.0, 0.0, 1.5])
     assert r.status is KinoStatus.NO_PATH and r.stop_reason == "time_cap"
-    assert r.search_time_s < 1.0
+    # stopped by the clock, not before its deadline and not by a cap (how far past the
+    # deadline it stops depends on the machine's load: not asserted)
+    assert r.search_time_s > 0.05
+    assert 0 < r.expansions < 10**6 and r.nodes < 10**6
 
 
 def test_node_pool_cap():
@@ -286,15 +289,16 @@ def test_voxel_occupancy_lookup():
         VoxelOccupancy(np.zeros((4, 5, 6), bool), np.zeros(3), 0.0)
 
 
-def test_typical_search_takes_tens_of_milliseconds(wall_planner):
+def test_typical_wall_search_reaches_the_goal_within_2000_expansions(wall_planner):
+    # (how long it takes, tens of ms, is measured in bench/bench_search.py, not asserted)
     args = ([0, 0, 1.5], [0, 0, 0], [0, 0, 0], [6.0, 0.0, 1.5])
-    wall_planner.search(*args)  # compiled and warm
-    times = []
-    for _ in range(3):
-        r = wall_planner.search(*args)
-        times.append(r.search_time_s)
-    assert r.found
-    assert min(times) < 0.25, times  # ~30 ms on a 2020s laptop core; generous for CI
+    r = wall_planner.search(*args)
+    assert r.status is KinoStatus.REACHED_GOAL and r.found
+    assert not boxes_map(*WALL)(check_points(r)).any()
+    # the work, deterministic: the kept start acceleration finds nothing (1 expansion), the
+    # retry with the full inputs 1,482 expansions and 4,336 nodes in all (2026-11-26)
+    assert r.attempts == 2 and r.stats["per_attempt"][0]["expansions"] == 1
+    assert r.expansions <= 2000 and r.nodes <= 6000, (r.expansions, r.nodes)
 
 
 def test_bspline_samples_cover_the_path(wall_planner):
