@@ -105,6 +105,11 @@ SAFETY_STEP_S = 0.02
 YAW_LOOKAHEAD_S = 2.0
 #: the fewest knot spans of a fitted segment (3 fixed control points at each end + >= 1)
 MIN_SEGMENTS = 4
+#: :func:`first_collision_time` evaluates at most this many samples at once (the samples
+#: are half a voxel apart along the control polygon: 65536 cover a 3.3 km polygon at 0.1 m).
+#: Only a diverged spline exceeds it; the check is ours (the original adopts the lowest-jerk
+#: candidate unchecked), so the bound is a memory bound, not one of the original's caps.
+COLLISION_CHECK_BLOCK = 1 << 16
 ORDER = 3
 
 
@@ -418,13 +423,26 @@ def first_collision_time(spline: UniformBSpline, grid: EsdfGrid) -> float | None
     """Time of the first unsafe sample along the whole curve (:func:`near_occupied` on the
     snapshot, which includes the flight volume's bounds; samples at most half a voxel apart
     from the control-polygon length). None if safe: the same test as the navigator's
-    safety check, so an adopted plan does not trigger it against the same map."""
+    safety check, so an adopted plan does not trigger it against the same map. More than
+    ``COLLISION_CHECK_BLOCK`` samples are evaluated in blocks (same samples and result)."""
     q = spline.control_points
     length = float(np.sum(np.linalg.norm(np.diff(q, axis=0), axis=1)))
     n = max(int(math.ceil(2.0 * length / grid.resolution)), 1)
-    t = np.linspace(0.0, spline.duration, n + 1)
-    hit = np.flatnonzero(near_occupied(grid.occupied, grid.resolution, spline.position(t)))
-    return float(t[hit[0]]) if hit.size else None
+    if n + 1 <= COLLISION_CHECK_BLOCK:
+        t = np.linspace(0.0, spline.duration, n + 1)
+        hit = np.flatnonzero(near_occupied(grid.occupied, grid.resolution, spline.position(t)))
+        return float(t[hit[0]]) if hit.size else None
+    # a very long control polygon (a diverged fit or optimisation): the same samples, in
+    # blocks, stopping at the first unsafe one, so memory stays bounded
+    step = spline.duration / n
+    for i0 in range(0, n + 1, COLLISION_CHECK_BLOCK):
+        t = np.arange(i0, min(i0 + COLLISION_CHECK_BLOCK, n + 1), dtype=float) * step
+        if i0 + t.shape[0] == n + 1:
+            t[-1] = spline.duration  # as np.linspace's end point
+        hit = np.flatnonzero(near_occupied(grid.occupied, grid.resolution, spline.position(t)))
+        if hit.size:
+            return float(t[hit[0]])
+    return None
 
 
 def lengthen_time(spline: UniformBSpline, ratio: float) -> tuple[np.ndarray, float]:

@@ -2,6 +2,7 @@
 equivalence, the path-guided optimisation, the navigator's logic and one real trial."""
 
 import math
+import tracemalloc
 
 import numpy as np
 import pytest
@@ -20,6 +21,7 @@ from ft_sitl.navigation.pgo import (
     guide_phase,
     jerk_cost,
     lengthen_time,
+    near_occupied,
     normal_cost,
     plan_segment,
 )
@@ -169,6 +171,44 @@ def test_path_guided_optimisation_avoids_the_pillar():
     clear, resample, derivs = _straight()
     plan = plan_segment(clear, resample, derivs, _world(), np.random.default_rng(0), params)
     assert plan.status == "free" and plan.search is None
+
+
+def _one_shot_first_collision(spline, grid):
+    """The candidate check as it was before the blockwise evaluation (all samples at once)."""
+    length = float(np.sum(np.linalg.norm(np.diff(spline.control_points, axis=0), axis=1)))
+    t = np.linspace(0.0, spline.duration, max(math.ceil(2.0 * length / grid.resolution), 1) + 1)
+    hit = np.flatnonzero(near_occupied(grid.occupied, grid.resolution, spline.position(t)))
+    return float(t[hit[0]]) if hit.size else None
+
+
+def test_the_check_of_a_diverged_candidate_stays_small_in_memory():
+    # trial 8b3c40a7 (PGO, 2.50kg-HLY, urban 1, protocol 5): a diverged fit left a candidate
+    # whose control polygon was 9.5e6 m long; the check sampled it every half voxel at once
+    # (1.9e8 samples, > 20 GB with the 8 corner voxels). Here a 1e5 m polygon (2e6 samples,
+    # ~0.5 GB at once) swinging through the pillar.
+    grid = _world(pillars=[(5.0, 0.0, 0.5)])
+    q = np.array([[5.0, 1500.0 * (-1) ** i, 1.5] for i in range(36)])
+    spline = UniformBSpline(q, 0.1)
+    tracemalloc.start()
+    try:
+        t = first_collision_time(spline, grid)
+        peak = tracemalloc.get_traced_memory()[1]
+    finally:
+        tracemalloc.stop()
+    assert t is not None and t < 0.1  # the first swing crosses the pillar
+    assert peak < 64e6
+
+
+@pytest.mark.parametrize("into_pillar", [False, True])
+def test_the_blockwise_check_gives_the_one_shot_result(into_pillar):
+    # ~160k samples (3 blocks): back and forth in free space, then (or not) into the pillar
+    grid = _world(pillars=[(5.0, 0.0, 0.5)])
+    q = [[1.0, 2.0 * (-1) ** i, 1.5] for i in range(2000)]
+    q += [[5.0, 0.0, 1.5]] * 4 if into_pillar else [[1.0, 0.0, 1.5]] * 4
+    spline = UniformBSpline(np.array(q), 0.05)
+    expected = _one_shot_first_collision(spline, grid)
+    assert (expected is not None) == into_pillar
+    assert first_collision_time(spline, grid) == expected
 
 
 def test_time_lengthening_keeps_the_shape_and_the_end_speeds():
