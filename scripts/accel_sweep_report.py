@@ -63,8 +63,7 @@ INDICATORS = (
     ("twr_max", "TWR_max", False),
     ("alpha_xy_max", "alpha_xy,max (rad/s^2)", True),
     ("alpha_z_max", "alpha_z,max (rad/s^2)", False),
-    ("footprint_m", "footprint (m): body half span (protocol 5), collision radius (1-4)",
-     False),
+    ("footprint_m", "footprint (m)", False),
 )
 ALGORITHM_ORDER = ("straight", "ego", "fast", "pgo", "navrl")
 
