@@ -125,8 +125,12 @@ def mosquitto_factory(tmp_path):
         broker.kill()
 
 
-@pytest.fixture(scope="session")
+@pytest.fixture
 def amqtt():
+    # one broker per test: amqtt 0.12 iterates its subscription table in one client's
+    # session handler while another session changes it ("dictionary changed size during
+    # iteration", seen once in CI under load), so sessions of earlier tests must not share
+    # it; the embedded broker starts in well under a second
     broker = EmbeddedBroker().start()
     yield broker
     broker.stop()
