@@ -384,6 +384,18 @@ class CollisionGuard:
         x = sim.x[i]
         n = np.asarray(contact.normal, dtype=float)
         x[d.X_POS:d.X_POS + 3] = np.asarray(contact.center) + SEPARATION_M * n
+        self._stop_into(sim, i, n)
+        g = self.rows[i]
+        p = x[d.X_POS:d.X_POS + 3].copy()
+        c = self.world._nearest(p)[0] - self.radii[i]
+        self._anchor(g, p, c if c > self.world.contact_tol else -math.inf)
+
+    def _stop_into(self, sim, i: int, n: np.ndarray) -> None:
+        """Vehicle i (already put back) loses its velocity into the surface of normal n, and
+        its tangential velocity FRICTION x the normal one; a crashed vehicle lying on top of
+        an obstacle rests there like on the floor (the plant's ground contact holds it),
+        instead of touching it every step."""
+        x = sim.x[i]
         v = x[d.X_VEL:d.X_VEL + 3]
         vn = float(v @ n)
         if vn < 0.0:
@@ -392,14 +404,8 @@ class CollisionGuard:
             keep = max(0.0, speed_t - FRICTION * (-vn)) / speed_t if speed_t > 0.0 else 0.0
             x[d.X_VEL:d.X_VEL + 3] = vt * keep
         if self.crashed[i] and n[2] > SUPPORT_NZ:
-            # a crashed vehicle lying on top of an obstacle rests there like on the floor
-            # (the plant's ground contact holds it), instead of touching it every step
             env = sim.plant.env[i]
             env[d.E_GROUND_Z] = max(env[d.E_GROUND_Z], x[d.X_POS + 2])
-        g = self.rows[i]
-        p = x[d.X_POS:d.X_POS + 3].copy()
-        c = self.world._nearest(p)[0] - self.radii[i]
-        self._anchor(g, p, c if c > self.world.contact_tol else -math.inf)
 
     @staticmethod
     def _anchor(g, p, c: float) -> None:
@@ -450,18 +456,8 @@ class CollisionGuard:
         the tangential velocity reduced by FRICTION x the normal one. The next step is
         checked in full."""
         x = sim.x[i]
-        n = np.asarray(contact.normal, dtype=float)
         x[d.X_POS:d.X_POS + 3] = a
-        v = x[d.X_VEL:d.X_VEL + 3]
-        vn = float(v @ n)
-        if vn < 0.0:
-            vt = v - vn * n
-            speed_t = float(np.linalg.norm(vt))
-            keep = max(0.0, speed_t - FRICTION * (-vn)) / speed_t if speed_t > 0.0 else 0.0
-            x[d.X_VEL:d.X_VEL + 3] = vt * keep
-        if self.crashed[i] and n[2] > SUPPORT_NZ:
-            env = sim.plant.env[i]
-            env[d.E_GROUND_Z] = max(env[d.E_GROUND_Z], x[d.X_POS + 2])
+        self._stop_into(sim, i, np.asarray(contact.normal, dtype=float))
         g = self.rows[i]
         g[G_BMODE] = 1.0
         g[G_QW:G_QZ + 1] = x[d.X_QUAT:d.X_QUAT + 4]
