@@ -109,8 +109,8 @@ class VehicleBody:
     def half_height_m(self) -> float:
         """Half the height of the upright cylinder around the centre of mass that holds the
         level vehicle (m)."""
-        return max(max(abs(p.center[2]) + p.size[2] / 2 for p in (self.box,)),
-                   max(abs(d.center[2]) + d.thickness / 2 for d in self.rotors))
+        return max(abs(self.box.center[2]) + self.box.size[2] / 2,
+                   *(abs(d.center[2]) + d.thickness / 2 for d in self.rotors))
 
     def describe(self) -> dict:
         """The body's dimensions as plain data (``platforms show``)."""

@@ -70,18 +70,18 @@ from ft_sitl.scenarios.distance_grid import GM_H, GRID_META_N, DistanceGrid, gri
 # G_A*: position before the step that tripped; G_LBA: clearance bound there;
 # G_OUT: 1 while the centre is outside the flight volume (checked when G_BOUNDS is 1);
 # G_TRIP: why the kernel stopped this vehicle (1 obstacles, 2 bounds, bit set).
-# Vehicles with a body (G_BODY 1): G_R is its bounding radius, so the sphere rows above
-# are its broad phase; while the bounding sphere is within reach of an obstacle the anchor
-# is the body's own (G_BMODE 1): G_ANCHOR is then the body's clearance at the anchor pose
-# (position G_O*, attitude G_QW..G_QZ), and no free ball is kept (the kernel bounds the
-# motion of every body point by |dp| + 2 R sin(dtheta / 2) at each step instead).
+# Vehicles with a body (CollisionGuard.probes[i]): G_R is its bounding radius, so the
+# sphere rows above are its broad phase. While the bounding sphere is within reach of an
+# obstacle, the anchor is the body's own (G_BMODE 1): G_ANCHOR is then the body's
+# clearance at the anchor pose (position G_O*, attitude G_QW..G_QZ), and the kernel bounds
+# the motion of every body point by |dp| + 2 R sin(dtheta / 2).
 # In body mode the free ball also has an attitude: the kernel stays silent while the centre
 # is inside the ball and the attitude within the rotation budget of G_BQW..G_BQZ
 # (<q_ball, q>^2 > G_DOT2), which together keep every body point inside the anchor's reach.
 (G_ON, G_R, G_ANCHOR, G_OX, G_OY, G_OZ, G_BX, G_BY, G_BZ, G_RR, G_AX, G_AY, G_AZ, G_LBA,
- G_OUT, G_BOUNDS, G_TRIP, G_BODY, G_BMODE, G_QW, G_QX, G_QY, G_QZ, G_BQW, G_BQX, G_BQY,
- G_BQZ, G_DOT2) = range(28)
-G_N = 28
+ G_OUT, G_BOUNDS, G_TRIP, G_BMODE, G_QW, G_QX, G_QY, G_QZ, G_BQW, G_BQX, G_BQY,
+ G_BQZ, G_DOT2) = range(27)
+G_N = 27
 # guard meta row: the distance grid's layout first (origin (3), pitch, shape (3): what
 # grid_lower_bound reads), then the flight volume lo x/y, hi x/y/z and the margin (m)
 (M_LOX, M_LOY, M_HIX, M_HIY, M_HIZ, M_MARGIN) = range(GRID_META_N, GRID_META_N + 6)
@@ -293,7 +293,6 @@ class CollisionGuard:
         g[G_ANCHOR] = -math.inf
         g[G_RR] = -1.0
         g[G_BOUNDS] = 1.0 if self.check_volume else 0.0
-        g[G_BODY] = 1.0 if self.probes[i] is not None else 0.0
         g[G_OUT] = 1.0 if self._outside(self._sim.x[i, d.X_POS:d.X_POS + 3]) else 0.0
         self._sim.plant.env[i, d.E_GROUND_Z] = self.world.floor_z
         self.crashed[i] = False
