@@ -46,6 +46,10 @@ class ProtocolRules:
     #: (nav_time_s, path, energy), and a flight that would have got going again later
     #: and reached the goal is a timeout (docs/benchmarks.md, "Stalled flights")
     stall_timeout_s: float | None = None
+    #: the navigator's map takes the latest camera frame at this rate (Hz), as the
+    #: originals' grid maps do on their 0.05 s update timer; frames no update takes are not
+    #: rendered (None: every frame goes to the navigator as it is captured)
+    map_fusion_hz: float | None = None
 
 
 #: the versions of the trial protocol this code flies; a trial's spec names its version
@@ -77,6 +81,12 @@ PROTOCOLS = {
                      offboard_acc_clamp=False, benchmark_camera_hz=None,
                      observe_approach=True, max_acc_m_s2=3.0, footprint_inflation=True,
                      vehicle_body=True),
+    6: ProtocolRules(6, "the navigator's map takes the latest frame of the 30 Hz camera on "
+                        "its own 20 Hz timer, as the originals' grid maps do (frames it "
+                        "would never fuse are not rendered); the rest as in 5",
+                     offboard_acc_clamp=False, benchmark_camera_hz=None,
+                     observe_approach=True, max_acc_m_s2=3.0, footprint_inflation=True,
+                     vehicle_body=True, map_fusion_hz=20.0),
 }
 #: the version new trials and campaigns fly unless they name another
 PROTOCOL_VERSION = max(PROTOCOLS)

@@ -99,14 +99,71 @@ def run_trial(spec: TrialSpec, *, record: bool = False, navigator=None,
 
 
 class _Eyes:
-    """The navigator's depth camera in this trial (None without one) and the random
-    stream of its noise."""
+    """The navigator's depth camera in this trial (None without one), the random stream of
+    its noise, and when its frames are rendered and handed over.
+
+    Up to protocol 5 every frame goes to the navigator as it is captured. From protocol 6
+    the navigator's map takes the latest frame on its own timer
+    (:attr:`~ft_sitl.missions.spec.ProtocolRules.map_fusion_hz`), as the originals' grid
+    maps do: a frame is rendered at its capture time only when the map's next update
+    comes before the next frame, and handed over at that update; the others would never
+    be fused, so they are not rendered.
+    """
 
     def __init__(self, nav, sc, spec: TrialSpec):
         cfg = getattr(nav, "camera", None)
         self.camera = RESOURCES.camera(cfg, sc) if cfg is not None else None
         self.period_us = round(1e6 / cfg.rate_hz) if cfg is not None else 0
+        fuse_hz = PROTOCOLS[spec.protocol].map_fusion_hz
+        self.fuse_period_us = round(1e6 / fuse_hz) if cfg is not None and fuse_hz else 0
         self.rng = np.random.default_rng(np.random.SeedSequence([spec.seed, spec.trial, 1]))
+        self.start(1, floor=False)
+
+    def start(self, quantum_us: int, *, floor: bool) -> None:
+        """A new clock (arming, navigation start): the camera and the map's timer fire at
+        0; the driver serves an event at a multiple of ``quantum_us``: the last one at or
+        before its time (``floor``: the approach, on the physics steps) or the first one
+        at or after it (the navigator's steps)."""
+        self.quantum_us = int(quantum_us)
+        self.floor = floor
+        self.next_cam_us = 0
+        self.next_fuse_us = 0
+        self.held = None
+
+    def _served(self, t_us: int) -> int:
+        q = self.quantum_us
+        return (t_us // q if self.floor else -(-t_us // q)) * q
+
+    def next_event_us(self) -> int:
+        """Clock time at which the next capture or map update is served."""
+        if self.fuse_period_us:
+            return self._served(min(self.next_cam_us, self.next_fuse_us))
+        return self._served(self.next_cam_us)
+
+    def due(self, fleet, t_us: int):
+        """At clock time ``t_us`` (a served instant): capture when the camera is due; the
+        frame the navigator gets now (None: none)."""
+        if self.camera is None or self._served(self.next_cam_us) > t_us and (
+                not self.fuse_period_us or self._served(self.next_fuse_us) > t_us):
+            return None
+        if not self.fuse_period_us:  # protocols 1-5: every frame, at its capture
+            self.next_cam_us += self.period_us
+            return self.frame(fleet, t_us)
+        if self._served(self.next_cam_us) <= t_us:
+            # to the first camera tick served after now (a navigator stepping slower than
+            # the camera sees only the frames of its steps)
+            while self._served(self.next_cam_us) <= t_us:
+                self.next_cam_us += self.period_us
+            if self._served(self.next_fuse_us) < self._served(self.next_cam_us):
+                self.held = self.frame(fleet, t_us)
+            else:  # a newer frame replaces it before the map's next update
+                self.held = None
+        if self._served(self.next_fuse_us) > t_us:
+            return None
+        while self._served(self.next_fuse_us) <= t_us:
+            self.next_fuse_us += self.fuse_period_us
+        frame, self.held = self.held, None
+        return frame
 
     def frame(self, fleet, t_us: int):
         return self.camera.capture(t_us, fleet.sim.position(0), fleet.sim.attitude(0),
@@ -124,7 +181,8 @@ def _observation(fleet, t_us: int, s, depth) -> Observation:
 def _approach(fleet, sc, ref: TrialReferee, observer, eyes: _Eyes) -> None:
     """Arm, take off to the start altitude, reposition to the start waypoint; until the
     protocol finds the vehicle stable there (or ends the trial). ``observer`` (a navigator,
-    protocol 3 on) gets every camera frame on the way (its clock starts at arming)."""
+    protocol 3 on) gets the camera frames on the way (its clock starts at arming; every
+    frame, or from protocol 6 the frames its map's timer takes: :class:`_Eyes`)."""
     cmd = fleet.commanders[0]
     res = cmd.arm()
     if res.name != "ACCEPTED":
@@ -137,15 +195,16 @@ def _approach(fleet, sc, ref: TrialReferee, observer, eyes: _Eyes) -> None:
     tick_us = round(TICK_S * 1e6)
     repositioned = False
     seeing = observer is not None and eyes.camera is not None
-    next_cam_us = t_arm_us
+    eyes.start(fleet.sim.dt_us, floor=True)
     while ref.phase is Phase.APPROACH:
         tick_end_us = fleet.time_us + tick_us
-        while seeing and next_cam_us < tick_end_us:
-            fleet.run_us(next_cam_us - fleet.time_us)
+        while seeing and t_arm_us + eyes.next_event_us() < tick_end_us:
+            fleet.run_us(t_arm_us + eyes.next_event_us() - fleet.time_us)
             t_us = fleet.time_us - t_arm_us
-            obs = _observation(fleet, t_us, fleet.state(0), eyes.frame(fleet, t_us))
-            _call(observer.observe, obs, "observe", ref.metrics)
-            next_cam_us += eyes.period_us
+            frame = eyes.due(fleet, t_us)
+            if frame is not None:
+                obs = _observation(fleet, t_us, fleet.state(0), frame)
+                _call(observer.observe, obs, "observe", ref.metrics)
         fleet.run_us(tick_end_us - fleet.time_us)
         if not repositioned and abs(fleet.state(0).position[2] - sc.start[2]) < STABLE_POS_M:
             cmd.reposition(sc.start.copy(), sc.start_yaw)
@@ -160,12 +219,11 @@ def _navigate(nav, fleet, sc, platform, spec: TrialSpec, ref: TrialReferee,
     cmd = fleet.commanders[0]
     m = ref.metrics
     t_nav0_us = ref.t_nav0_us
-    camera = eyes.camera
     if reset:
         _call(nav.reset, trial_task(spec, sc, platform), "reset", m)
     period_us = _period_us(nav, fleet.sim.dt_us)
     next_nav_us = t_nav0_us
-    next_cam_us = t_nav0_us
+    eyes.start(period_us, floor=False)
     judge = ref.judge
     tick_us = round(TICK_S * 1e6)
     while True:
@@ -173,10 +231,7 @@ def _navigate(nav, fleet, sc, platform, spec: TrialSpec, ref: TrialReferee,
         t_nav_us = now - t_nav0_us
         if now >= next_nav_us:
             s = judge.state_at(now)
-            depth = None
-            if camera is not None and now >= next_cam_us:
-                depth = eyes.frame(fleet, t_nav_us)
-                next_cam_us += eyes.period_us
+            depth = eyes.due(fleet, t_nav_us)
             sp = _ask(nav, _observation(fleet, t_nav_us, s, depth), m)
             fleet.offboard_setpoint(0, sp)
             if cmd.main_mode != MAIN_OFFBOARD:  # PX4: a setpoint first, then the mode

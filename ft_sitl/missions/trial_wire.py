@@ -144,7 +144,8 @@ def wire_task(spec: TrialSpec, sc, platform) -> WireTask:
                     seed=int(np.random.SeedSequence([spec.seed, spec.trial]).generate_state(1)[0]),
                     observe_approach=PROTOCOLS[spec.protocol].observe_approach,
                     max_acc_m_s2=lim.max_acc_m_s2,
-                    footprint_m=footprint_m(spec, platform))
+                    footprint_m=footprint_m(spec, platform),
+                    map_fusion_hz=PROTOCOLS[spec.protocol].map_fusion_hz)
 
 
 def navigator_argv(spec: TrialSpec, wt: WireTask, connect: str, mqtt: str | None,

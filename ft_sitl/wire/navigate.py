@@ -84,6 +84,9 @@ class WireTask:
     max_acc_m_s2: float | None = None
     #: how far the navigator keeps obstacles away (protocol 4 on; None: its own default)
     footprint_m: float | None = None
+    #: the navigator's map takes the latest depth frame at this rate (protocol 6 on: 20 Hz,
+    #: the originals' map timer; None: every frame as it arrives)
+    map_fusion_hz: float | None = None
 
     def __post_init__(self):
         for name in ("goal", "start", "origin", "bounds_min", "bounds_max"):
@@ -100,7 +103,7 @@ class WireTask:
                 raise ValueError(f"task {name}: {v!r} is not a finite number")
         if not isinstance(self.seed, int) or isinstance(self.seed, bool):
             raise ValueError(f"task seed: {self.seed!r} is not an integer")
-        for name in ("max_acc_m_s2", "footprint_m"):
+        for name in ("max_acc_m_s2", "footprint_m", "map_fusion_hz"):
             a = getattr(self, name)
             if a is not None and (isinstance(a, bool) or not isinstance(a, (int, float))
                                   or not math.isfinite(a) or a <= 0):
@@ -313,7 +316,8 @@ async def fly(nav, wt: WireTask, connect: str, *, mqtt: str | None = None,
         await action.arm()
         observer = None
         if wt.observe_approach:
-            observer = asyncio.create_task(_observe(nav, state, speed_factor))
+            observer = asyncio.create_task(_observe(nav, state, speed_factor,
+                                                    wt.map_fusion_hz))
             tasks.append(observer)
         await action.takeoff()
         await first(tel.subscribe_position_velocity_ned(),
@@ -379,19 +383,41 @@ def _reset(nav, wt: WireTask, real_latency: bool) -> None:
     nav.reset(wt.task())
 
 
-async def _observe(nav, state: _State, speed_factor: float) -> None:
-    """Before navigation (protocol 3 on): every depth frame that arrives goes to the
-    navigator's ``observe``, its clock counting from arming."""
+class _MapTimer:
+    """When the navigator's map takes the latest depth frame: every ``1 / hz`` s of its
+    clock (protocol 6 on), or whenever one arrives (``hz`` None)."""
+
+    def __init__(self, hz: float | None) -> None:
+        self.period = 1.0 / hz if hz else 0.0
+        self.next = 0.0
+
+    def fires(self, t: float) -> bool:
+        if not self.period:
+            return True
+        if t + 1e-9 < self.next:
+            return False
+        self.next += self.period * (1 + int((t - self.next) // self.period))
+        return True
+
+
+async def _observe(nav, state: _State, speed_factor: float,
+                   fusion_hz: float | None = None) -> None:
+    """Before navigation (protocol 3 on): the depth frames go to the navigator's
+    ``observe`` (every one, or the latest at each tick of its map's timer), its clock
+    counting from arming."""
     t_wall0 = time.monotonic()
     t0 = state.sim_time
+    timer = _MapTimer(fusion_hz)
     while True:
         await asyncio.sleep(0.005)
-        if not state.depth_new or state.position is None:
+        if state.position is None:
             continue
-        depth, state.depth_new = state.depth, False
         if t0 is None:
             t0 = state.sim_time
         now = _now(state, t_wall0, speed_factor)
+        if not timer.fires(now - (t0 if t0 is not None else 0.0)) or not state.depth_new:
+            continue
+        depth, state.depth_new = state.depth, False
         obs = Observation(time_s=now - (t0 if t0 is not None else 0.0),
                           position=state.position.copy(), velocity=state.velocity.copy(),
                           yaw=state.yaw, attitude=state.q.copy(),
@@ -411,6 +437,7 @@ async def _navigate(nav, wt: WireTask, off, state: _State, t_wall0: float,
     goal = np.array(wt.goal)
     entered = None
     steps = 0
+    timer = _MapTimer(wt.map_fusion_hz)
     while True:
         await state.updated.wait()
         state.updated.clear()
@@ -422,7 +449,7 @@ async def _navigate(nav, wt: WireTask, off, state: _State, t_wall0: float,
         # a slow navigator skips steps instead of falling behind the vehicle
         next_step = max(next_step + period, t - period / 2.0 + period)
         depth = None
-        if state.depth_new:
+        if timer.fires(t) and state.depth_new:
             depth, state.depth_new = state.depth, False
         obs = Observation(time_s=t, position=state.position.copy(),
                           velocity=state.velocity.copy(), yaw=state.yaw,

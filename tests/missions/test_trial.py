@@ -798,3 +798,59 @@ def test_protocol_5_flies_the_vehicle_body_and_tells_its_half_span():
     assert row["protocol_version"] == 5
     assert row["reason"] == "collision" and row["detail"].startswith("hit tree ")
     assert row["min_clearance_m"] <= 0.0
+
+
+def test_protocol_6_maps_take_the_latest_30_hz_frame_on_a_20_hz_timer():
+    """Protocol 6: the navigator's map takes a frame every 0.05 s of its clock, on the
+    approach and in flight, and the frame is the camera's latest (captured on the 30 Hz
+    grid, at most one camera period before); the camera's skipped frames are not rendered.
+    Protocol 5 hands over every 30 Hz frame as it is captured."""
+    from ft_sitl.missions.protocol import navigator_params
+    from ft_sitl.navigation.ego import EgoPlanner
+
+    class Spy(EgoPlanner):
+        def reset(self, task):
+            super().reset(task)
+            self.got = []  # (phase, observation time, frame time), microseconds
+
+        def observe(self, obs):
+            if obs.depth is not None:
+                self.got.append(("approach", round(obs.time_s * 1e6), obs.depth.t_us))
+            super().observe(obs)
+
+        def step(self, obs):
+            if obs.depth is not None:
+                self.got.append(("flight", round(obs.time_s * 1e6), obs.depth.t_us))
+            return super().step(obs)
+
+    got = {}
+    for protocol in (5, 6):
+        spec = TrialSpec("ego", "0.98kg-EGO Planner DIY", "forest", scenario_index=1,
+                         protocol=protocol, limits=Limits(timeout_s=3.0))
+        spy = Spy(**navigator_params(spec))
+        row = run_trial(spec, navigator=spy, wall_budget_s=None).row
+        assert row["protocol_version"] == protocol
+        got[protocol] = spy.got
+    period_us = 33_333
+    for phase, step_us, floor in (("approach", 1_000, True), ("flight", 10_000, False)):
+        # events are served on the physics steps (the last at or before the camera's
+        # tick) on the approach, on the navigator's steps (the first at or after) in flight
+        def served(t, step_us=step_us, floor=floor):
+            return (t // step_us if floor else -(-t // step_us)) * step_us
+
+        five = [(t, f) for p, t, f in got[5] if p == phase]
+        six = [(t, f) for p, t, f in got[6] if p == phase]
+        assert len(five) > 30 and len(six) > 20, phase
+        # protocol 5: every frame at its capture, one per camera period
+        assert all(t == f for t, f in five)
+        assert all(period_us - step_us <= b[1] - a[1] <= period_us + step_us
+                   for a, b in zip(five, five[1:])), phase
+        # protocol 6: one frame per map update, updates 50 ms apart from 0, each the
+        # camera's latest frame (captured on the 30 Hz grid before the update)
+        assert [t for t, _ in six] == [50_000 * k for k in range(len(six))], phase
+        for t, f in six:
+            assert any(served(k * period_us) == f for k in range(f // period_us,
+                                                                  f // period_us + 2))
+            assert 0 <= t - f < period_us + step_us, (phase, t, f)
+        # two frames of every three are rendered
+        assert 0.6 < len(six) / len(five) < 0.72, phase
