@@ -10,8 +10,10 @@ A campaign file (TOML or YAML) names what to run; every key is optional except
     scenario_seed = 0                # seed of the scenario configurations
     platforms = ["real"]             # names, categories (real, virtual, user) or "all"
     platform_files = ["mine.toml"]   # user platforms (relative to this file)
-    scenarios = "all"                # families (paper names work), {family, indices},
-                                     # {file = "yard.yaml"} (a user scenario), or "all"
+    scenarios = "all"                # families (paper names work), {family, indices,
+                                     # version} (version: an older generator of the
+                                     # family, default the newest), {file = "yard.yaml"}
+                                     # (a user scenario), or "all"
     indices = "all"                  # default configurations of each family (1..10)
     physics_hz = 1000
     protocol = 1                     # the trial protocol's version (default: the newest)
@@ -60,7 +62,7 @@ from ft_sitl.navigation.base import Limits
 from ft_sitl.navigation.registry import NavigatorError, available, create
 from ft_sitl.physics.catalog import PlatformRegistry
 from ft_sitl.physics.platform import PlatformError
-from ft_sitl.scenarios.families import CATEGORY, FAMILIES, resolve_family
+from ft_sitl.scenarios.families import CATEGORY, FAMILIES, REGISTRY, resolve_family
 from ft_sitl.scenarios.io import load_scenario
 from ft_sitl.scenarios.scenario import ScenarioError
 
@@ -88,6 +90,8 @@ class ScenarioEntry:
     family: str
     indices: tuple[int, ...]
     file: str | None = None
+    #: the family generator's version (None for a file)
+    version: int | None = None
 
 
 @dataclass
@@ -118,7 +122,10 @@ class Campaign:
                            for a in self.algorithms],
             "platforms": [p.name for p in self.platforms],
             "scenarios": [{"family": s.family, "indices": list(s.indices),
-                           **({"file": s.file} if s.file else {})} for s in self.scenarios],
+                           **({"file": s.file} if s.file else {}),
+                           # (left out at 1: directories written before versions resume)
+                           **({"version": s.version} if s.version not in (None, 1) else {})}
+                          for s in self.scenarios],
             "limits": self.limits.as_dict(), "weights": self.weights,
             # (left out at version 1: directories written before versions resume)
             **({"protocol": self.protocol} if self.protocol != 1 else {}),
@@ -144,7 +151,7 @@ class Campaign:
                             scenario_seed=self.scenario_seed, scenario_file=sc.file,
                             trial=t, seed=seed, limits=self.limits, campaign=self.name,
                             physics_hz=self.physics_hz, protocol=self.protocol,
-                            gains=self.gains))
+                            gains=self.gains, scenario_version=sc.version))
         out.sort(key=lambda s: (s.scenario_file or "", s.family, s.scenario_index))
         return out
 
@@ -351,7 +358,7 @@ def _scenarios(t: Table, base: Path) -> list[ScenarioEntry]:
     where = t.where
     indices = _indices(t)
     if t.get("scenarios", "all") == "all":
-        return [ScenarioEntry(f, indices) for f in FAMILIES]
+        return [ScenarioEntry(f, indices, version=REGISTRY[f].version) for f in FAMILIES]
     out = []
     for k, item in enumerate(t.items("scenarios")):
         w = f"{where}: scenarios[{k}]"
@@ -360,9 +367,12 @@ def _scenarios(t: Table, base: Path) -> list[ScenarioEntry]:
         if not isinstance(item, dict):
             raise CampaignError(f"{w}: must be a family name or a table")
         entry = Table(item, w, error=CampaignError)
-        entry.check_keys(("family", "indices", "file"))
+        entry.check_keys(("family", "indices", "file", "version"))
         if "file" in item:
 
+            if "version" in item:
+                raise CampaignError(f"{w}: version does not apply to a scenario file (its "
+                                    "geometry is the file)")
             if "indices" in item:
                 raise CampaignError(f"{w}: indices do not apply to a scenario file (it is "
                                     "one configuration)")
@@ -378,7 +388,11 @@ def _scenarios(t: Table, base: Path) -> list[ScenarioEntry]:
         except ScenarioError as exc:
             raise CampaignError(f"{w}: {exc}") from None
         idx = _indices(entry) if "indices" in item else indices
-        out.append(ScenarioEntry(fam, idx))
+        try:
+            version = REGISTRY[fam].check_version(item.get("version"))
+        except ScenarioError as exc:
+            raise CampaignError(f"{w}: version: {exc}") from None
+        out.append(ScenarioEntry(fam, idx, version=version))
     seen: dict = {}
     for k, e in enumerate(out):
         key = e.file or e.family

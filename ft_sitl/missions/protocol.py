@@ -104,7 +104,7 @@ def failed_row(spec, platform, scenario, reason: Outcome, detail: str) -> dict:
     row = identity_row(spec, platform, scenario)
     row.update({"success": False, "reason": Outcome(reason).value, "detail": detail,
                 "code_version": __version__, "protocol_version": spec.protocol,
-                "gains": spec.gains,
+                "gains": spec.gains, "scenario_version": spec.scenario_version,
                 "spec": spec.to_json(),
                 "finished_utc": utc_now()})
     return row
@@ -386,6 +386,7 @@ class TrialReferee:
             "code_version": __version__,
             "protocol_version": self.spec.protocol,
             "gains": self.spec.gains,
+            "scenario_version": self.spec.scenario_version,
             "finished_utc": utc_now(),
             "spec": self.spec.to_json(),
         })

@@ -61,7 +61,8 @@ class TrialResources:
         if spec.scenario_file:
             return self._cached(self._scenarios, ("file", spec.scenario_file),
                                 lambda: load_scenario(spec.scenario_file))
-        key = (spec.family, spec.scenario_index, spec.scenario_seed)
+        key = (spec.family, spec.scenario_index, spec.scenario_seed, None,
+               spec.scenario_version)
         return self._cached(self._scenarios, key, lambda: build_scenario(*key))
 
     def world_and_grid(self, scenario) -> tuple[CollisionWorld, DistanceGrid]:

@@ -27,6 +27,9 @@ run
     protocol's version, ft_sitl.missions.spec.PROTOCOLS; 1 for rows written before it was
     recorded), ``gains`` (the controller-gain mode the trial flew, "bandwidth" or "px4":
     FT_GAIN_MODE 0 or 1; "bandwidth" for rows written before it was recorded),
+    ``scenario_version`` (the version of the family's generator that built the scenario,
+    scenarios.families.Family.versions; 1 for rows written before it was recorded, empty
+    for a scenario file),
     ``finished_utc``, ``spec`` (the full trial spec as JSON: enough to rerun the
     trial alone).
 """
@@ -84,13 +87,13 @@ METRICS = ("time_to_goal_s", "nav_time_s", "path_length_m", "mean_speed_m_s",
            "max_speed_m_s", "min_clearance_m", "max_tilt_deg", "saturation_fraction",
            "energy_j", "replans", "planner_time_s", "planner_calls")
 RUN = ("sim_time_s", "wall_time_s", "code_version", "protocol_version", "gains",
-       "finished_utc", "spec")
+       "scenario_version", "finished_utc", "spec")
 COLUMNS = IDENTITY + OUTCOME + METRICS + RUN
 
 CATEGORICAL = ("campaign", "algorithm", "platform", "platform_category", "family",
                "scenario_category", "scenario", "reason", "gains")
 INTEGER = ("scenario_index", "scenario_seed", "trial", "seed", "replans", "planner_calls",
-           "protocol_version")
+           "protocol_version", "scenario_version")
 FLOAT = ("mass_kg", "twr_max", "alpha_xy_max", "alpha_z_max") + tuple(
     m for m in METRICS if m not in ("replans", "planner_calls")) + ("sim_time_s",
                                                                      "wall_time_s")
@@ -110,6 +113,10 @@ def to_frame(rows):
         df[c] = pd.to_numeric(df[c], errors="coerce").astype("Int64")
     # rows written before the version was recorded flew protocol 1
     df["protocol_version"] = df["protocol_version"].fillna(1)
+    # ... and were built by their family's first generator (a scenario file has none)
+    df["scenario_version"] = df["scenario_version"].mask(
+        df["scenario_version"].isna() & ~df["spec"].astype(str).str.contains(
+            '"scenario_file":"', regex=False), 1)
     df["gains"] = df["gains"].astype(object).fillna(DEFAULT_GAINS)  # (likewise: the default)
     for c in FLOAT:
         df[c] = pd.to_numeric(df[c], errors="coerce").astype("float64")

@@ -16,6 +16,8 @@ from ft_sitl.autopilot.params import DEFAULT_GAINS, GAIN_MODES
 from ft_sitl.navigation.base import Limits
 from ft_sitl.physics.catalog import get_platform, platform_from_mapping
 from ft_sitl.physics.platform import Platform
+from ft_sitl.scenarios.families import describe_family
+from ft_sitl.scenarios.scenario import ScenarioError
 
 
 @dataclass(frozen=True)
@@ -123,6 +125,9 @@ class TrialSpec:
     physics_hz: int = 1000
     protocol: int = PROTOCOL_VERSION
     gains: str = DEFAULT_GAINS  # the controller-gain mode (GAIN_MODES: FT_GAIN_MODE)
+    #: the family generator's version (scenarios.families.Family.versions; None: the
+    #: newest, written into the spec; absent from a stored spec: 1). None for a file.
+    scenario_version: int | None = None
 
     def __post_init__(self):
         for name in ("algorithm", "platform", "family"):
@@ -140,6 +145,16 @@ class TrialSpec:
             raise TrialSpecError("limits: must be a Limits")
         check_protocol(self.protocol)
         check_gains(self.gains)
+        if self.scenario_file is None:
+            try:
+                fam = describe_family(self.family)
+                object.__setattr__(self, "scenario_version",
+                                   fam.check_version(self.scenario_version))
+            except ScenarioError as exc:
+                raise TrialSpecError(f"family / scenario_version: {exc}") from None
+        elif self.scenario_version is not None:
+            raise TrialSpecError("scenario_version: a scenario file has no generator version "
+                                 f"(got {self.scenario_version!r})")
         default_acc = PROTOCOLS[self.protocol].max_acc_m_s2
         if self.limits.max_acc_m_s2 is not None and default_acc is None:
             raise TrialSpecError(f"limits.max_acc_m_s2: protocol version {self.protocol} has "
@@ -151,9 +166,9 @@ class TrialSpec:
 
     # --- serialisation -------------------------------------------------------------------
     def to_dict(self) -> dict:
-        """The canonical spec. ``protocol`` is left out at version 1 and ``gains`` at the
-        default, so the specs (and trial ids) of rows written before either existed stay
-        what they were."""
+        """The canonical spec. ``protocol`` and ``scenario_version`` are left out at
+        version 1 and ``gains`` at the default, so the specs (and trial ids) of rows
+        written before any of them existed stay what they were."""
         d = {
             "algorithm": self.algorithm, "algorithm_params": self.algorithm_params,
             "platform": self.platform, "platform_def": self.platform_def,
@@ -166,6 +181,8 @@ class TrialSpec:
             d["protocol"] = self.protocol
         if self.gains != DEFAULT_GAINS:
             d["gains"] = self.gains
+        if self.scenario_version not in (None, 1):
+            d["scenario_version"] = self.scenario_version
         return d
 
     @classmethod
@@ -175,6 +192,8 @@ class TrialSpec:
         d = dict(d)
         d.pop("code_version", None)
         d.setdefault("protocol", 1)  # a spec written before versions were recorded
+        if not d.get("scenario_file"):  # likewise: the family's first generator
+            d.setdefault("scenario_version", 1)
         try:
             limits = Limits(**d.pop("limits", {}))
         except TypeError as exc:

@@ -81,7 +81,7 @@ import difflib
 import math
 import zlib
 from collections.abc import Callable, Mapping
-from dataclasses import dataclass
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 import trimesh
@@ -298,8 +298,14 @@ def _far_from(p, q, points, min_dist) -> bool:
 class Family:
     """One scenario family: its registry key, the paper's name, its category, the
     generator's parameters (defaults, units, ranges, docs) and ``build(index, seed=0,
-    params=None) -> Scenario``; ``aliases`` are further names :func:`resolve_family`
-    accepts."""
+    params=None, version=None) -> Scenario``; ``aliases`` are further names
+    :func:`resolve_family` accepts.
+
+    ``versions`` holds every generator the family has had (version -> its parameter
+    schema and generator function), so that configurations of results written with an
+    older generator stay buildable (``version=``); ``schema`` is the newest one's and
+    ``version`` its number, what builds by default. A change to a generator that alters
+    any configuration's mesh is a new version (docs/scenarios.md, "Generator versions")."""
 
     name: str
     paper_name: str
@@ -307,12 +313,34 @@ class Family:
     schema: Schema
     build: Callable[..., Scenario]
     aliases: tuple[str, ...] = ()
+    versions: Mapping[int, tuple[Schema, Callable]] = field(default_factory=dict,
+                                                            compare=False, repr=False)
+    #: version -> what changed in it (docs)
+    changes: Mapping[int, str] = field(default_factory=dict, compare=False, repr=False)
 
-    def resolve(self, params: Mapping | None) -> dict:
+    @property
+    def version(self) -> int:
+        """The newest generator version (what builds unless asked for another)."""
+        return max(self.versions)
+
+    def check_version(self, version) -> int:
+        """``version`` as a generator version of this family (None: the newest);
+        ScenarioError naming the versions it has."""
+        if version is None:
+            return self.version
+        if isinstance(version, bool) or not isinstance(version, (int, np.integer)) or \
+                int(version) not in self.versions:
+            raise ScenarioError(f"{self.name}: no generator version {version!r} (versions: "
+                                f"{', '.join(map(str, sorted(self.versions)))})")
+        return int(version)
+
+    def resolve(self, params: Mapping | None, version: int | None = None) -> dict:
         """The generator's parameters: the defaults updated with ``params`` (checked; a
         ScenarioError names the family, the key, the value and the allowed range)."""
+        schema = self.versions[self.check_version(version)][0] if self.versions else \
+            self.schema
         try:
-            return self.schema.resolve(params, f"scenario family {self.name!r}")
+            return schema.resolve(params, f"scenario family {self.name!r}")
         except SchemaError as exc:
             raise ScenarioError(str(exc)) from None
 
@@ -321,23 +349,53 @@ REGISTRY: dict[str, Family] = {}
 """Family name -> its :class:`Family`, in the paper's order (the order of declaration)."""
 
 
+def _builder(name: str):
+    """``build(index, seed=0, params=None, version=None)`` of family ``name``: checks index,
+    seed and version, resolves the parameters with that version's schema and seeds the
+    generator (every version draws from the same stream: see the module docstring)."""
+    def build(index: int, seed: int = 0, params: Mapping | None = None,
+              version: int | None = None) -> Scenario:
+        fam = REGISTRY[name]
+        _check(name, index, seed)
+        v = fam.check_version(version)
+        schema, generator = fam.versions[v]
+        view = replace(fam, schema=schema)
+        sc = generator(view, fam.resolve(params, v), _rng(name, index, seed), index, seed)
+        sc.provenance["generator_version"] = v
+        return sc
+    return build
+
+
 def _family(name: str, paper_name: str, category: str, schema: Schema,
             aliases: tuple[str, ...] = ()):
-    """Declare the family whose generator the decorated function is. The function takes
-    ``(family, params, rng, index, seed)``; the decorator returns ``build(index, seed=0,
-    params=None)``, which checks index and seed, resolves the parameters and seeds the
-    generator (see the module docstring)."""
+    """Declare the family whose generator (version 1) the decorated function is. The
+    function takes ``(family, params, rng, index, seed)``; the decorator returns the
+    family's ``build`` (:func:`_builder`)."""
     def declare(generator):
-        def build(index: int, seed: int = 0, params: Mapping | None = None) -> Scenario:
-            _check(name, index, seed)
-            resolved = fam.resolve(params)
-            return generator(fam, resolved, _rng(name, index, seed), index, seed)
-
+        build = _builder(name)
         build.__name__ = build.__qualname__ = generator.__name__
         build.__doc__ = generator.__doc__
-        fam = Family(name, paper_name, category, schema, build, aliases)
-        REGISTRY[name] = fam
+        REGISTRY[name] = Family(name, paper_name, category, schema, build, aliases,
+                                versions={1: (schema, generator)},
+                                changes={1: "the first generator"})
         return build
+    return declare
+
+
+def _revise(name: str, version: int, change: str, schema: Schema | None = None):
+    """Declare generator ``version`` of family ``name`` (the decorated function, same
+    signature as for :func:`_family`; ``schema``: its parameters when they differ from
+    the previous version's), ``change`` saying what it changes and why. The older
+    versions stay buildable by number."""
+    def declare(generator):
+        fam = REGISTRY[name]
+        if version != fam.version + 1:
+            raise RuntimeError(f"{name}: version {version} after {fam.version}")
+        schema_v = schema if schema is not None else fam.schema
+        REGISTRY[name] = replace(fam, schema=schema_v,
+                                 versions={**fam.versions, version: (schema_v, generator)},
+                                 changes={**fam.changes, version: change})
+        return generator
     return declare
 
 
@@ -1058,9 +1116,10 @@ def describe_family(name: str) -> Family:
 
 
 def build_scenario(family: str, index: int, seed: int = 0,
-                   params: Mapping | None = None) -> Scenario:
+                   params: Mapping | None = None, version: int | None = None) -> Scenario:
     """Configuration ``index`` (1..10) of ``family`` for ``seed`` (see the module docs);
-    ``params`` change the generator's parameters (:func:`describe_family`)."""
+    ``params`` change the generator's parameters (:func:`describe_family`); ``version``
+    builds with an older generator of the family (None: the newest)."""
     key = resolve_family(family)
     _check(key, index, seed)
-    return REGISTRY[key].build(int(index), int(seed), params)
+    return REGISTRY[key].build(int(index), int(seed), params, version)
