@@ -29,7 +29,7 @@ Run::
         runs/accel-sweep/acc-1.5 runs/accel-sweep/acc-3 runs/accel-sweep/acc-6 \\
         runs/accel-sweep/acc-3-px4 --out runs/accel-sweep/report
 
-Needs statsmodels (``pip install -e .[analysis]``).
+Uses statsmodels (a dependency of ft-sitl, for the campaign report).
 """
 
 from __future__ import annotations
