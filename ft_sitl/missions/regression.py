@@ -436,7 +436,7 @@ def coefficient_table(fits: Sequence[SuccessFit]) -> pd.DataFrame:
     return pd.DataFrame(rows)
 
 
-def _num(v: float) -> str:
+def ratio_text(v: float) -> str:
     """An odds ratio as printed: 0.082, 0.82, 1.52, 16.1, 167."""
     if not math.isfinite(v):
         return "inf" if v > 0 else "–"
@@ -450,10 +450,12 @@ def _num(v: float) -> str:
 
 
 def p_text(p: float) -> str:
-    """A p-value as printed: two significant digits, "< 0.001" below that."""
+    """A p-value as printed: 0.53, 0.058, 0.004, "< 0.001"."""
     if not math.isfinite(p):
         return "–"
-    return "< 0.001" if p < 0.001 else f"{p:.2g}"
+    if p < 0.001:
+        return "< 0.001"
+    return f"{p:.2f}" if p >= 0.1 else f"{p:.3f}"
 
 
 def reading(fit: SuccessFit, column: str) -> str:
@@ -468,9 +470,9 @@ def reading(fit: SuccessFit, column: str) -> str:
         why = dict(fit.dropped_indicators).get(ind.label, "not in the fit")
         return f"{ind.label} not in the fit: {why}"
     p = c["p"]
-    numbers = (f"odds x{_num(c['odds_ratio'])} {ind.per}, 95 % CI "
-               f"[{_num(c['or_lo'])}, {_num(c['or_hi'])}], p {'' if p < 0.001 else '= '}"
-               f"{p_text(p)}")
+    numbers = (f"odds x{ratio_text(c['odds_ratio'])} {ind.per}, 95 % CI "
+               f"[{ratio_text(c['or_lo'])}, {ratio_text(c['or_hi'])}], "
+               f"p {'' if p < 0.001 else '= '}{p_text(p)}")
     if math.isfinite(p) and p < ALPHA:
         trend = "rises" if c["odds_ratio"] > 1 else "falls"
         return f"success {trend} with {ind.label}: {numbers}"
