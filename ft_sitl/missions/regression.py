@@ -95,8 +95,8 @@ def footprints(df: pd.DataFrame) -> pd.Series:
     collision check saw it (the body's half span from protocol 5, the collision radius
     before: :func:`~ft_sitl.missions.spec.vehicle_half_span_m`). The platform comes from
     the row's stored spec when it has one (user platforms carry their definition there),
-    else from the catalog by name; NaN where neither is known. One look-up per
-    (platform, protocol version)."""
+    else (no spec, or one that does not parse) from the catalog by name; NaN where
+    neither is known. One look-up per (platform, protocol version)."""
     names = df["platform"].astype(str)
     versions = (pd.to_numeric(df["protocol_version"], errors="coerce").fillna(1).astype(int)
                 if "protocol_version" in df.columns else pd.Series(1, index=df.index))
@@ -118,8 +118,8 @@ def _footprint_of(name: str, version: int, spec, known) -> float:
         try:
             s = TrialSpec.from_dict(json.loads(spec))
             return vehicle_half_span_m(s.protocol, platform_for(s))
-        except (ValueError, TrialSpecError, KeyError):
-            pass  # an unreadable spec: fall back to the catalog by name below
+        except (ValueError, KeyError):   # TrialSpecError, PlatformError, bad JSON
+            pass  # an unreadable spec: the catalog platform of that name, as for no spec
     if name in known:
         try:
             return vehicle_half_span_m(version, known[name])
@@ -230,8 +230,8 @@ def fit_success_models(df: pd.DataFrame) -> list[SuccessFit]:
     df = df.copy()
     if "footprint_m" not in df.columns:
         df["footprint_m"] = footprints(df)
-    return [_fit_one(str(algo), g) for algo, g in
-            sorted(df.groupby(df["algorithm"].astype(str), sort=True), key=lambda kv: kv[0])]
+    return [_fit_one(str(algo), g)
+            for algo, g in df.groupby(df["algorithm"].astype(str), sort=True)]
 
 
 def _fit_one(algo: str, g: pd.DataFrame) -> SuccessFit:
@@ -318,9 +318,9 @@ def _fit_one(algo: str, g: pd.DataFrame) -> SuccessFit:
                 fit.params, fit.cov = firth_logit(X, y)
                 fit.method = "firth"
                 notes.append(f"maximum likelihood {trouble}: Firth's penalised fit")
-    except np.linalg.LinAlgError as exc:
+    except np.linalg.LinAlgError as exc:   # a singular matrix, no convergence, the LP
         fit.method = ""
-        fit.note = "; ".join(notes + [f"not fitted: singular information matrix ({exc})"])
+        fit.note = "; ".join(notes + [f"not fitted: the fit failed ({exc})"])
         return fit
     if epv < FEW_EVENTS_PER_COEF:
         notes.append(f"{epv:.1f} events per coefficient (< {FEW_EVENTS_PER_COEF:g}): "
