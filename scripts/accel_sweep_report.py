@@ -29,7 +29,7 @@ Run::
         runs/accel-sweep/acc-1.5 runs/accel-sweep/acc-3 runs/accel-sweep/acc-6 \\
         runs/accel-sweep/acc-3-px4 --out runs/accel-sweep/report
 
-Needs statsmodels (``pip install -e .[analysis]``).
+Uses statsmodels (a dependency of ft-sitl, for the campaign report).
 """
 
 from __future__ import annotations
@@ -52,9 +52,12 @@ import pandas as pd  # noqa: E402
 from scipy import stats  # noqa: E402
 
 from ft_sitl.autopilot.params import DEFAULT_GAINS  # noqa: E402
-from ft_sitl.missions.protocol import footprint_m  # noqa: E402
 from ft_sitl.missions.results import rows_from_parquet, to_frame  # noqa: E402
-from ft_sitl.missions.spec import TrialSpec, platform_for  # noqa: E402
+from ft_sitl.missions.spec import (  # noqa: E402
+    TrialSpec,
+    platform_for,
+    vehicle_half_span_m,
+)
 from ft_sitl.missions.store import load_rows  # noqa: E402
 
 CLASSIC = ("forest", "urban", "random_angle_cylinder")
@@ -122,11 +125,10 @@ def load_sweep(dirs, families=CLASSIC) -> pd.DataFrame:
             key = (s["platform"], s.get("protocol", 1))
             if key not in footprint:
                 spec = TrialSpec.from_dict(s)
-                platform = platform_for(spec)
                 # what the trial told its navigator (protocol 4: the collision radius; 5:
-                # the body's half span); before 4 nothing, so the collision radius
-                told = footprint_m(spec, platform)
-                footprint[key] = told if told is not None else platform.collision_radius_m
+                # the body's half span); before 4 nothing, and the vehicle's collision
+                # sphere, so its radius
+                footprint[key] = vehicle_half_span_m(spec.protocol, platform_for(spec))
             keys.append(key)
         df["footprint_m"] = [footprint[k] for k in keys]
         df = df[df["family"].astype(str).isin(families)].copy()

@@ -7,12 +7,21 @@ cd "$(dirname "$0")/.."
 extras=""
 if [ "${1:-}" = "--test" ]; then
   extras="[test]"
+  packages=""
   # the bus tests run a real MQTT broker: install mosquitto (Debian puts it in /usr/sbin)
   if ! command -v mosquitto >/dev/null 2>&1 && [ ! -x /usr/sbin/mosquitto ]; then
+    packages="$packages mosquitto"
+  fi
+  # the report's browser test loads report.html in headless Chromium through its WebDriver
+  if ! command -v chromium >/dev/null 2>&1 || ! command -v chromedriver >/dev/null 2>&1; then
+    packages="$packages chromium chromium-driver"
+  fi
+  if [ -n "$packages" ]; then
     sudo=""
     if [ "$(id -u)" -ne 0 ]; then sudo="sudo"; fi
     $sudo apt-get update -qq
-    $sudo apt-get install -y -qq mosquitto
+    # shellcheck disable=SC2086  # one word per package
+    $sudo apt-get install -y -qq $packages
   fi
 fi
 python3 -m venv .venv

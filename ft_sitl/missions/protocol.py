@@ -47,7 +47,7 @@ from ft_sitl.autopilot.cascade import C_SAT_STEPS
 from ft_sitl.autopilot.params import GAIN_MODES, ParamSet
 from ft_sitl.missions.resources import RESOURCES, TrialResources
 from ft_sitl.missions.results import Outcome
-from ft_sitl.missions.spec import PROTOCOLS
+from ft_sitl.missions.spec import PROTOCOLS, vehicle_half_span_m
 from ft_sitl.navigation.base import STABLE_FOR_S, STABLE_POS_M, STABLE_SPEED_M_S, Task
 from ft_sitl.navigation.registry import available
 from ft_sitl.sim.fleet import Fleet
@@ -419,10 +419,9 @@ def trial_task(spec, scenario, platform) -> Task:
 def footprint_m(spec, platform) -> float | None:
     """How far the trial's navigator keeps obstacles away (m; None: not told): the body's
     half span from protocol 5, the collision radius in 4, nothing before."""
-    rules = PROTOCOLS[spec.protocol]
-    if rules.vehicle_body:
-        return platform.body().half_span_m
-    return platform.collision_radius_m if rules.footprint_inflation else None
+    if PROTOCOLS[spec.protocol].footprint_inflation:
+        return vehicle_half_span_m(spec.protocol, platform)
+    return None
 
 
 def navigator_params(spec) -> dict:

@@ -11,9 +11,13 @@
   ``success_vs_indicators``     success vs TWR_max, alpha_xy,max (log x), alpha_z,max;
                                 one marker per platform and algorithm, pooled over
                                 scenarios, with CI bars
+  ``success_partial_dependence`` the logistic regression's predicted success vs each
+                                indicator (TWR_max, alpha_xy,max, alpha_z,max, footprint),
+                                one line and band per algorithm
   ``platform_grid``             one small bar chart per platform, placed by alpha_xy,max
                                 (rows, bottom to top) and TWR_max (left to right in a row)
-  ``heatmap_<algorithm>``       per algorithm: platforms (y, by TWR_max) x scenarios (x)
+  ``heatmap_<algorithm>``       per algorithm: platforms (y, by TWR_max) x scenarios (x);
+                                each cell: successes / trials and the Wilson interval
   ``composite_score``           Score and FinalScore per algorithm
   ``failures_by_algorithm``     exit reasons, stacked fractions per algorithm
   ``failures_by_family``        exit reasons per scenario family, one panel per algorithm
@@ -24,8 +28,9 @@ backends: no pyplot, no global state (style settings are applied inside
 with a constant, so the same table gives byte-identical figures; only the report's
 "generated" time and the timestamps passed in ``meta`` change between runs.
 
-The statistics are those of :mod:`ft_sitl.missions.scoring`; what they mean and what the
-report contains is written up in ``docs/scoring.md``.
+The statistics are those of :mod:`ft_sitl.missions.scoring` and, for success against the
+indicators, :mod:`ft_sitl.missions.regression`; what they mean and what the report
+contains is written up in ``docs/scoring.md``.
 """
 
 from __future__ import annotations
@@ -44,7 +49,7 @@ import numpy as np
 import pandas as pd
 import yaml
 
-from ft_sitl.missions import scoring
+from ft_sitl.missions import regression, scoring
 from ft_sitl.missions.results import REASONS
 from ft_sitl.scenarios.families import FAMILIES, PAPER_NAMES
 
@@ -55,10 +60,13 @@ META_KEYS = ("code_version", "machine", "started_utc", "finished_utc", "wall_tim
 MACHINE_KEYS = ("cpu_model", "n_cpus")
 #: Heatmaps carry the value in each cell up to this many cells.
 ANNOTATE_MAX_CELLS = 400
-#: Metric columns summarised (median over successful trials) per algorithm.
-METRICS_SHOWN = ("time_to_goal_s", "path_length_m", "mean_speed_m_s", "max_speed_m_s",
-                 "min_clearance_m", "max_tilt_deg", "saturation_fraction", "energy_j",
-                 "replans", "planner_time_s")
+#: Metric columns summarised (median over successful trials) per algorithm, with the
+#: header each is printed under (words, so a narrow window can wrap them).
+METRICS_SHOWN = {"time_to_goal_s": "time to goal (s)", "path_length_m": "path length (m)",
+                 "mean_speed_m_s": "mean speed (m/s)", "max_speed_m_s": "max speed (m/s)",
+                 "min_clearance_m": "min clearance (m)", "max_tilt_deg": "max tilt (deg)",
+                 "saturation_fraction": "saturation fraction", "energy_j": "energy (J)",
+                 "replans": "replans", "planner_time_s": "planner time (s)"}
 
 REASON_COLOURS = {"success": "#2ca02c", "collision": "#d62728", "out_of_bounds": "#ff7f0e",
                   "timeout": "#7f7f7f", "unstable": "#9467bd", "loss_of_control": "#8c564b",
@@ -81,8 +89,10 @@ class _Tables:
         present = set(df["family"].astype(str).unique())
         self.families = [f for f in FAMILIES if f in present] + sorted(present - set(FAMILIES))
         self.family_label = {f: PAPER_NAMES.get(f, f) for f in self.families}
-        keep = ["platform", "platform_category", "twr_max", "alpha_xy_max", "alpha_z_max"]
-        ind = df[keep].astype({"platform": str, "platform_category": str})
+        with_footprint = df.assign(footprint_m=regression.footprints(df))
+        keep = ["platform", "platform_category", "twr_max", "alpha_xy_max", "alpha_z_max",
+                "footprint_m"]
+        ind = with_footprint[keep].astype({"platform": str, "platform_category": str})
         ind = ind.drop_duplicates("platform").set_index("platform")
         self.indicators = ind
         self.platforms_by_twr = list(
@@ -98,6 +108,9 @@ class _Tables:
         self.scores = scoring.composite_score(
             df, scenario_weights=w.get("scenarios"), platform_weights=w.get("platforms"),
             beta=w.get("beta", 0.3))
+        self.fits = regression.fit_success_models(with_footprint)
+        self.coefficients = regression.coefficient_table(self.fits)
+        self.collinearity = regression.collinearity(with_footprint)
         self.fail_algo = scoring.failure_breakdown(df, ("algorithm",))
         self.fail_family = scoring.failure_breakdown(df, ("algorithm", "family"))
         self.B = B
@@ -162,34 +175,61 @@ def _new_figure(w: float, h: float):
 
 
 def _fig_success_by_family(t: _Tables):
+    # matplotlib: heavy, loaded only when plotting
+    from matplotlib.lines import Line2D
+    from matplotlib.patches import Patch
+
     fig = _new_figure(max(6.0, 1.1 * len(t.families) + 2.0), 3.8)
     ax = fig.add_subplot()
     n_alg = len(t.algorithms)
     width = 0.8 / n_alg
     x0 = np.arange(len(t.families))
+    missing = zero = False
     for i, algo in enumerate(t.algorithms):
-        xs, r, lo, hi = [], [], [], []
+        xs, r, lo, hi, none = [], [], [], [], []
         for j, fam in enumerate(t.families):
+            x = x0[j] + (i - (n_alg - 1) / 2) * width
             row = _lookup(t.by_family, ("algorithm", "family"), (algo, fam))
             if row is None:
+                none.append(x)
                 continue
-            xs.append(x0[j] + (i - (n_alg - 1) / 2) * width)
+            xs.append(x)
             r.append(row["rate"])
             lo.append(row["ci_lo"])
             hi.append(row["ci_hi"])
-        for j, fam in enumerate(t.families):
-            if _lookup(t.by_family, ("algorithm", "family"), (algo, fam)) is None:
-                ax.text(x0[j] + (i - (n_alg - 1) / 2) * width, 0.01, "n/a", rotation=90,
-                        ha="center", va="bottom", fontsize=6, color="#555555")
+        if none:   # no trials: an empty hatched bar over the whole range, labelled n/a
+            missing = True
+            ax.bar(none, np.ones(len(none)), width=width * 0.95, facecolor="none",
+                   edgecolor="#aaaaaa", hatch="////", linewidth=0.6)
+            for x in none:
+                ax.text(x, 0.5, "n/a", rotation=90, ha="center", va="center", fontsize=6,
+                        color="#555555", bbox={"facecolor": "white", "edgecolor": "none",
+                                               "pad": 0.5})
         if not xs:
             continue
         r, lo, hi = map(np.asarray, (r, lo, hi))
         ax.bar(xs, r, width=width * 0.95, color=t.colour(algo), label=algo,
                yerr=_yerr(r, lo, hi), capsize=2, error_kw={"elinewidth": 0.8})
+        at_zero = np.asarray(xs)[r == 0]
+        if at_zero.size:   # a rate of 0: a marker on the axis and a "0", not just nothing
+            zero = True
+            ax.plot(at_zero, np.zeros(at_zero.size), ls="none", marker="^", ms=4,
+                    color=t.colour(algo), clip_on=False, zorder=3)
+            for x in at_zero:
+                ax.text(x, 0.035, "0", ha="center", va="bottom", fontsize=6,
+                        color=t.colour(algo))
     ax.set_xticks(x0, [t.family_label[f] for f in t.families], rotation=20, ha="right")
     ax.set_ylim(0, 1.05)
     ax.set_ylabel("success rate")
-    fig.legend(loc="outside upper center", ncols=min(n_alg, 6), frameon=False)
+    handles, labels = ax.get_legend_handles_labels()
+    if zero:
+        handles.append(Line2D([], [], ls="none", marker="^", ms=4, color="#444444"))
+        labels.append("rate 0")
+    if missing:
+        handles.append(Patch(facecolor="none", edgecolor="#aaaaaa", hatch="////"))
+        labels.append("no trials (n/a)")
+    fig.legend(handles, labels, loc="outside upper center", ncols=min(len(labels), 7),
+               frameon=False)
     ax.grid(axis="y", alpha=0.3)
     return fig
 
@@ -222,6 +262,50 @@ def _fig_success_vs_indicators(t: _Tables):
     handles, labels = axes[0].get_legend_handles_labels()
     if handles:
         fig.legend(handles, labels, loc="outside upper center", ncols=min(len(labels), 6),
+                   frameon=False)
+    return fig
+
+
+def _fig_partial_dependence(t: _Tables):
+    fig = _new_figure(12.0, 3.9)
+    axes = fig.subplots(1, len(regression.INDICATORS), sharey=True)
+    labels = {"twr_max": r"$\mathrm{TWR}_{\max}$",
+              "alpha_xy_max": r"$\alpha_{xy,\max}$ (rad/s$^2$, log)",
+              "alpha_z_max": r"$\alpha_{z,\max}$ (rad/s$^2$)",
+              "footprint_m": "footprint (m)"}
+    fitted = [f for f in t.fits if f.fitted]
+    for ax, ind in zip(axes, regression.INDICATORS, strict=True):
+        col = ind.column
+        for f in fitted:
+            if col not in f.indicators:
+                continue
+            lo_x, hi_x = f.ranges[col]
+            grid = (np.geomspace(lo_x, hi_x, 60) if ind.log2 else np.linspace(lo_x, hi_x, 60))
+            mean, lo, hi = f.partial_dependence(col, grid, seed=t.seed)
+            colour = t.colour(f.algorithm)
+            ax.fill_between(grid, lo, hi, color=colour, alpha=0.15, linewidth=0)
+            ax.plot(grid, mean, color=colour, lw=1.6, label=f.algorithm)
+        x = t.indicators[col].to_numpy(dtype=float)
+        x = x[np.isfinite(x) & ((x > 0) if ind.log2 else True)]
+        ax.plot(x, np.full(x.size, 0.0), ls="none", marker="|", ms=7, color="#555555",
+                alpha=0.6, clip_on=False)   # the platforms' values
+        if ind.log2:
+            ax.set_xscale("log")
+        ax.set_xlabel(labels[col])
+        ax.set_ylim(0.0, 1.02)
+        ax.grid(alpha=0.3)
+    axes[0].set_ylabel("predicted success\n(others at their means, mean over families)")
+    if not fitted:
+        axes[0].text(0.05, 0.5, "no algorithm could be fitted\n(see the regression table)",
+                     transform=axes[0].transAxes, fontsize=8, va="center")
+    handles, names = axes[0].get_legend_handles_labels()
+    for ax in axes[1:]:
+        for h, n in zip(*ax.get_legend_handles_labels(), strict=True):
+            if n not in names:
+                handles.append(h)
+                names.append(n)
+    if handles:
+        fig.legend(handles, names, loc="outside upper center", ncols=min(len(names), 6),
                    frameon=False)
     return fig
 
@@ -272,12 +356,17 @@ def _fig_heatmap(t: _Tables, algo: str):
 
     plats = t.platforms_by_twr
     sub = t.cells[t.cells["algorithm"].astype(str) == algo]
-    grid = (sub.assign(platform=sub["platform"].astype(str), family=sub["family"].astype(str))
-            .pivot(index="platform", columns="family", values="rate")
-            .reindex(index=plats, columns=t.families))
-    values = grid.to_numpy(dtype=float)
+    sub = sub.assign(platform=sub["platform"].astype(str), family=sub["family"].astype(str))
+
+    def grid(col):
+        return (sub.pivot(index="platform", columns="family", values=col)
+                .reindex(index=plats, columns=t.families).to_numpy(dtype=float))
+
+    values = grid("rate")
     n_p, n_f = values.shape
-    fig = _new_figure(max(4.5, 0.75 * n_f + 3.2), max(2.5, 0.22 * n_p + 1.6))
+    annotate = n_p * n_f <= ANNOTATE_MAX_CELLS
+    row_in = 0.34 if annotate else 0.22
+    fig = _new_figure(max(5.0, 0.9 * n_f + 3.4), max(3.0, row_in * n_p + 1.9))
     ax = fig.add_subplot()
     cmap = colormaps["viridis"].with_extremes(bad="#d9d9d9")
     im = ax.imshow(np.ma.masked_invalid(values), cmap=cmap, vmin=0.0, vmax=1.0,
@@ -287,14 +376,22 @@ def _fig_heatmap(t: _Tables, algo: str):
     twr = t.indicators["twr_max"]
     ax.set_yticks(np.arange(n_p), [f"{p} ({twr[p]:.2f})" for p in plats],
                   fontsize=6 if n_p > 12 else 8)
-    ax.set_ylabel(r"platform ($\mathrm{TWR}_{\max}$), sorted by $\mathrm{TWR}_{\max}$")
-    ax.set_title(f"{algo}: success rate per platform and scenario")
-    if n_p * n_f <= ANNOTATE_MAX_CELLS:
-        size = 6 if n_p > 12 else 8
+    # short: a label longer than the axes is cut off by the figure's edge
+    ax.set_ylabel(r"platform ($\mathrm{TWR}_{\max}$)")
+    ax.set_title(f"{algo}: success per platform and scenario family\n"
+                 r"platforms by $\mathrm{TWR}_{\max}$, lowest at the bottom", fontsize=9)
+    if annotate:
+        k, n = grid("successes"), grid("n")
+        lo, hi = grid("wilson_lo"), grid("wilson_hi")
+        size = 5.5 if n_p > 12 else 7
         for (i, j), v in np.ndenumerate(values):
-            text = "n/a" if not np.isfinite(v) else f"{v:.1f}"
+            if not np.isfinite(v):
+                text = "n/a"
+            else:
+                text = f"{k[i, j]:.0f}/{n[i, j]:.0f}\n[{lo[i, j]:.2f}, {hi[i, j]:.2f}]"
             colour = "black" if (not np.isfinite(v) or v > 0.6) else "white"
-            ax.text(j, i, text, ha="center", va="center", fontsize=size, color=colour)
+            ax.text(j, i, text, ha="center", va="center", fontsize=size, color=colour,
+                    linespacing=1.1)
     fig.colorbar(im, ax=ax, label="success rate", fraction=0.05)
     return fig
 
@@ -391,11 +488,18 @@ def _slug(text: str) -> str:
 def _figures(t: _Tables) -> list[tuple[str, str, object]]:
     figs = [
         ("success_by_family", "Mean success per scenario family, one bar per algorithm, "
-         "pooled over platforms; error bars: 95 % percentile-bootstrap CI.",
+         "pooled over platforms; error bars: 95 % percentile-bootstrap CI; a triangle and "
+         "\"0\" mark a rate of 0, an empty hatched bar (n/a) a family without trials.",
          _fig_success_by_family),
         ("success_vs_indicators", "Success per platform (pooled over scenario families) "
          "against the kinodynamic indicators TWR_max, alpha_xy,max (log x) and alpha_z,max; "
          "one marker per platform and algorithm, 95 % CI bars.", _fig_success_vs_indicators),
+        ("success_partial_dependence", "The logistic regression's predicted success against "
+         "each indicator, the other indicators at their means and averaged over the scenario "
+         "families fitted; bands: 95 % of the curves under the fit's coefficient "
+         "uncertainty; ticks on the x axis: the platforms. One line per algorithm fitted "
+         "(none where the indicator or the algorithm is not in the fit: see the regression "
+         "tables).", _fig_partial_dependence),
         ("platform_grid", "One panel per platform: success per algorithm pooled over "
          "scenario families, 95 % CI. Rows are bands of alpha_xy,max (bottom: lowest); "
          "within a row, TWR_max increases to the right.", _fig_platform_grid),
@@ -410,7 +514,8 @@ def _figures(t: _Tables) -> list[tuple[str, str, object]]:
             k += 1
         used.add(name)
         figs.append((name, f"{algo}: success rate per platform (y, sorted by TWR_max) and "
-                     "scenario family (x); grey = no trials.",
+                     "scenario family (x); each cell: successes / trials and the 95 % Wilson "
+                     "interval; grey, n/a = no trials.",
                      lambda t, a=algo: _fig_heatmap(t, a)))
     figs += [
         ("composite_score", "Composite score per algorithm (eqs. 12-19): Score without "
@@ -450,7 +555,10 @@ def _score_rows(t: _Tables) -> tuple[list[str], list[list[str]]]:
 
 
 def _ci_text(row) -> str:
-    return f"{row['rate']:.2f} [{row['ci_lo']:.2f}, {row['ci_hi']:.2f}] (n={row['n']})"
+    """Rate (successes/n), bootstrap and Wilson intervals, one per line."""
+    return (f"{row['rate']:.2f} ({row['successes']}/{row['n']})\n"
+            f"boot [{row['ci_lo']:.2f}, {row['ci_hi']:.2f}]\n"
+            f"Wilson [{row['wilson_lo']:.2f}, {row['wilson_hi']:.2f}]")
 
 
 def _family_rows(t: _Tables) -> tuple[list[str], list[list[str]]]:
@@ -477,9 +585,15 @@ def _failure_rows(t: _Tables) -> tuple[list[str], list[list[str]]]:
     return head, rows
 
 
+def _metric_text(v: float) -> str:
+    """Three significant digits, without an exponent: 0.307, 17.8, 3,720."""
+    rounded = float(f"{v:.3g}")
+    return f"{rounded:,.0f}" if abs(rounded) >= 1000 else f"{v:.3g}"
+
+
 def _metric_rows(t: _Tables) -> tuple[list[str], list[list[str]]]:
     cols = [c for c in METRICS_SHOWN if c in t.df.columns]
-    head = ["Algorithm", "Successes", *cols]
+    head = ["Algorithm", "Successes", *(METRICS_SHOWN[c] for c in cols)]
     rows = []
     ok = t.df[t.df["success"].astype(bool)]
     for algo in t.algorithms:
@@ -488,8 +602,58 @@ def _metric_rows(t: _Tables) -> tuple[list[str], list[list[str]]]:
         for c in cols:
             v = pd.to_numeric(sub[c], errors="coerce").astype(float)
             v = v[np.isfinite(v)]
-            row.append("–" if v.empty else f"{float(v.median()):.3g}")
+            row.append("–" if v.empty else _metric_text(float(v.median())))
         rows.append(row)
+    return head, rows
+
+
+def _fit_rows(t: _Tables) -> tuple[list[str], list[list[str]]]:
+    head = ["Algorithm", "Trials", "In the fit (successes)", "Families fitted",
+            "Families left out", "Indicators left out", "Fit", "Note"]
+    method = {"logit": "maximum likelihood", "firth": "Firth (penalised)", "": "not fitted"}
+    rows = []
+    for f in t.fits:
+        rows.append([
+            f.algorithm, str(f.n_trials), f"{f.n_rows} ({f.n_successes})",
+            ", ".join(t.family_label.get(x, x) for x in f.families) or "–",
+            "; ".join(f"{t.family_label.get(x, x)} ({why})" for x, why in f.left_out) or "–",
+            "; ".join(f"{x} ({why})" for x, why in f.dropped_indicators) or "–",
+            method[f.method], f.note or "–"])
+    return head, rows
+
+
+def _coefficient_rows(t: _Tables) -> tuple[list[str], list[list[str]]]:
+    head = ["Algorithm", "Indicator", "Step", "Log-odds (SE)", "Odds ratio [95 % CI]", "p"]
+    rows = []
+    for r in t.coefficients.itertuples(index=False):
+        if not math.isfinite(r.coef):
+            continue
+        rows.append([r.algorithm, r.indicator, r.per, f"{r.coef:+.2f} ({r.se:.2f})",
+                     f"{regression.ratio_text(r.odds_ratio)} [{regression.ratio_text(r.or_lo)}"
+                     f", {regression.ratio_text(r.or_hi)}]", regression.p_text(r.p)])
+    return head, rows
+
+
+def _readings(t: _Tables) -> list[tuple[str, list[str]]]:
+    """(algorithm, its one-line readings) -- one line in all when it was not fitted."""
+    out = []
+    for f in t.fits:
+        lines = list(t.coefficients.loc[t.coefficients["algorithm"] == f.algorithm,
+                                        "reading"])
+        out.append((f.algorithm, lines if f.fitted else lines[:1]))
+    return out
+
+
+def _collinearity_rows(t: _Tables) -> tuple[list[str], list[list[str]]]:
+    c = t.collinearity
+    names = {"alpha_xy,max": "log2 alpha_xy,max", "mass": "mass (not in the fit)"}
+    head = ["Predictor", *(names.get(x, x) for x in c.columns[:-1]), "VIF"]
+
+    def vif(v: float) -> str:
+        return "inf" if v == math.inf else _fmt(v, ".1f")
+
+    rows = [[names.get(str(i), str(i)), *(_fmt(float(v), ".2f") for v in r.iloc[:-1]),
+             "–" if i == "mass" else vif(float(r.iloc[-1]))] for i, r in c.iterrows()]
     return head, rows
 
 
@@ -547,29 +711,40 @@ _CSS = """
 body{font-family:system-ui,-apple-system,Segoe UI,Helvetica,Arial,sans-serif;margin:2em auto;
 max-width:1250px;padding:0 1em;color:#222;line-height:1.4}
 h1{font-size:1.5em}h2{font-size:1.2em;margin-top:1.8em;border-bottom:1px solid #ddd}
+h3{font-size:1.05em;margin-top:1.4em}
 table{border-collapse:collapse;margin:.6em 0;font-size:.85em}
-th,td{border:1px solid #ccc;padding:.25em .5em;text-align:left;vertical-align:top}
-th{background:#f2f2f2}td.num{text-align:right}
-figure{margin:1.2em 0}figure img{max-width:100%;height:auto;border:1px solid #eee}
+th,td{border:1px solid #ccc;padding:.25em .5em;text-align:left;vertical-align:top;
+white-space:pre-line}
+th{background:#f2f2f2}tbody th{font-weight:normal}td.num{text-align:right}
+figure{margin:1.2em 0}figure img{max-width:100%;height:auto;border:1px solid #eee;
+box-sizing:border-box}
 figcaption{font-size:.85em;color:#555}pre{background:#f7f7f7;padding:.8em;overflow-x:auto;
 font-size:.8em}.note{font-size:.85em;color:#555}
 """
 
 
-def _html_table(head: Sequence[str], rows: Sequence[Sequence[str]], cls: str = "") -> str:
+def _html_table(head: Sequence[str] | None, rows: Sequence[Sequence[str]],
+                cls: str = "") -> str:
+    """A table; ``head`` None: no header row, the first cell of each row is its header.
+    A newline in a cell is a line break (``white-space: pre-line``)."""
     e = html.escape
-    out = [f'<table class="{e(cls)}">' if cls else "<table>", "<thead><tr>"]
-    out += [f"<th>{e(h)}</th>" for h in head]
-    out.append("</tr></thead><tbody>")
+    out = [f'<table class="{e(cls)}">' if cls else "<table>"]
+    if head is not None:
+        out += ["<thead><tr>", *(f"<th>{e(h)}</th>" for h in head), "</tr></thead>"]
+    out.append("<tbody>")
     for r in rows:
-        out.append("<tr>" + "".join(f"<td>{e(c)}</td>" for c in r) + "</tr>")
+        if head is None:
+            out.append(f'<tr><th scope="row">{e(r[0])}</th>'
+                       + "".join(f"<td>{e(c)}</td>" for c in r[1:]) + "</tr>")
+        else:
+            out.append("<tr>" + "".join(f"<td>{e(c)}</td>" for c in r) + "</tr>")
     out.append("</tbody></table>")
     return "".join(out)
 
 
 def _md_table(head: Sequence[str], rows: Sequence[Sequence[str]]) -> str:
     def cell(s: str) -> str:
-        return str(s).replace("|", "\\|").replace("\n", " ")
+        return str(s).replace("|", "\\|").replace("\n", "<br>")
 
     lines = ["| " + " | ".join(cell(h) for h in head) + " |",
              "|" + "---|" * len(head)]
@@ -584,7 +759,9 @@ def _method_notes(t: _Tables) -> list[str]:
     return [
         f"Success rates with 95 % percentile-bootstrap confidence intervals, B = {t.B} "
         f"resamples, seed {t.seed} (resampling trials with replacement, drawn as binomial "
-        "counts); pooled rates take the trials of all platforms / scenarios together.",
+        "counts), and 95 % Wilson score intervals (which, unlike the bootstrap, do not "
+        "collapse to a point when every trial of a group succeeds or fails); pooled rates "
+        "take the trials of all platforms / scenarios together.",
         f"Composite score (eqs. 12-19): scenario weights {sw}; platform weights {pw}; "
         f"beta = {a['beta']:g}. A scenario family without any trial of an algorithm is "
         "dropped for it and its scenario weights renormalised (eq. 19); † marks scores not "
@@ -593,13 +770,38 @@ def _method_notes(t: _Tables) -> list[str]:
     ]
 
 
+def _regression_notes() -> list[str]:
+    steps = "; ".join(f"{i.label} {i.per}" for i in regression.INDICATORS)
+    return [
+        "Per algorithm: logistic regression of each trial's success on TWR_max, "
+        "log2 alpha_xy,max, alpha_z,max and the vehicle's footprint (its half span from "
+        "protocol 5, its collision radius before), with the scenario family as a factor. "
+        f"Odds ratios are per step: {steps}; each holds the other indicators and the "
+        "family fixed.",
+        "95 % Wald intervals and p-values from the (penalised) information matrix; an "
+        f"effect is read as one when p < {regression.ALPHA:g} (the interval then excludes "
+        "1). \"No detectable effect\" is not \"no effect\": read the interval.",
+        "Left out of a fit, and said so: families in which the algorithm's trials all "
+        "succeed or all fail (they carry no information on the indicators once the family "
+        "has its own effect), indicators that are constant or a combination of the others "
+        "over the platforms fitted, trials without all four indicators. Separation (some "
+        "combination predicts every outcome) switches to Firth's penalised fit. Fewer than "
+        f"{regression.MIN_EVENTS_PER_COEF:g} successes or failures per coefficient: not "
+        "fitted.",
+        "The indicators are correlated over the platforms (table below): an effect can "
+        "only be told apart from the others' as far as the platforms vary independently "
+        "(VIF above 10: hardly).",
+    ]
+
+
 def _html(t: _Tables, facts, figures, spec_text: str, generated: str) -> str:
     e = html.escape
     parts = ["<!DOCTYPE html>", '<html lang="en">', "<head>", '<meta charset="utf-8">',
+             '<meta name="viewport" content="width=device-width, initial-scale=1">',
              "<title>FLYINGTRUST benchmark report</title>", f"<style>{_CSS}</style>",
              "</head>", "<body>", "<h1>FLYINGTRUST benchmark report</h1>",
              f'<p class="note">Generated {e(generated)} by ft_sitl.missions.report.</p>',
-             "<h2>Run</h2>", _html_table(("", ""), facts, "facts"),
+             "<h2>Run</h2>", _html_table(None, facts, "facts"),
              "<h2>Composite score</h2>", _html_table(*_score_rows(t), "scores")]
     parts.append("<ul class=\"note\">" + "".join(f"<li>{e(n)}</li>" for n in _method_notes(t))
                  + "</ul>")
@@ -610,8 +812,22 @@ def _html(t: _Tables, facts, figures, spec_text: str, generated: str) -> str:
                      f'src="data:image/png;base64,{b64}">'
                      f"<figcaption><b>{e(name)}</b>: {e(caption)}</figcaption></figure>")
     parts += ["<h2>Success per scenario family</h2>",
-              '<p class="note">rate [95 % CI] (trials), pooled over platforms.</p>',
+              '<p class="note">rate (successes/trials), 95 % percentile-bootstrap and Wilson '
+              "intervals, pooled over platforms.</p>",
               _html_table(*_family_rows(t), "families"),
+              "<h2>Success against the indicators (logistic regression)</h2>",
+              "<ul class=\"note\">" + "".join(f"<li>{e(n)}</li>" for n in _regression_notes())
+              + "</ul>",
+              "<h3>Readings</h3>", "<ul class=\"readings\">"]
+    for algo, lines in _readings(t):
+        parts.append(f"<li><b>{e(algo)}</b><ul>"
+                     + "".join(f"<li>{e(x)}</li>" for x in lines) + "</ul></li>")
+    parts += ["</ul>", "<h3>Fits</h3>", _html_table(*_fit_rows(t), "fits"),
+              "<h3>Coefficients</h3>", _html_table(*_coefficient_rows(t), "coefficients"),
+              "<h3>Collinearity of the predictors over the platforms</h3>",
+              '<p class="note">Pearson correlations (one point per platform) and variance '
+              "inflation factors.</p>",
+              _html_table(*_collinearity_rows(t), "collinearity"),
               "<h2>Exit reasons</h2>", _html_table(*_failure_rows(t), "failures"),
               "<h2>Metrics of successful trials (median)</h2>",
               _html_table(*_metric_rows(t), "metrics"),
@@ -622,12 +838,26 @@ def _html(t: _Tables, facts, figures, spec_text: str, generated: str) -> str:
 
 def _markdown(t: _Tables, facts, figures, spec_text: str, generated: str) -> str:
     lines = ["# FLYINGTRUST benchmark report", "", f"Generated {generated}.", "", "## Run",
-             "", _md_table(("", ""), facts), "", "## Composite score", "",
-             _md_table(*_score_rows(t)), ""]
+             ""]
+    lines += [f"- **{k}**: {v}" for k, v in facts]
+    lines += ["", "## Composite score", "", _md_table(*_score_rows(t)), ""]
     lines += [f"- {n}" for n in _method_notes(t)]
     lines += ["", "## Success per scenario family", "",
-              "rate [95 % CI] (trials), pooled over platforms.", "",
-              _md_table(*_family_rows(t)), "", "## Exit reasons", "",
+              "rate (successes/trials), 95 % percentile-bootstrap and Wilson intervals, "
+              "pooled over platforms.", "",
+              _md_table(*_family_rows(t)), "",
+              "## Success against the indicators (logistic regression)", ""]
+    lines += [f"- {n}" for n in _regression_notes()]
+    lines += ["", "### Readings", ""]
+    for algo, readings in _readings(t):
+        lines.append(f"- **{algo}**")
+        lines += [f"  - {x}" for x in readings]
+    lines += ["", "### Fits", "", _md_table(*_fit_rows(t)), "", "### Coefficients", "",
+              _md_table(*_coefficient_rows(t)), "",
+              "### Collinearity of the predictors over the platforms", "",
+              "Pearson correlations (one point per platform) and variance inflation factors.",
+              "", _md_table(*_collinearity_rows(t)), "",
+              "## Exit reasons", "",
               _md_table(*_failure_rows(t)), "", "## Metrics of successful trials (median)", "",
               _md_table(*_metric_rows(t)), "", "## Figures", ""]
     for name, caption, _ in figures:

@@ -5,7 +5,8 @@ trial):
 
 * :func:`success_table` -- success rate per group (by default per algorithm, scenario
   family and platform: the paper's ``S_{a,s,m}``) with a seeded percentile-bootstrap
-  confidence interval (Sec. IV-B: 95 %, B = 1000).
+  confidence interval (Sec. IV-B: 95 %, B = 1000) and, next to it, the Wilson score
+  interval (:func:`wilson_interval`), which stays informative for small groups.
 * :func:`composite_score` -- the weighted score, weighted variance, normalised variance
   and variance-penalised final score per algorithm (Sec. III-C, eqs. 12-19), with the
   missing-scenario renormalisation and a ``comparable`` flag.
@@ -34,6 +35,7 @@ from numbers import Real
 
 import numpy as np
 import pandas as pd
+from scipy.stats import binomtest
 
 from ft_sitl.missions.results import REASONS
 from ft_sitl.physics.catalog import catalog
@@ -101,10 +103,25 @@ def bootstrap_interval(n: int, successes: int, *, B: int, ci: float,
     return float(lo), float(hi)
 
 
+def wilson_interval(n: int, successes: int, *, ci: float = 0.95) -> tuple[float, float]:
+    """Wilson score interval of the success rate of ``n`` Bernoulli trials with
+    ``successes`` successes (scipy's ``binomtest(...).proportion_ci(method="wilson")``).
+
+    Unlike the percentile bootstrap it does not collapse for an all-success or
+    all-failure group: 10/10 gives [0.72, 1], not [1, 1]."""
+    if n <= 0:
+        raise ValueError(f"wilson_interval: n must be > 0, got {n}")
+    if not 0 <= successes <= n:
+        raise ValueError(f"wilson_interval: successes must be in [0, {n}], got {successes}")
+    interval = binomtest(int(successes), int(n)).proportion_ci(confidence_level=float(ci),
+                                                               method="wilson")
+    return float(interval.low), float(interval.high)
+
+
 # --------------------------------------------------------------------------- success
 def success_table(df: pd.DataFrame, by=CELL, *, B: int = 1000, seed: int = 0,
                   ci: float = 0.95) -> pd.DataFrame:
-    """Success rate and bootstrap confidence interval per group of trials.
+    """Success rate, bootstrap and Wilson confidence intervals per group of trials.
 
     ``by`` is any tuple of columns of the results table: the default is the paper's cell
     (algorithm, family, platform); ``("algorithm", "family")`` pools the platforms of each
@@ -112,9 +129,10 @@ def success_table(df: pd.DataFrame, by=CELL, *, B: int = 1000, seed: int = 0,
     trials of the group are taken together (rate = successes / n), resampled as one sample.
 
     Returns one row per group present in ``df`` (sorted by ``by``), with the ``by``
-    columns, ``n`` (trials), ``successes``, ``rate``, ``ci_lo`` and ``ci_hi``. ``B``
-    resamples, seeded by ``seed`` (see the module docstring: same seed, same intervals;
-    each group's interval is independent of the rest of the table).
+    columns, ``n`` (trials), ``successes``, ``rate``, ``ci_lo`` and ``ci_hi`` (the
+    percentile bootstrap: ``B`` resamples, seeded by ``seed``; see the module docstring:
+    same seed, same intervals; each group's interval is independent of the rest of the
+    table), and ``wilson_lo``, ``wilson_hi`` (:func:`wilson_interval`, no resampling).
     """
     by = _as_by(by)
     _require_columns(df, (*by, "success"), "success_table")
@@ -136,14 +154,16 @@ def success_table(df: pd.DataFrame, by=CELL, *, B: int = 1000, seed: int = 0,
     out["n"] = out["n"].astype(int)
     out["successes"] = out["successes"].astype(int)
     out["rate"] = out["successes"] / out["n"]
-    lo = np.empty(len(out))
-    hi = np.empty(len(out))
+    lo, hi, w_lo, w_hi = (np.empty(len(out)) for _ in range(4))
     keys = out[list(by)].itertuples(index=False, name=None)
     for i, (key, n, k) in enumerate(zip(keys, out["n"], out["successes"], strict=True)):
         lo[i], hi[i] = bootstrap_interval(int(n), int(k), B=int(B), ci=float(ci),
                                           rng=_group_seed(int(seed), by, key))
+        w_lo[i], w_hi[i] = wilson_interval(int(n), int(k), ci=float(ci))
     out["ci_lo"] = lo
     out["ci_hi"] = hi
+    out["wilson_lo"] = w_lo
+    out["wilson_hi"] = w_hi
     for c in by:
         if isinstance(df[c].dtype, pd.CategoricalDtype):
             out[c] = out[c].cat.remove_unused_categories()

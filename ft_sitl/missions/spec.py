@@ -235,6 +235,15 @@ def check_gains(name) -> str:
     return name
 
 
+def vehicle_half_span_m(protocol: int, platform: Platform) -> float:
+    """The vehicle's horizontal half size in a trial of this protocol version (m): what
+    its collision check takes to be the vehicle, seen from above. From protocol 5
+    (``vehicle_body``) the body's half span; before, its collision sphere's radius."""
+    if PROTOCOLS[check_protocol(protocol)].vehicle_body:
+        return platform.body().half_span_m
+    return platform.collision_radius_m
+
+
 def platform_for(spec: TrialSpec) -> Platform:
     """The spec's platform: its stored physical fields, else the catalog entry."""
     if spec.platform_def is not None:

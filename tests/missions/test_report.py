@@ -11,14 +11,14 @@ import matplotlib.image
 import numpy as np
 import pytest
 
-from ft_sitl.missions import scoring
+from ft_sitl.missions import regression, scoring
 from ft_sitl.missions.report import platform_grid_layout, write_report
 from ft_sitl.missions.results import COLUMNS, REASONS, to_frame
 from ft_sitl.physics.catalog import catalog
 from ft_sitl.scenarios.families import CATEGORY, FAMILIES
 
-FIGURES = ("success_by_family", "success_vs_indicators", "platform_grid", "composite_score",
-           "failures_by_algorithm", "failures_by_family")
+FIGURES = ("success_by_family", "success_vs_indicators", "success_partial_dependence",
+           "platform_grid", "composite_score", "failures_by_algorithm", "failures_by_family")
 META = {"code_version": "0.1.0+g1234abc", "machine": {"cpu_model": "Test CPU 9000",
                                                       "n_cpus": 8},
         "started_utc": "2026-01-02T03:04:05Z", "finished_utc": "2026-01-02T03:06:05Z",
@@ -259,3 +259,118 @@ def test_full_catalog_campaign_report_has_every_file_and_a_36_platform_grid(tmp_
     assert "2520" in " ".join(page.tables["facts"])
     # the 6 x 6 grid of platforms: a tall figure
     assert matplotlib.image.imread(paths["platform_grid.png"]).shape[0] > 800
+
+
+# --------------------------------------------------------------------------- issue 20
+def test_family_table_shows_successes_bootstrap_and_wilson_intervals(campaign):
+    df, _, paths, _ = campaign
+    families = " ".join(_parse(paths["report.html"]).tables["families"])
+    md = paths["summary.md"].read_text(encoding="utf-8")
+    fam = scoring.success_table(df, ("algorithm", "family"))
+    for r in fam.itertuples(index=False):
+        lines = (f"{r.rate:.2f} ({r.successes}/{r.n})", f"boot [{r.ci_lo:.2f}, {r.ci_hi:.2f}]",
+                 f"Wilson [{r.wilson_lo:.2f}, {r.wilson_hi:.2f}]")
+        for text in lines:
+            assert text in families
+        assert "<br>".join(lines) in md
+
+
+def test_run_facts_have_no_empty_header_row(campaign):
+    _, _, paths, _ = campaign
+    html_text = paths["report.html"].read_text(encoding="utf-8")
+    start = html_text.index('<table class="facts">')
+    facts = html_text[start:html_text.index("</table>", start)]
+    assert "<thead>" not in facts and '<tr><th scope="row">code version</th>' in facts
+    md = paths["summary.md"].read_text(encoding="utf-8")
+    assert "- **code version**: 0.1.0+g1234abc" in md and "|  |  |" not in md
+
+
+def test_regression_section_reads_each_algorithms_fit(campaign):
+    df, _, paths, _ = campaign
+    page = _parse(paths["report.html"])
+    md = paths["summary.md"].read_text(encoding="utf-8")
+    fits = regression.fit_success_models(df)
+    coefs = regression.coefficient_table(fits)
+    assert len(coefs) == 2 * 4 and set(coefs["algorithm"]) == {"ego", "straight"}
+    text = " ".join(page.text)
+    for r in coefs.itertuples(index=False):
+        assert r.reading in text and f"  - {r.reading}" in md
+        if math.isfinite(r.p):
+            row = f"| {r.algorithm} | {r.indicator} | {r.per} | {r.coef:+.2f} ({r.se:.2f}) |"
+            assert row in md
+    fit_table = " ".join(page.tables["fits"])
+    for f in fits:
+        assert f"{f.n_rows} ({f.n_successes})" in fit_table
+    col = regression.collinearity(df)
+    collinear = " ".join(page.tables["collinearity"])
+    for name in ("TWR_max", "log2 alpha_xy,max", "footprint", "mass (not in the fit)"):
+        assert name in collinear
+    assert f"{col.loc['TWR_max', 'VIF']:.1f}" in collinear
+
+
+def test_regression_degenerate_cases_are_said_in_the_report(tmp_path):
+    # one algorithm that always fails, one whose forest trials all succeed
+    rows = _rows(["a", "b"], _real_platforms(6), ["forest", "maze", "perlin"], 3, seed=4)
+    for r in rows:
+        if r["algorithm"] == "a" or (r["algorithm"] == "b" and r["family"] == "forest"):
+            ok = r["algorithm"] == "b"
+            r.update(success=ok, reason="success" if ok else "timeout")
+    paths = write_report(to_frame(rows), tmp_path, campaign_spec={}, meta={})
+    page = _parse(paths["report.html"])
+    fits = " ".join(page.tables["fits"])
+    assert "no family with both successes and failures: nothing to fit" in fits
+    assert "Forest (all 18 fail)" in fits and "Forest (all 18 succeed)" in fits
+    assert "not fitted" in fits
+    assert "not fitted (no family with both successes and failures" in " ".join(page.text)
+
+
+def test_heatmap_cells_show_successes_trials_and_wilson_interval(campaign):
+    df, _, paths, _ = campaign
+    svg = paths["heatmap_ego.svg"].read_text(encoding="utf-8")
+    cells = scoring.success_table(df)
+    ego = cells[cells["algorithm"] == "ego"]
+    assert len(ego) == 6 * 7
+    for r in ego.itertuples(index=False):
+        assert f"{r.successes}/{r.n}" in svg
+        assert f"[{r.wilson_lo:.2f}, {r.wilson_hi:.2f}]" in svg
+
+
+def test_success_by_family_marks_zero_rates_and_missing_families(tmp_path):
+    rows = _rows(["a", "b"], _real_platforms(2), ["forest", "perlin"], 2, seed=1)
+    for r in rows:   # a fails every perlin trial; b never ran forest
+        if r["algorithm"] == "a" and r["family"] == "perlin":
+            r.update(success=False, reason="collision")
+    rows = [r for r in rows if not (r["algorithm"] == "b" and r["family"] == "forest")]
+    paths = write_report(to_frame(rows), tmp_path, campaign_spec={}, meta={})
+    svg = paths["success_by_family.svg"].read_text(encoding="utf-8")
+    assert "rate 0" in svg and "no trials (n/a)" in svg and "n/a" in svg
+    # a table without zeros or gaps has neither legend entry
+    full = _rows(["a"], _real_platforms(2), ["forest"], 4, seed=0)
+    for r in full:
+        r.update(success=True, reason="success")
+    svg = write_report(to_frame(full), tmp_path / "full", campaign_spec={},
+                       meta={})["success_by_family.svg"].read_text(encoding="utf-8")
+    assert "rate 0" not in svg and "n/a" not in svg
+
+
+def test_nothing_in_any_figure_is_cut_off_by_its_edge(campaign):
+    """The bounding box of everything a figure draws (labels, titles, tick labels, legend,
+    cell values) lies inside the figure: a heatmap's long y label used to run past the
+    top and bottom edges."""
+    from matplotlib import rc_context
+    from matplotlib.backends.backend_agg import FigureCanvasAgg
+
+    from ft_sitl.missions import report
+
+    df, *_ = campaign
+    t = report._Tables(df, 50, 0)
+    with rc_context(report._RC):
+        for name, _, make in report._figures(t):
+            fig = make(t)
+            canvas = FigureCanvasAgg(fig)
+            canvas.draw()
+            drawn = fig.get_tightbbox(canvas.get_renderer())   # inches
+            w, h = fig.get_size_inches()
+            eps = 1.0 / report._DPI
+            assert (drawn.x0 >= -eps and drawn.y0 >= -eps and drawn.x1 <= w + eps
+                    and drawn.y1 <= h + eps), (name, drawn, (w, h))

@@ -108,6 +108,47 @@ def test_other_groupings_pool_the_trials():
     assert row.ci_lo < 27 / 60 < row.ci_hi
 
 
+# --------------------------------------------------------------------------- Wilson
+def _wilson_by_hand(n, k, z=1.959963984540054):
+    """The Wilson score interval written out (Wilson 1927; Agresti & Coull 1998, eq. 2)."""
+    p = k / n
+    centre = (p + z * z / (2 * n)) / (1 + z * z / n)
+    half = z / (1 + z * z / n) * math.sqrt(p * (1 - p) / n + z * z / (4 * n * n))
+    return centre - half, centre + half
+
+
+@pytest.mark.parametrize("n,k", [(10, 10), (10, 0), (10, 3), (1, 1), (36, 19), (200, 101)])
+def test_wilson_interval_is_the_score_interval(n, k):
+    lo, hi = scoring.wilson_interval(n, k)
+    assert (lo, hi) == pytest.approx(_wilson_by_hand(n, k), abs=1e-12)
+    assert 0.0 <= lo <= k / n <= hi <= 1.0
+
+
+def test_wilson_does_not_collapse_where_the_bootstrap_does():
+    # 10/10 and 0/10: the bootstrap interval is a point, the Wilson interval is not
+    df = _table({("a", "forest", "R"): [True] * 10, ("a", "forest", "V"): [False] * 10,
+                 ("a", "maze", "R"): [True] * 3 + [False] * 7})
+    st = scoring.success_table(df).set_index(["family", "platform"])
+    full = st.loc[("forest", "R")]
+    assert (full["ci_lo"], full["ci_hi"]) == (1.0, 1.0)
+    assert full["wilson_lo"] == pytest.approx(10 / (10 + 1.959963984540054 ** 2))
+    assert full["wilson_hi"] == 1.0
+    none = st.loc[("forest", "V")]
+    assert none["wilson_lo"] == 0.0 and none["wilson_hi"] == pytest.approx(1 - full["wilson_lo"])
+    mixed = st.loc[("maze", "R")]
+    assert (mixed["wilson_lo"], mixed["wilson_hi"]) == pytest.approx(_wilson_by_hand(10, 3))
+    # a wider confidence level gives a wider interval
+    wide = scoring.success_table(df, ci=0.99).set_index(["family", "platform"])
+    assert wide.loc[("maze", "R"), "wilson_lo"] < mixed["wilson_lo"]
+    assert wide.loc[("maze", "R"), "wilson_hi"] > mixed["wilson_hi"]
+
+
+@pytest.mark.parametrize("n,k", [(0, 0), (5, 6), (5, -1)])
+def test_wilson_interval_rejects_impossible_counts(n, k):
+    with pytest.raises(ValueError, match="wilson_interval"):
+        scoring.wilson_interval(n, k)
+
+
 @pytest.mark.parametrize("kwargs,match", [
     ({"B": 0}, "B must be a positive integer"),
     ({"ci": 1.5}, "ci must be a number in"),

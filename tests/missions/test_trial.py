@@ -777,6 +777,24 @@ def test_navrl_shield_takes_the_footprint_as_its_agent_radius():
     assert in_vo(0.0) is False and in_vo(0.4) is True
 
 
+def test_the_vehicles_half_span_is_its_bodys_from_protocol_5_its_spheres_before():
+    """The size a trial's collision check takes the vehicle to be, seen from above (what
+    the campaign report regresses success on): the body's half span under 5, the collision
+    radius under 1-4; a version this code does not fly is refused."""
+    from ft_sitl.missions.spec import vehicle_half_span_m
+
+    big = platform_for(TrialSpec("fast", "4.50kg-UAV 14", "forest"))
+    small = platform_for(TrialSpec("fast", PLATFORM, "forest"))
+    for p in (big, small):
+        for protocol in (1, 2, 3, 4):
+            assert vehicle_half_span_m(protocol, p) == p.collision_radius_m
+        assert vehicle_half_span_m(5, p) == p.body().half_span_m
+        assert p.body().half_span_m != p.collision_radius_m
+    assert vehicle_half_span_m(5, big) > vehicle_half_span_m(5, small)
+    with pytest.raises(TrialSpecError, match="version 99"):
+        vehicle_half_span_m(99, big)
+
+
 def test_protocol_5_flies_the_vehicle_body_and_tells_its_half_span():
     """Protocol 5: the guard checks the body (central box and rotor disks) inside the
     bounding sphere, the row's clearance is the body's, and the footprint a navigator
