@@ -242,6 +242,9 @@ class CollisionGuard:
         self.handler: Callable[[GuardEvent], None] | None = None
         self.events: list[GuardEvent] = []
         self.crashed = [False] * len(self.radii)
+        #: per vehicle, the last exact clearance() and the pose it was measured at
+        #: (clearance, position, attitude quaternion), or None
+        self._measured: list = [None] * len(self.radii)
         self.queries = 0  # exact (fcl) steps resolved
         self.trips = 0
         self._margin = CollisionMonitor(world).margin_m
@@ -288,6 +291,7 @@ class CollisionGuard:
         """Forget vehicle i's history (after it was placed somewhere new)."""
         g = self.rows[i]
         g[:] = 0.0
+        self._measured[i] = None
         g[G_ON] = 1.0 if self.world._obj is not None else 0.0
         g[G_R] = self.radii[i]
         g[G_ANCHOR] = -math.inf
@@ -316,9 +320,12 @@ class CollisionGuard:
         p = self._sim.x[i, d.X_POS:d.X_POS + 3]
         probe = self.probes[i]
         if probe is None:
-            return self.world.clearance(p, self.radii[i], kinds=("obstacle",))
-        c = self.world.body_distance(probe, p.copy(), self._rot(i))
-        return c if c > self.world.contact_tol else min(c, 0.0)
+            c = self.world.clearance(p, self.radii[i], kinds=("obstacle",))
+        else:
+            c = self.world.body_distance(probe, p.copy(), self._rot(i))
+            c = c if c > self.world.contact_tol else min(c, 0.0)
+        self._measured[i] = (c, p.copy(), self._sim.x[i, d.X_QUAT:d.X_QUAT + 4].copy())
+        return c
 
     def _rot(self, i: int) -> np.ndarray:
         return matrix_from_quat(self._sim.x[i, d.X_QUAT:d.X_QUAT + 4], name="attitude")
@@ -464,10 +471,24 @@ class CollisionGuard:
 
     def clearance_bound(self, i: int) -> float:
         """A lower bound (m) of vehicle i's obstacle clearance now, from the guard's
-        anchor (no query; -inf when unknown)."""
+        anchor and the last :meth:`clearance` (no query; -inf when unknown)."""
         g = self.rows[i]
-        p = self._sim.x[i, d.X_POS:d.X_POS + 3]
+        x = self._sim.x[i]
+        p = x[d.X_POS:d.X_POS + 3]
         if g[G_BMODE] > 0.0:
-            return float(g[G_ANCHOR] - body_motion_bound(g, self._sim.x[i], p[0], p[1], p[2]))
-        r = p - g[G_OX:G_OZ + 1]
-        return float(g[G_ANCHOR] - math.sqrt(r.dot(r)))  # np.linalg.norm's arithmetic
+            bound = float(g[G_ANCHOR] - body_motion_bound(g, x, p[0], p[1], p[2]))
+        else:
+            r = p - g[G_OX:G_OZ + 1]
+            bound = float(g[G_ANCHOR] - math.sqrt(r.dot(r)))  # np.linalg.norm's arithmetic
+        # the last exact clearance less how far any point of the vehicle has moved since
+        # (the guard's anchor in sphere mode is the bounding sphere's, far below the
+        # body's clearance); a nanometre of margin for fcl's rounding
+        m = self._measured[i]
+        if m is not None and math.isfinite(m[0]):
+            c0, p0, q0 = m
+            moved = float(np.linalg.norm(p - p0))
+            if self.probes[i] is not None:
+                dot = min(1.0, abs(float(q0 @ x[d.X_QUAT:d.X_QUAT + 4])))
+                moved += 2.0 * self.radii[i] * math.sqrt(max(0.0, 1.0 - dot * dot))
+            bound = max(bound, c0 - moved - 1e-9)
+        return bound

@@ -179,3 +179,30 @@ def test_body_rules_scale_with_the_arm():
     assert big.box.size == pytest.approx([3 * s for s in small.box.size])
     with pytest.raises(ValueError, match="smaller than its body's bounding radius"):
         CollisionGuard(wall()[0], [0.1], bodies=[small])
+
+
+def test_the_clearance_bound_holds_the_last_measurement_less_any_body_points_motion():
+    """After an exact clearance the bound is that clearance less how far any point of the
+    body can have moved since (translation plus the bounding radius's chord of the
+    rotation): at the measured pose it is the measurement, and it never exceeds the exact
+    clearance along a flight that yaws past a wall."""
+    p = get_platform(PLATFORM)
+    b = p.body()
+    world, grid = wall()
+    sim = Simulation([p])
+    sim.start_hovering(0, [3.6, -4.0, 2.0], yaw=math.pi / 2)
+    guard = CollisionGuard(world, [b.bounding_radius_m], grid=grid, bodies=[b])
+    sim.attach_guard(guard)
+    c = guard.clearance(0)
+    assert guard.clearance_bound(0) == pytest.approx(c, abs=1e-8)
+    sim.set_setpoint(0, Setpoint.trajectory(velocity=[0.0, 1.0, 0.0],
+                                            position=[3.6, math.nan, 2.0], yaw=math.pi))
+    gains = []
+    for _ in range(40):
+        sim.run(0.05)
+        bound = guard.clearance_bound(0)
+        exact = guard.clearance(0)  # (and measures anew)
+        assert bound <= exact + 1e-9
+        gains.append(bound)
+    # the bound tracks the vehicle (it is not the sphere anchor's -inf or a constant)
+    assert max(gains) > 0.0 and len(set(gains)) > 10
