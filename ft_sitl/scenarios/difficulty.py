@@ -435,3 +435,26 @@ def markdown_row(d: Difficulty) -> str:
 def markdown_table(results) -> str:
     """A Markdown table of configurations, one row each (docs/scenarios.md)."""
     return "\n".join([MARKDOWN_HEADER, *(markdown_row(d) for d in results)])
+
+
+def markdown_summary(by_family: dict) -> str:
+    """A Markdown table of each family's ranges (:func:`summarise`) over its
+    configurations: ``by_family`` maps a family name to its :class:`Difficulty` list."""
+    def span(pair, fmt, scale=None):
+        if pair is None:
+            return "-"
+        lo, hi = (format(v if scale is None else scale * v, fmt) for v in pair)
+        return lo if lo == hi else f"{lo} - {hi}"
+
+    lines = ["| family | in budget | path / line | turns | narrowest (m) | spare (m) | "
+             "obstacles | filled (%) | time (s) |",
+             "|---|---|---|---|---|---|---|---|---|"]
+    for family, results in by_family.items():
+        s = summarise(results)
+        lines.append(
+            f"| {family} | {s['flyable']} / {s['configurations']} | "
+            f"{span(s['path_ratio'], '.2f')} | {span(s['turns'], 'd')} | "
+            f"{span(s['passage_width_m'], '.2f')} | {span(s['passage_spare_m'], '.2f')} | "
+            f"{span(s['obstacle_count'], 'd')} | {span(s['occupied_fraction'], '.1f', 100)} | "
+            f"{span(s['time_s'], '.1f')} |")
+    return "\n".join(lines)
