@@ -113,7 +113,11 @@ def _measure(scenarios, args, what: str) -> list[Difficulty]:
         for make in scenarios:
             sc = make()
             bar.set_postfix_str(sc.name, refresh=False)
-            out.append(cached_difficulty(sc, platform, budget, cache))
+            try:
+                out.append(cached_difficulty(sc, platform, budget, cache))
+            except OSError as exc:
+                raise CliError(f"cannot write the difficulty cache in {cache}: {exc} "
+                               "(--no-cache measures without it)") from None
             bar.update()
     return out
 

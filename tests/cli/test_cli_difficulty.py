@@ -4,6 +4,7 @@ command line, its cache, and the options' errors."""
 import json
 
 import pytest
+import trimesh
 
 from ft_sitl.cli import main
 from ft_sitl.scenarios.families import build_scenario
@@ -104,3 +105,32 @@ def test_bad_option_values_are_refused_by_the_parser(capsys):
     with pytest.raises(SystemExit):
         main(["scenarios", "export", "maze", "--difficulty"])  # not an option of export
     assert "unrecognized arguments: --difficulty" in capsys.readouterr().err
+
+
+def test_a_scenario_without_a_path(capsys, cache, tmp_path):
+    """A wall across the whole area: no path for the body, said so, not in the budget."""
+    trimesh.creation.box(bounds=[[0.0, 9.0, 0.0], [20.0, 10.0, 6.0]]).export(
+        tmp_path / "wall.ply")
+    spec = tmp_path / "blocked.toml"
+    spec.write_text('name = "blocked"\nmesh = "wall.ply"\nstart = [10.0, 3.0, 2.0]\n'
+                    'goal = [10.0, 17.0, 2.0]\nbounds_min = [0.0, 0.0, 0.0]\n'
+                    'bounds_max = [20.0, 20.0, 4.0]\n')
+    rc, out, err = cli(capsys, "build", "--file", str(spec), "--difficulty", "--json")
+    assert rc == 0, err
+    d = json.loads(out)["difficulty"]
+    assert d["path_m"] is None and d["turns"] is None and d["time_s"] is None
+    assert d["flyable"] is False and d["obstacle_count"] == 1
+    assert d["occupied_fraction"] == pytest.approx(20 * 1 * 4 / (20 * 20 * 4))
+    rc, out, _ = cli(capsys, "build", "--file", str(spec), "--difficulty")
+    assert rc == 0 and "    no path found for the body" in out
+
+
+def test_an_unwritable_cache_is_a_clear_error(capsys, tmp_path, monkeypatch):
+    blocker = tmp_path / "not-a-dir"
+    blocker.write_text("")
+    monkeypatch.setenv("XDG_CACHE_HOME", str(blocker))  # the cache would go under a file
+    rc, out, err = cli(capsys, "build", "sudden_drop", "--difficulty")
+    assert (rc, out) == (2, "")
+    assert "cannot write the difficulty cache in" in err and "--no-cache" in err
+    rc, out, err = cli(capsys, "build", "sudden_drop", "--difficulty", "--no-cache")
+    assert rc == 0 and "flight time at best" in out
