@@ -301,16 +301,34 @@ def _add_scenarios(sub) -> None:
     src.add_argument("--index", type=int, help="configuration 1..10 (default: 1)")
     src.add_argument("--seed", type=int, help="random seed, >= 0 (default: 0)")
 
-    sl = ssub.add_parser("list", help="list the scenario families")
+    diff = argparse.ArgumentParser(add_help=False)
+    diff.add_argument("--difficulty", action="store_true",
+                      help="measure the difficulty for the largest platform's body: "
+                      "shortest path, narrowest passage, turns, obstacles, flight time "
+                      "(cached; docs/scenarios.md, 'Difficulty')")
+    diff.add_argument("--no-cache", action="store_true",
+                      help="with --difficulty: measure again, ignoring and not writing the "
+                      "cache")
+    diff_seed = argparse.ArgumentParser(add_help=False)
+    diff_seed.add_argument("--seed", type=int,
+                           help="with --difficulty: the configurations of this seed, >= 0 "
+                           "(default: 0)")
+
+    sl = ssub.add_parser("list", parents=[diff, diff_seed], help="list the scenario families",
+                         description="List the scenario families; --difficulty measures "
+                         "all 70 configurations (minutes the first time, then cached).")
     sl.add_argument("--json", action="store_true", help="machine-readable output")
     sl.set_defaults(handler="scenarios:cmd_scenarios_list")
-    ssh = ssub.add_parser("show", help="one family's generator parameters: default, unit, "
-                                       "range, meaning")
+    ssh = ssub.add_parser("show", parents=[diff, diff_seed],
+                          help="one family's generator parameters: default, unit, range, "
+                          "meaning", description="One family's generator parameters; "
+                          "--difficulty measures its 10 configurations.")
     ssh.add_argument("family", metavar="FAMILY",
                      help="family name, e.g. forest or the paper's Narrow-Gap")
     ssh.add_argument("--json", action="store_true", help="machine-readable output")
     ssh.set_defaults(handler="scenarios:cmd_scenarios_show")
-    sb = ssub.add_parser("build", parents=[src], help="build one scenario and summarise it",
+    sb = ssub.add_parser("build", parents=[src, diff],
+                         help="build one scenario and summarise it",
                          description="Build a scenario and print its summary.")
     sb.add_argument("--json", action="store_true", help="print Scenario.summary() as JSON")
     sb.set_defaults(handler="scenarios:cmd_scenarios_build")

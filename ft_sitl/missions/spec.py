@@ -16,6 +16,7 @@ from ft_sitl.autopilot.params import DEFAULT_GAINS, GAIN_MODES
 from ft_sitl.navigation.base import Limits
 from ft_sitl.physics.catalog import get_platform, platform_from_mapping
 from ft_sitl.physics.platform import Platform
+from ft_sitl.scenarios.difficulty import FlightBudget
 from ft_sitl.scenarios.families import describe_family
 from ft_sitl.scenarios.scenario import ScenarioError
 
@@ -92,6 +93,15 @@ PROTOCOLS = {
 }
 #: the version new trials and campaigns fly unless they name another
 PROTOCOL_VERSION = max(PROTOCOLS)
+
+
+def flight_budget() -> FlightBudget:
+    """What the current protocol gives a navigation: the default limits' top speed and
+    time limit, and the acceleration limit every planner plans with (scenario difficulty
+    times its routes under it; :mod:`ft_sitl.scenarios.difficulty`)."""
+    limits = Limits()
+    return FlightBudget(limits.max_speed_m_s, PROTOCOLS[PROTOCOL_VERSION].max_acc_m_s2,
+                        limits.timeout_s)
 
 
 class TrialSpecError(ValueError):

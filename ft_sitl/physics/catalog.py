@@ -144,6 +144,13 @@ def catalog() -> dict[str, Platform]:
     return {p.name: p for p, _ in _catalog_with_paper()}
 
 
+def largest_platform() -> Platform:
+    """The catalog platform whose body reaches farthest (largest bounding radius): every
+    scenario configuration must be solvable for its body (protocol 5), and scenario
+    difficulty is measured with it."""
+    return max(catalog().values(), key=lambda p: p.body().bounding_radius_m)
+
+
 def paper_values() -> dict[str, dict[str, float]]:
     """The values printed in the paper's Table 1, keyed by platform name."""
     return {p.name: dict(paper) for p, paper in _catalog_with_paper()}

@@ -11,7 +11,9 @@
 * a red arrow ending at the goal, pointing along the start -> goal direction, and (top
   view) the circle of ``goal_radius_m`` around the goal;
 * the straight start -> goal reference line in blue;
-* optionally a flown trajectory, an ``(N, 3)`` array of ENU positions, as a red curve.
+* optionally a flown trajectory, an ``(N, 3)`` array of ENU positions, as a red curve
+  (or any path: ``trajectory_label`` names it in the legend), and marked points, each a
+  magenta ring with its label in the legend.
 
 Drawing uses matplotlib's Agg canvas directly (no ``pyplot``, no window, no global figure
 registry), so it works headless and from worker processes. Most scenarios render in under
@@ -44,6 +46,7 @@ START_COLOR = "#00b400"
 GOAL_COLOR = "#e00000"
 LINE_COLOR = "#0046ff"
 TRAJECTORY_COLOR = GOAL_COLOR
+MARK_COLOR = "#d000d0"
 BOUNDS_COLOR = "#202020"
 
 _LIGHT = np.array([0.35, -0.75, 0.56])
@@ -169,6 +172,22 @@ def _check_views(views) -> tuple[str, ...]:
     return views
 
 
+def _check_marks(marks) -> list[tuple[np.ndarray, str]]:
+    out = []
+    for k, mark in enumerate(marks):
+        try:
+            point, label = mark
+            point = np.asarray(point, dtype=float)
+        except (TypeError, ValueError):
+            raise ValueError(f"marks[{k}]: needs (point [x, y, z], label), got "
+                             f"{mark!r}") from None
+        if point.shape != (3,) or not np.all(np.isfinite(point)):
+            raise ValueError(f"marks[{k}]: the point needs 3 finite numbers, got "
+                             f"{point.tolist()}")
+        out.append((point, str(label)))
+    return out
+
+
 def _goal_direction(scenario) -> np.ndarray:
     """Unit horizontal start -> goal direction (the start yaw when they coincide in xy)."""
     d = scenario.goal[:2] - scenario.start[:2]
@@ -203,7 +222,7 @@ def _height_fraction(z: np.ndarray, scenario) -> np.ndarray:
     return (z - scenario.floor) / max(top - scenario.floor, 1e-9)
 
 
-def _draw_top(ax, scenario, traj) -> None:
+def _draw_top(ax, scenario, traj, marks) -> None:
     # matplotlib: heavy, loaded only when plotting
     from matplotlib.collections import PolyCollection
     from matplotlib.patches import Circle, Rectangle
@@ -226,6 +245,9 @@ def _draw_top(ax, scenario, traj) -> None:
     ax.plot([s[0], g[0]], [s[1], g[1]], color=LINE_COLOR, linewidth=1.8, zorder=3)
     if traj is not None:
         ax.plot(traj[:, 0], traj[:, 1], color=TRAJECTORY_COLOR, linewidth=1.6, zorder=4)
+    for point, _ in marks:
+        ax.plot(point[0], point[1], marker="o", markersize=11, markerfacecolor="none",
+                markeredgecolor=MARK_COLOR, markeredgewidth=2.2, zorder=6)
     ax.add_patch(Circle(tuple(g[:2]), scenario.goal_radius_m, fill=False,
                         edgecolor=GOAL_COLOR, linestyle="--", linewidth=1.2, zorder=4))
     length = _arrow_length(scenario)
@@ -253,7 +275,7 @@ def _box_edges(lo, hi):
     return [(c[a], c[b]) for a, b in pairs]
 
 
-def _draw_perspective(ax, scenario, traj, max_faces: int) -> None:
+def _draw_perspective(ax, scenario, traj, marks, max_faces: int) -> None:
     # matplotlib: heavy, loaded only when plotting
     from matplotlib.ticker import MaxNLocator
     from mpl_toolkits.mplot3d.art3d import Poly3DCollection
@@ -287,6 +309,10 @@ def _draw_perspective(ax, scenario, traj, max_faces: int) -> None:
                 zorder=4)
         zlo = min(zlo, float(traj[:, 2].min()))
         zhi = max(zhi, float(traj[:, 2].max()))
+    for point, _ in marks:
+        ax.plot([point[0]], [point[1]], [point[2]], marker="o", markersize=11,
+                markerfacecolor="none", markeredgecolor=MARK_COLOR, markeredgewidth=2.2,
+                zorder=6)
     length = _arrow_length(scenario)
     yaw = np.array([math.cos(scenario.start_yaw), math.sin(scenario.start_yaw), 0.0])
     d = np.append(_goal_direction(scenario), 0.0)
@@ -311,7 +337,7 @@ def _draw_perspective(ax, scenario, traj, max_faces: int) -> None:
     ax.set_title(title, fontsize=10)
 
 
-def _legend(fig, traj) -> None:
+def _legend(fig, traj, trajectory_label: str, marks) -> None:
     # matplotlib: heavy, loaded only when plotting
     from matplotlib.lines import Line2D
     from matplotlib.patches import Patch
@@ -323,7 +349,11 @@ def _legend(fig, traj) -> None:
     ]
     if traj is not None:
         handles.append(Line2D([], [], color=TRAJECTORY_COLOR, linewidth=1.6,
-                              label="trajectory"))
+                              label=trajectory_label))
+    for _, label in marks:
+        handles.append(Line2D([], [], linestyle="none", marker="o", markersize=8,
+                              markerfacecolor="none", markeredgecolor=MARK_COLOR,
+                              markeredgewidth=2, label=label))
     handles.append(Patch(facecolor="0.55", label="obstacles (darker: taller)"))
     fig.legend(handles=handles, loc="lower center", ncol=len(handles), fontsize=8,
                frameon=False)
@@ -331,10 +361,13 @@ def _legend(fig, traj) -> None:
 
 def render_scenario(scenario, path=None, *, trajectory=None,
                     views: Sequence[str] = VIEWS, dpi: float = DEFAULT_DPI,
-                    title: str | None = None):
+                    title: str | None = None, trajectory_label: str = "trajectory",
+                    marks: Sequence[tuple[Sequence[float], str]] = ()):
     """Draw ``scenario`` (top and/or perspective view); save a PNG at ``path`` if given.
 
-    ``trajectory`` is an optional ``(N, 3)`` array of ENU positions (m), drawn in red.
+    ``trajectory`` is an optional ``(N, 3)`` array of ENU positions (m), drawn in red and
+    called ``trajectory_label`` in the legend. ``marks`` are ``(point, label)`` pairs: an
+    ENU point (m) ringed in magenta, its label in the legend.
     ``views`` is a non-empty subset of :data:`VIEWS`, drawn left to right in that order.
     ``title`` replaces the default ``"<name>: <paper family name>, <category>"``.
     Returns the :class:`matplotlib.figure.Figure` (on an Agg canvas); the PNG is saved
@@ -347,6 +380,7 @@ def render_scenario(scenario, path=None, *, trajectory=None,
 
     traj = _check_trajectory(trajectory)
     views = _check_views(views)
+    marks = _check_marks(marks)
     lo, hi = DPI_RANGE
     if not (isinstance(dpi, (int, float)) and math.isfinite(dpi) and lo <= dpi <= hi):
         raise ValueError(f"dpi: {dpi!r} must be a number within {lo}..{hi}")
@@ -355,15 +389,15 @@ def render_scenario(scenario, path=None, *, trajectory=None,
     for k, view in enumerate(views):
         if view == "top":
             ax = fig.add_subplot(1, len(views), k + 1)
-            _draw_top(ax, scenario, traj)
+            _draw_top(ax, scenario, traj, marks)
         else:
             # annotations are drawn over the obstacles, as in the paper's figure, rather
             # than depth-sorted with them (mplot3d sorts whole artists, not pixels)
             ax = fig.add_subplot(1, len(views), k + 1, projection="3d",
                                  computed_zorder=False)
-            _draw_perspective(ax, scenario, traj, MAX_FACES_3D)
+            _draw_perspective(ax, scenario, traj, marks, MAX_FACES_3D)
         ax.set_label(view)
-    _legend(fig, traj)
+    _legend(fig, traj, trajectory_label, marks)
     fig.suptitle(title if title is not None else
                  f"{scenario.name}: {_family_label(scenario)}", fontsize=12)
     fig.subplots_adjust(left=0.06, right=0.97, bottom=0.12, top=0.9, wspace=0.15)

@@ -13,7 +13,7 @@ import pytest
 import trimesh
 
 from ft_sitl import __version__
-from ft_sitl.physics.catalog import catalog
+from ft_sitl.physics.catalog import catalog, largest_platform
 from ft_sitl.rotations import matrix_from_quat
 from ft_sitl.scenarios.collision import BodyProbe, CollisionWorld
 from ft_sitl.scenarios.families import (
@@ -122,7 +122,7 @@ def test_solvable_for_the_largest_body_at_the_start_yaw(family, index):
     """Protocol 5's vehicle is its body: the largest platform's, held level at the start
     yaw, has a path; an exact fcl check of the body along it confirms the grid."""
     sc = built(family, index)
-    big = max(catalog().values(), key=lambda p: p.body().bounding_radius_m)
+    big = largest_platform()
     found = body_path(sc, big.body(), yaws_deg=(0.0,))
     assert found is not None, f"{sc.name}: no path for {big.name}'s body"
     path, yaw = found
@@ -139,7 +139,7 @@ def test_narrow_gap_needs_the_largest_body_along_the_passage():
     """An X frame is 2.56 d wide across its nose and 3.15 d along its arms: the largest
     platform (d = 0.2956 m) passes a 0.85 m gap nose first and not yawed 45 degrees."""
     sc = built("narrow_gap", 1)
-    big = max(catalog().values(), key=lambda p: p.body().bounding_radius_m)
+    big = largest_platform()
     assert body_path(sc, big.body(), yaws_deg=(0.0,)) is not None
     assert body_path(sc, big.body(), yaws_deg=(45.0,)) is None
 

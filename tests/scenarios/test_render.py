@@ -12,6 +12,7 @@ from ft_sitl.scenarios.families import build_scenario
 from ft_sitl.scenarios.render import (
     GOAL_COLOR,
     LINE_COLOR,
+    MARK_COLOR,
     START_COLOR,
     load_trajectory,
     render_scenario,
@@ -101,6 +102,28 @@ def test_forest_with_trajectory_shows_start_goal_line_and_path(forest, tmp_path)
     region = _axes_region(fig, persp, img)
     for color in (START_COLOR, GOAL_COLOR, LINE_COLOR):
         assert _near(region, color).sum() > 20, color
+
+
+def test_marks_and_the_path_label(forest, tmp_path):
+    path = tmp_path / "marked.png"
+    point = (30.0, 20.0, 1.5)  # a clear spot east of the line
+    fig = render_scenario(forest, path, trajectory=_detour(forest), dpi=100,
+                          trajectory_label="shortest path", marks=[(point, "narrowest")])
+    labels = [t.get_text() for t in fig.legends[0].get_texts()]
+    assert "shortest path" in labels and "narrowest" in labels and "trajectory" not in labels
+    img = _load(path)
+    top, persp = fig.axes[:2]
+    ring = _window(img, _pixel(fig, top, *point[:2]), half=8)
+    assert _near(ring, MARK_COLOR).sum() > 10
+    assert _near(_axes_region(fig, persp, img), MARK_COLOR).sum() > 10
+    without = tmp_path / "plain.png"
+    render_scenario(forest, without, dpi=100)
+    assert not _near(_load(without), MARK_COLOR).any()
+    for bad, message in [([((1.0, 2.0), "x")], r"marks\[0\]: the point needs 3 finite"),
+                         ([(1.0, 2.0, 3.0)], r"marks\[0\]: needs \(point"),
+                         ([((0.0, np.nan, 1.0), "x")], "3 finite numbers")]:
+        with pytest.raises(ValueError, match=message):
+            render_scenario(forest, marks=bad)
 
 
 def test_top_view_fills_obstacle_footprints(tmp_path):
