@@ -239,9 +239,9 @@ def test_sudden_drop():
         assert path[:, 2].min() < 1.5 - R_MAX  # the vehicle has to drop below the blocks
 
 
-def test_maze():
+def test_maze_version_1():
     for i in INDICES:
-        sc = built("maze", i)
+        sc = build_scenario("maze", i, version=1)
         p = sc.provenance
         assert p["parameters"]["corridor_width_m"] >= 2.0
         assert p["layout"]["dead_ends"] > 0
