@@ -517,7 +517,7 @@ def test_spec_round_trips_through_dict_and_json():
 
 def test_trial_id_is_stable():
     spec = TrialSpec("straight", PLATFORM, "maze", scenario_index=3, scenario_seed=1, trial=2,
-                     seed=7, protocol=1)
+                     seed=7, protocol=1, scenario_version=1)
     # the key of every stored result: a change here orphans existing result directories
     assert spec.trial_id == "3f5892779a3fd6af"
     assert dataclasses.replace(spec, protocol=2).trial_id == "927138a9ce742cce"
@@ -626,7 +626,7 @@ def test_protocol_version_is_in_the_row_and_absent_means_1():
 # --- controller-gain mode ----------------------------------------------------------------------
 def test_the_default_gain_mode_is_left_out_of_the_spec_so_old_ids_stay():
     spec = TrialSpec("straight", PLATFORM, "maze", scenario_index=3, scenario_seed=1, trial=2,
-                     seed=7, protocol=1)
+                     seed=7, protocol=1, scenario_version=1)
     assert spec.gains == "bandwidth" and "gains" not in spec.to_dict()
     assert spec.trial_id == "3f5892779a3fd6af"  # (test_trial_id_is_stable's)
     px4 = dataclasses.replace(spec, gains="px4")

@@ -52,7 +52,7 @@ def test_flies_a_forest_configuration_to_the_goal():
 
 def test_gives_up_in_a_dead_end_instead_of_hovering_90_s():
     row = run_trial(TrialSpec(algorithm="ego", platform=AGILE, family="maze",
-                              scenario_index=1)).row
+                              scenario_index=1, scenario_version=1)).row
     assert row["reason"] == "timeout" and "no plan" in row["detail"]
     assert row["nav_time_s"] < 60
 

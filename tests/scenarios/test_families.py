@@ -239,9 +239,9 @@ def test_sudden_drop():
         assert path[:, 2].min() < 1.5 - R_MAX  # the vehicle has to drop below the blocks
 
 
-def test_maze():
+def test_maze_version_1():
     for i in INDICES:
-        sc = built("maze", i)
+        sc = build_scenario("maze", i, version=1)
         p = sc.provenance
         assert p["parameters"]["corridor_width_m"] >= 2.0
         assert p["layout"]["dead_ends"] > 0
@@ -250,6 +250,131 @@ def test_maze():
         nx, ny = p["parameters"]["cells"]
         assert east.sum() + north.sum() == nx * ny - 1  # a perfect maze is a spanning tree
         assert sc.mesh.bounds[1][2] > sc.ceiling
+
+
+# Maze, version 2 (issue 20): what the paper fixes, the start, loops and dead ends read
+# from the mesh itself, and a route the largest body can fly well within 90 s
+BIG_BODY = max(catalog().values(), key=lambda p: p.body().bounding_radius_m)
+MAZE_ROUTE_FACTOR, MAZE_TURNS, MAZE_STOP_AND_GO_S = 1.8, 12, 45.0  # the generator's bounds
+
+
+@functools.cache
+def maze_v2(index: int) -> Scenario:
+    return build_scenario("maze", index, version=2)
+
+
+def _maze_cells(sc: Scenario):
+    """(nx, ny), the cell size and the centre of cell (i, j) at the flight altitude."""
+    nx, ny = sc.provenance["parameters"]["cells"]
+    cw, ch = sc.provenance["parameters"]["cell_m"]
+    return (nx, ny), (cw, ch), lambda i, j: np.array([(i + 0.5) * cw, (j + 0.5) * ch,
+                                                     sc.start[2]])
+
+
+def _maze_passages(sc: Scenario) -> dict:
+    """Which neighbouring cells the mesh joins: the segment between their centres is clear
+    of the walls by more than the largest body's bounding radius (True), or it crosses a
+    wall (False); anything in between fails. Keys ((i, j), (i2, j2))."""
+    (nx, ny), _, centre = _maze_cells(sc)
+    out = {}
+    for i in range(nx):
+        for j in range(ny):
+            for i2, j2 in ((i + 1, j), (i, j + 1)):
+                if i2 < nx and j2 < ny:
+                    d = segment_mesh_distance(sc.mesh, centre(i, j), centre(i2, j2))
+                    assert d == 0.0 or d > BIG_BODY.body().bounding_radius_m, (sc.name, i, j)
+                    out[(i, j), (i2, j2)] = d > 0.0
+    return out
+
+
+def _stop_and_go_s(points, speed=4.0, acc=3.0) -> float:
+    """Flying a polyline from rest to rest on every straight leg (the vehicle stops at
+    every corner) at most at ``speed`` with ``acc``."""
+    pts = np.asarray(points, dtype=float)
+    legs, heading = [], None
+    for a, b in zip(pts[:-1], pts[1:]):
+        d = b - a
+        n = float(np.linalg.norm(d))
+        if heading is not None and np.allclose(d / n, heading):
+            legs[-1] += n
+        else:
+            legs.append(n)
+            heading = d / n
+    return sum(d / speed + speed / acc if d >= speed**2 / acc else 2 * math.sqrt(d / acc)
+               for d in legs)
+
+
+@pytest.mark.parametrize("index", INDICES)
+def test_maze_v2_is_the_papers_labyrinth(index):
+    """25 x 40 m, flight height limited to 2 m (walls above it), closed all round; the
+    start cell opens towards the goal; dead ends and loops (not a perfect maze)."""
+    sc = maze_v2(index)
+    assert sc.provenance["generator_version"] == 2
+    np.testing.assert_array_equal(sc.bounds_max, [25.0, 40.0, 2.0])
+    assert sc.start[2] == sc.goal[2] == 1.0
+    lo, hi = sc.mesh.bounds
+    np.testing.assert_allclose([lo[0], lo[1], hi[0], hi[1]], [-0.1, -0.1, 25.1, 40.1])
+    assert lo[2] == 0.0 and hi[2] > sc.ceiling
+    assert sc.line_blocked(0.0)
+    (nx, ny), (cw, ch), centre = _maze_cells(sc)
+    assert min(cw, ch) - 0.2 > 3.0  # corridors
+    # the start cell opens towards the goal: a whole cell ahead is clear for the body
+    ahead = sc.start + np.array([0.0, ch, 0.0])
+    assert segment_mesh_distance(sc.mesh, sc.start, ahead) > BIG_BODY.body().bounding_radius_m
+    # the passages as the mesh has them: connected, more than a spanning tree, dead ends
+    passages = _maze_passages(sc)
+    edges = [e for e, open_ in passages.items() if open_]
+    graph = {(i, j): set() for i in range(nx) for j in range(ny)}
+    for a, b in edges:
+        graph[a].add(b)
+        graph[b].add(a)
+    seen, todo = {(nx // 2, 0)}, [(nx // 2, 0)]
+    while todo:
+        for n in graph[todo.pop()] - seen:
+            seen.add(n)
+            todo.append(n)
+    assert len(seen) == nx * ny  # every cell reachable
+    loops = len(edges) - (nx * ny - 1)
+    assert loops >= 6 and loops == sc.provenance["layout"]["loops"]
+    dead_ends = sum(len(v) == 1 for v in graph.values())
+    assert dead_ends > 0 and dead_ends == sc.provenance["layout"]["dead_ends"]
+
+
+@pytest.mark.parametrize("index", INDICES)
+def test_maze_v2_route_is_flyable_in_the_time(index):
+    """The largest platform's body (held level at the start yaw) has a path at most 1.8 x
+    the straight line (grid proof); the recorded route through cell centres keeps it clear
+    (exact), turns at most 12 times, and flown stopping at every corner at 4 m/s with
+    3 m/s^2 takes at most 45 s, half the 90 s budget."""
+    sc = maze_v2(index)
+    straight = float(np.linalg.norm(sc.goal - sc.start))
+    found = body_path(sc, BIG_BODY.body(), yaws_deg=(0.0,))
+    assert found is not None, sc.name
+    body_m = float(np.linalg.norm(np.diff(found[0], axis=0), axis=1).sum())
+    assert body_m <= MAZE_ROUTE_FACTOR * straight
+    lay = sc.provenance["layout"]
+    _, _, centre = _maze_cells(sc)
+    route = np.array([centre(i, j) for i, j in lay["route_cells"]])
+    np.testing.assert_allclose(route[[0, -1]], [sc.start, sc.goal])
+    assert polyline_clearance(sc.mesh, route) > BIG_BODY.body().bounding_radius_m
+    route_m = float(np.linalg.norm(np.diff(route, axis=0), axis=1).sum())
+    assert route_m == pytest.approx(lay["route_length_m"])
+    assert body_m <= route_m + 0.5 <= MAZE_ROUTE_FACTOR * straight + 0.5
+    steps = np.diff(np.array(lay["route_cells"]), axis=0)
+    turns = int(np.any(steps[1:] != steps[:-1], axis=1).sum())
+    assert turns == lay["route_turns"] <= MAZE_TURNS
+    assert _stop_and_go_s(route) == pytest.approx(lay["route_stop_and_go_s"])
+    assert _stop_and_go_s(route) <= MAZE_STOP_AND_GO_S
+
+
+def test_maze_v2_gets_harder_with_the_index():
+    """A goal-greedy explorer wastes no step in configuration 1 and more in each next one
+    (the dead ends facing the goal it has to back out of)."""
+    waste = [maze_v2(i).provenance["layout"]["greedy_detour_cells"] for i in INDICES]
+    bands = [maze_v2(i).provenance["parameters"]["detour_band_cells"] for i in INDICES]
+    assert waste[0] == 0 and waste[-1] >= 34
+    assert all(a < b for a, b in zip(waste, waste[1:])), waste
+    assert all(lo <= w <= hi for w, (lo, hi) in zip(waste, bands))
 
 
 def test_perlin():
