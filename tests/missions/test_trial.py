@@ -503,7 +503,7 @@ FULL = TrialSpec(algorithm="straight", platform=PLATFORM, family="maze", scenari
                  scenario_seed=1, trial=2, seed=7, algorithm_params={"speed_m_s": 3.0},
                  limits=Limits(timeout_s=60.0), campaign="c", label="straight-3",
                  platform_def=None, scenario_file=None, physics_hz=500, protocol=2,
-                 gains="px4")
+                 gains="px4", scenario_version=2)
 
 
 def test_spec_round_trips_through_dict_and_json():
@@ -531,7 +531,7 @@ CHANGES = {
     "scenario_seed": 2, "trial": 3, "seed": 8, "algorithm_params": {"speed_m_s": 2.0},
     "limits": Limits(timeout_s=61.0), "campaign": "d", "label": "x",
     "platform_def": {"name": PLATFORM}, "scenario_file": "/tmp/x.yaml", "physics_hz": 1000,
-    "protocol": 1, "gains": "bandwidth",
+    "protocol": 1, "gains": "bandwidth", "scenario_version": 1,
 }
 # (protocol 2 here: FULL with protocol 3 would carry 3's acceleration limit, which 1 refuses)
 
@@ -541,7 +541,9 @@ def test_trial_id_changes_with_every_field():
     ids = {FULL.trial_id}
     for name, value in CHANGES.items():
         assert getattr(FULL, name) != value
-        ids.add(dataclasses.replace(FULL, **{name: value}).trial_id)
+        # (a scenario file has no generator version; another family has its own)
+        extra = {"scenario_version": None} if name in ("scenario_file", "family") else {}
+        ids.add(dataclasses.replace(FULL, **{name: value}, **extra).trial_id)
     assert len(ids) == 1 + len(CHANGES)
     for name in ("max_speed_m_s", "timeout_s", "goal_radius_m", "hold_s"):
         limits = dataclasses.replace(FULL.limits, **{name: 1.5})
