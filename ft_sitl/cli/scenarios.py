@@ -41,7 +41,8 @@ SCENARIO_DESCRIPTIONS = {
     "forest": "random upright tree trunks (paper density 1/49 per m^2)",
     "urban": "buildings on a street grid, plus free-standing walls",
     "random_angle_cylinder": "random cylinders tilted 0-180 deg (paper density 1/36 per m^2)",
-    "narrow_gap": "walls across the route, one 0.85-0.90 m gap each; index = walls",
+    "narrow_gap": "walls across the route, one 0.85-0.90 m gap each, on the line or 1-2 m "
+                  "beside it; index = walls",
     "sudden_drop": "overhanging blocks from 1.5 m up, start at 2.5 m; index = blocks",
     "maze": "a perfect maze with dead ends: one route to the goal",
     "perlin": "blobs of 0.25 m voxels where 3-D Perlin noise is in its top 3 %",

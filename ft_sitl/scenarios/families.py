@@ -25,6 +25,10 @@ travels north, from near the short side ``y = 0`` to near ``y = length``.
   a few: the paper's straight-flight baseline succeeds in 10-20 % of its Forest and Urban
   trials and never elsewhere (Sec. IV-B, A4), which strict blocking could not reproduce.
   Urban lays its centre line along an open boulevard (walls only) with probability 0.35.
+  Narrow-Gap (version 2) holds to the corridor too: a gap may be centred on the line,
+  its walls 0.43-0.45 m either side, and a configuration whose gaps all are is flown
+  straight (the paper compares its Narrow-Gap planners with a baseline that succeeds
+  there sometimes, Sec. IV-B, A1); version 1 crosses the line with every wall.
 * A collision-free path exists for the largest catalog platform's collision radius
   (0.384 m), and for its body held level at the start yaw (protocol 5; in Narrow-Gap it
   fits a gap nose first, not yawed 45 degrees): see :mod:`ft_sitl.scenarios.solvability`
@@ -53,8 +57,11 @@ random_angle_cylinder  classic      40 x 60    3 m      67 cylinders (density 1/
 narrow_gap             theoretical  50 x 50    4 m      ``index`` walls (5 m tall, 0.3 m
                                                         thick) across the route, each with
                                                         one full-height gap 0.85-0.90 m
-                                                        wide, 4-18 m off the centre line on
-                                                        alternating sides: gaps = index
+                                                        wide, on the centre line (p = 0.4)
+                                                        or 1-2 m beside it, in the camera's
+                                                        view from the line: gaps = index
+                                                        (version 1: 4-18 m off the line on
+                                                        alternating sides)
 sudden_drop            theoretical  50 x 50    4 m      ``index`` overhanging blocks, full
                                     (x 14 m)            width, 1.5-3 m deep, from 1.5 m
                                                         (the lowest obstacle point) up to
@@ -775,6 +782,92 @@ def narrow_gap(fam: Family, p: dict, rng: np.random.Generator, index: int,
         walls.append({"y_m": y, "gap_centre_x_m": c, "gap_width_m": w})
     return _make(
         fam, index, seed, b, p, altitude=alt, obstacle_count=index, pitch=NARROW_GAP_PITCH_M,
+        derived={"gap_count": index, "start_altitude_m": alt},
+        layout={"walls": walls},
+    )
+
+
+@_revise("narrow_gap", 2, "gaps on the start->goal line or 1-2 m beside it, in the "
+         "camera's view from the line (version 1's, 4-18 m off, were out of view when the "
+         "vehicle had to decide: every algorithm hit the first wall); walls in y 8-42 m",
+         schema=Schema((
+             SIZE,
+             CEILING,
+             Param("gap_count", None, derived=True,
+                   doc="walls, one gap each: the configuration index"),
+             Param("gap_width_m", (0.85, 0.90), "m", (0.1, 10.0), kind=INTERVAL,
+                   doc="gap width, uniform in [lo, hi]"),
+             Param("on_line_probability", 0.4, "-", (0.0, 1.0),
+                   doc="a gap is centred on the start->goal line (else beside it)"),
+             Param("gap_offset_m", (1.0, 2.0), "m", (0.0, 100.0), kind=INTERVAL,
+                   doc="a gap beside the line: its centre's distance from the line, uniform "
+                       "in [lo, hi], east or west (a fair coin)"),
+             Param("wall_zone_y_m", (8.0, 42.0), "m", (0.0, 500.0), kind=INTERVAL,
+                   doc="the walls stand in y in [lo, hi], one in each of gap_count equal "
+                       "slots"),
+             Param("wall_thickness_m", 0.3, "m", (0.05, 5.0), doc="wall thickness"),
+             Param("wall_height_m", 5.0, "m", (0.5, 100.0), doc="wall height"),
+             START_ALTITUDE,
+         )).with_defaults(size_m=(50.0, 50.0), ceiling_m=4.0))
+def narrow_gap_v2(fam: Family, p: dict, rng: np.random.Generator, index: int,
+                  seed: int) -> Scenario:
+    """Narrow-Gap (version 2): 50 x 50 m, ceiling 4 m; ``index`` walls, one gap each.
+
+    Walls span the full width (x in [0, 50]), 0.3 m thick and 5 m tall (above the
+    ceiling: no way over or around), one near the middle of each of ``index`` equal slots
+    of y in [8, 42] (+-1/8 of a slot of jitter): 34 m apart for one wall, 3.4 m for ten.
+    Each has one full-height slot U(0.85, 0.90) m wide. With probability 0.4 the slot is
+    centred on the start->goal line; otherwise its centre lies U(1, 2) m east or west of
+    it (a fair coin per wall).
+
+    Why there. A gap has to be in view when the vehicle must decide. The planners' map
+    marks a depth pixel as an obstacle only within 4.5 m of the camera
+    (``max_ray_length_m``) and the camera sees 39.6 degrees either side of its axis, so
+    from the line a wall is mapped at most 2.87 m either side of it (from 3.5 m before
+    it). A gap 1-2 m off has its far edge <= 2.45 m off: the whole gap is mapped from the
+    line, from 3.8 m to 3.0 m before the wall, and passing it takes a lateral jink of
+    1-2 m (a heading change of 14-27 degrees) in the last ~4 m, the camera yawed along
+    (EGO, Fast-Planner and PGO point it along their path). With eight walls or more the
+    previous wall may stand in that stretch: the next gap, up to 4 m across from the last
+    one, is then seen through the last gap, from nearer, with a narrower view -- the
+    densest configurations are the hardest. Version 1's gaps, 4-18 m off, were out of view
+    until the vehicle stood at the wall, and every algorithm hit the first one; a gap 3 m
+    off is mapped whole from nowhere on the line. A gap on the line is reachable flying
+    straight, so a configuration whose gaps all lie on it is passed by the straight-flight
+    baseline (probability 0.4^n for n gaps: the paper's baseline succeeds sometimes in
+    Narrow-Gap); a gap off the line blocks the line for every platform (its near edge is
+    >= 0.55 m off, the largest body's half width nose first 0.38 m).
+
+    What separates platforms is the body and what the navigator makes of it. The largest
+    body (0.76 m across nose first, 0.93 m yawed 45 degrees) fits a 0.85-0.90 m gap only
+    within 14-25 degrees of nose (or side) first, so it must pass square to the wall, its
+    yaw settled; the 0.98 kg EGO-Planner DIY's (0.38-0.47 m across) fits at any yaw. And a
+    navigator inflates its map by the body's half span (protocol 4 on): with a half span
+    above 0.3 m (four voxels or more) every gap is closed in its map, and it passes only
+    gaps it flies through without replanning around them, on the line; below, a gap is a
+    one- or two-voxel channel to thread at speed.
+    """
+    width, length = p["size_m"]
+    alt = start_altitude(p["ceiling_m"])
+    thick, height = p["wall_thickness_m"], p["wall_height_m"]
+    y0, y1 = p["wall_zone_y_m"]
+    spacing = (y1 - y0) / index
+    line_x = width / 2.0
+    b = _MeshBuilder()
+    walls = []
+    for j in range(index):
+        y = y0 + spacing * (j + 0.5) + rng.uniform(-0.125, 0.125) * spacing
+        w = rng.uniform(*p["gap_width_m"])
+        on_line = bool(rng.random() < p["on_line_probability"])
+        offset = rng.uniform(*p["gap_offset_m"])
+        side = 1.0 if rng.random() < 0.5 else -1.0
+        c = line_x if on_line else line_x + side * offset
+        b.box((0.0, y - thick / 2, 0.0), (c - w / 2, y + thick / 2, height), "wall")
+        b.box((c + w / 2, y - thick / 2, 0.0), (width, y + thick / 2, height), "wall")
+        walls.append({"y_m": y, "gap_centre_x_m": c, "gap_width_m": w, "on_line": on_line})
+    return _make(
+        fam, index, seed, b, p, altitude=alt, obstacle_count=index, pitch=NARROW_GAP_PITCH_M,
+        corridor=LINE_CORRIDOR_M,
         derived={"gap_count": index, "start_altitude_m": alt},
         layout={"walls": walls},
     )

@@ -358,7 +358,8 @@ def test_hover_pwm_from_the_param_file_holds_altitude(name):
 def test_in_a_scenario_position_is_from_the_spawn_and_a_crash_lasts_until_restart(platform):
     from ft_sitl.scenarios.families import build_scenario
 
-    scenario = build_scenario("narrow_gap", 1, 0)  # starts facing north, walls ahead
+    # starts facing north, a wall across the way (version 1: its gap is 4-18 m aside)
+    scenario = build_scenario("narrow_gap", 1, 0, version=1)
     with serving(platform, scenario=scenario) as (bridge, peer):
         count, st = peer.fly(0, 700, [1850] * 4)  # climb
         assert st.position[0] == pytest.approx(0.0, abs=1e-9) and st.position[2] < -0.2

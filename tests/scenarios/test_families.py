@@ -13,8 +13,11 @@ import pytest
 import trimesh
 
 from ft_sitl import __version__
+from ft_sitl.navigation.common import camera_config
+from ft_sitl.navigation.mapping import MapConfig
 from ft_sitl.physics.catalog import catalog, largest_platform
 from ft_sitl.rotations import matrix_from_quat
+from ft_sitl.scenarios.camera import DepthCamera
 from ft_sitl.scenarios.collision import BodyProbe, CollisionWorld
 from ft_sitl.scenarios.families import (
     FAMILIES,
@@ -97,7 +100,8 @@ def test_configuration(family, index):
     # obstacles: closed, outward-facing, on the straight line
     assert sc.obstacle_count > 0
     assert sc.mesh.is_watertight and sc.mesh.is_winding_consistent and sc.mesh.volume > 0
-    if family in OPEN_FAMILIES:  # on the line, or beside it by less than the corridor
+    if family in OPEN_FAMILIES or family == "narrow_gap":
+        # on the line, or beside it by less than the corridor (Narrow-Gap: a gap on the line)
         assert sc.line_blocked(LINE_CORRIDOR_M), "no obstacle along the start->goal segment"
     else:
         assert sc.line_blocked(0.0), "no obstacle crosses the straight start->goal segment"
@@ -168,7 +172,8 @@ def test_no_global_rng():
 def test_other_seeds_build_and_are_solvable():
     for family in FAMILIES:
         sc = build_scenario(family, 7, 3)
-        assert sc.line_blocked(LINE_CORRIDOR_M if family in OPEN_FAMILIES else 0.0)
+        open_line = family in OPEN_FAMILIES or family == "narrow_gap"
+        assert sc.line_blocked(LINE_CORRIDOR_M if open_line else 0.0)
         assert scenario_path(sc, R_MAX) is not None, sc.name
 
 
@@ -214,9 +219,11 @@ def test_urban():
         assert max(b[5] for b in lay["buildings_lo_hi"]) > sc.ceiling
 
 
-def test_narrow_gap():
+def test_narrow_gap_version_1():
+    """Version 1 (kept for its results): full-width walls, gaps 4-18 m off the line on
+    alternating sides."""
     for i in INDICES:
-        sc = built("narrow_gap", i)
+        sc = build_scenario("narrow_gap", i, version=1)
         walls = sc.provenance["layout"]["walls"]
         assert all(0.85 <= w["gap_width_m"] <= 0.90 for w in walls)
         offsets = [w["gap_centre_x_m"] - 25.0 for w in walls]
@@ -226,6 +233,131 @@ def test_narrow_gap():
         np.testing.assert_allclose(sc.mesh.bounds[:, 0], [0.0, 50.0])
         # 2 r_max = 0.768 m fits through 0.85 m; a 0.46 m radius fits through no gap
         assert scenario_path(sc, 0.46) is None
+
+
+def _free_spans(sc, y, z, lo=0.0, hi=50.0, step=0.001):
+    """The free x-intervals of the segment x in [lo, hi] at (y, z), from the mesh."""
+    x = np.linspace(lo, hi, round((hi - lo) / step) + 1)
+    inside = sc.mesh.contains(np.column_stack([x, np.full_like(x, y), np.full_like(x, z)]))
+    edges = np.flatnonzero(np.diff(inside.astype(int))) + 1
+    bounds = np.concatenate([[0], edges, [len(x)]])
+    return [(x[a], x[b - 1]) for a, b in zip(bounds[:-1], bounds[1:]) if not inside[a]]
+
+
+def test_narrow_gap():
+    """Version 2 (the default): the paper's numbers read off the mesh -- 50 x 50 m, ceiling
+    4 m, one 0.85-0.90 m gap per wall, index walls -- and the placement rule: each gap
+    centred on the start->goal line or 1-2 m beside it."""
+    kinds = set()
+    for i in INDICES:
+        sc = built("narrow_gap", i)
+        prov = sc.provenance
+        assert prov["generator_version"] == 2
+        assert prov["parameters"]["gap_width_m"] == [0.85, 0.9]
+        walls = prov["layout"]["walls"]
+        assert len(walls) == i == prov["parameters"]["gap_count"] == sc.obstacle_count
+        ys = [w["y_m"] for w in walls]
+        assert ys == sorted(ys) and 8.0 < ys[0] and ys[-1] < 42.0
+        assert sc.mesh.bounds[1][2] > sc.ceiling  # no way over
+        np.testing.assert_allclose(sc.mesh.bounds[:, 0], [0.0, 50.0])  # nor around
+        for w in walls:
+            # every wall's only opening, measured on the mesh at the flight altitude
+            for y in (w["y_m"] - 0.14, w["y_m"] + 0.14):
+                coarse = _free_spans(sc, y, sc.start[2], 0.01, 49.99, 0.05)
+                assert len(coarse) == 1 and coarse[0][1] - coarse[0][0] < 0.9, coarse
+                (span,) = _free_spans(sc, y, sc.start[2], coarse[0][0] - 0.1,
+                                      coarse[0][1] + 0.1)
+                assert 0.85 - 0.002 <= span[1] - span[0] <= 0.90
+                assert (span[0] + span[1]) / 2 == pytest.approx(w["gap_centre_x_m"], abs=2e-3)
+            off = abs(w["gap_centre_x_m"] - 25.0)
+            assert w["on_line"] == (off == 0.0)
+            assert off == 0.0 or 1.0 <= off <= 2.0
+            kinds.add((w["on_line"], np.sign(w["gap_centre_x_m"] - 25.0)))
+    assert kinds == {(True, 0.0), (False, 1.0), (False, -1.0)}
+
+
+def test_narrow_gap_places_gaps_on_the_line_with_its_declared_probability():
+    """Over many configurations (seeds 0-29), 40 % of the gaps are on the line and the rest
+    fall either side, their offsets spread over 1-2 m."""
+    walls = [w for seed in range(30) for i in INDICES
+             for w in build_scenario("narrow_gap", i, seed).provenance["layout"]["walls"]]
+    off = np.array([w["gap_centre_x_m"] - 25.0 for w in walls])
+    on = np.array([w["on_line"] for w in walls])
+    assert len(walls) == 30 * 55
+    assert abs(on.mean() - 0.4) < 0.05  # 4 standard deviations
+    side = np.sign(off[~on])
+    assert abs((side > 0).mean() - 0.5) < 0.06
+    assert np.all((np.abs(off[~on]) >= 1.0) & (np.abs(off[~on]) <= 2.0))
+    assert np.quantile(np.abs(off[~on]), [0.1, 0.9]) == pytest.approx([1.1, 1.9], abs=0.06)
+
+
+def test_narrow_gap_straight_flight_passes_only_gaps_on_the_line():
+    """A body flown along the start->goal line, nose first, passes a configuration's walls
+    exactly when all its gaps lie on the line -- the largest platform's (0.76 m across)
+    included; a gap beside the line blocks it even for the smallest (0.30 m across). The
+    paper's configurations hold both kinds."""
+    bodies = sorted((p.body() for p in catalog().values()), key=lambda b: b.half_span_m)
+    probes = [BodyProbe(bodies[0]), BodyProbe(bodies[-1])]
+    straight = []
+    for i in INDICES:
+        sc = built("narrow_gap", i)
+        world = CollisionWorld(sc.mesh, sc.bounds_min, sc.bounds_max)
+        rot = matrix_from_quat([math.cos(sc.start_yaw / 2), 0.0, 0.0,
+                                math.sin(sc.start_yaw / 2)])
+        walls = sc.provenance["layout"]["walls"]
+        # sample the line densely through each wall (0.02 m steps across +-0.8 m)
+        ys = np.concatenate([w["y_m"] + np.arange(-0.8, 0.81, 0.02) for w in walls])
+        for probe in probes:
+            clear = all(world.body_distance(probe, np.array([25.0, y, sc.start[2]]), rot) > 0
+                        for y in ys)
+            assert clear == all(w["on_line"] for w in walls), (sc.name, probe.body)
+        straight.append(all(w["on_line"] for w in walls))
+    assert any(straight) and not all(straight)
+
+
+def test_narrow_gap_every_gap_beside_the_line_is_mapped_whole_from_the_line():
+    """From a stretch of the line at least 0.75 m long before each wall, the planners'
+    camera (field of view) and map (obstacles marked within max_ray_length_m) take in both
+    edges of a gap beside the line. Ray casts against the mesh confirm it from the middle
+    of that stretch: the wall either side of the gap is hit within range, the ray through
+    the gap's middle passes the wall. Only where walls stand closer than that stretch (8
+    or more walls) may the previous wall be in the way."""
+    cfg = camera_config("benchmark", None, None, None)
+    half_fov = math.radians(cfg.fov_deg[0] / 2)
+    reach = MapConfig().max_ray_length_m
+    seen, hidden = 0, set()
+    for i in INDICES:
+        sc = built("narrow_gap", i)
+        cam = DepthCamera(cfg, sc.mesh)
+        half_t = sc.provenance["parameters"]["wall_thickness_m"] / 2
+        walls = sc.provenance["layout"]["walls"]
+        for j, w in enumerate(walls):
+            if w["on_line"]:
+                continue
+            face = w["y_m"] - half_t
+            c, half = w["gap_centre_x_m"], w["gap_width_m"] / 2
+            far = abs(c - 25.0) + half + 0.02  # the wall just beyond the far edge
+            # distances before the face from which it is in view and in range
+            d_lo, d_hi = far / math.tan(half_fov), math.sqrt(reach ** 2 - far ** 2)
+            assert d_hi - d_lo >= 0.75, (sc.name, w)
+            if j > 0:  # not from behind the previous wall
+                d_hi = min(d_hi, face - (walls[j - 1]["y_m"] + half_t))
+            if d_hi <= d_lo:
+                hidden.add(i)
+                continue
+            eye = np.array([25.0, face - (d_lo + d_hi) / 2, sc.start[2]])
+            targets = np.array([[c - half - 0.02, face, eye[2]], [c + half + 0.02, face, eye[2]],
+                                [c, face, eye[2]]])
+            dirs = targets - eye
+            dist = np.linalg.norm(dirs, axis=1)
+            dirs /= dist[:, None]
+            assert np.all(np.abs(np.arctan2(dirs[:, 0], dirs[:, 1])) <= half_fov)
+            hit = cam.cast(eye, dirs)
+            np.testing.assert_allclose(hit[:2], dist[:2], atol=1e-6)
+            assert np.all(hit[:2] <= reach)
+            assert hit[2] > dist[2] + 2 * half_t  # through the gap
+            seen += 1
+    assert seen > 20 and min(hidden, default=10) >= 8, (seen, hidden)
 
 
 def test_sudden_drop():

@@ -18,7 +18,8 @@ from ft_sitl.scenarios.families import (
 from ft_sitl.scenarios.scenario import ScenarioError
 
 # mesh digest, start and goal captured at 5da4228, before the parameters were declared: an
-# edit of a generator must not change the geometry of the paper's configurations. (With
+# edit of a generator must not change the geometry of the paper's configurations (version
+# 1's; a generator that builds other meshes is a new version). (With
 # OpenBLAS's own kernel choice -- numpy imported before ft_sitl -- Random-Angle Cylinder
 # builds other meshes; see ft_sitl.numeric_env.)
 PINNED = [
