@@ -26,6 +26,7 @@ from ft_sitl.missions.store import (
 from ft_sitl.missions.trial import run_trial
 from ft_sitl.navigation.registry import NavigatorError
 from ft_sitl.physics.platform import PlatformError
+from ft_sitl.scenarios.families import describe_family
 from ft_sitl.scenarios.render import render_scenario
 from ft_sitl.scenarios.scenario import ScenarioError
 
@@ -322,6 +323,10 @@ def cmd_trial_rerun(args) -> int:
           f"{' - ' + row['detail'] if row['detail'] else ''}")
     print(f"  flown under protocol version {spec.protocol}: "
           f"{PROTOCOLS[spec.protocol].summary}")
+    if spec.scenario_version is not None:
+        fam = describe_family(spec.family)
+        print(f"  scenario built by generator version {spec.scenario_version} of "
+              f"{fam.name} (newest: {fam.version}): {fam.changes[spec.scenario_version]}")
     if spec.gains != DEFAULT_GAINS:
         print(f"  controller gains: {spec.gains} (FT_GAIN_MODE {GAIN_MODES[spec.gains]})")
     if not math.isnan(row["time_to_goal_s"]):

@@ -456,3 +456,27 @@ def test_workers_stop_when_the_campaign_process_is_killed(tmp_path):
         for w in workers:
             if _alive(w):
                 os.kill(w, signal.SIGKILL)
+
+
+def test_rerun_of_a_row_built_by_an_older_generator_rebuilds_that_scene(capsys, tmp_path):
+    """A committed protocol-5 Maze row was built by Maze's first generator (no version in
+    its spec): rerun rebuilds that maze, says so, and gives the stored row, although new
+    trials now fly a newer Maze."""
+    from pathlib import Path
+
+    from ft_sitl.scenarios.families import REGISTRY
+
+    assert REGISTRY["maze"].version > 1
+    src = Path(__file__).parents[2] / "docs" / "results" / "paper-sample-v5"
+    df = pd.read_parquet(src / "trials.parquet")
+    row = df[(df.family == "maze") & (df.algorithm == "straight")].iloc[0]
+    assert "scenario_version" not in json.loads(row.spec)
+    out = tmp_path / "v5"
+    out.mkdir()
+    df[df.trial_id == row.trial_id].to_parquet(out / "trials.parquet", index=False)
+    rc, text, err = cli(capsys, "trial", "rerun", out, row.trial_id)
+    assert (rc, err) == (0, "")
+    lines = text.splitlines()
+    assert lines[2] == (f"  scenario built by generator version 1 of maze (newest: "
+                        f"{REGISTRY['maze'].version}): {REGISTRY['maze'].changes[1]}")
+    assert "  identical to the stored result (all but wall-clock columns)" in lines
