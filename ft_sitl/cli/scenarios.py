@@ -28,7 +28,7 @@ from ft_sitl.scenarios.scenario import INDEX_RANGE, ScenarioError
 
 SCENARIO_DESCRIPTIONS = {
     "forest": "random upright tree trunks (paper density 1/49 per m^2)",
-    "urban": "buildings on a street grid, plus free-standing walls",
+    "urban": "a street grid; trucks and walls beside and across the avenue route",
     "random_angle_cylinder": "random cylinders tilted 0-180 deg (paper density 1/36 per m^2)",
     "narrow_gap": "walls across the route, one 0.85-0.90 m gap each; index = walls",
     "sudden_drop": "overhanging blocks from 1.5 m up, start at 2.5 m; index = blocks",
