@@ -39,7 +39,7 @@ from ft_sitl.scenarios.scenario import INDEX_RANGE, ScenarioError
 
 SCENARIO_DESCRIPTIONS = {
     "forest": "random upright tree trunks (paper density 1/49 per m^2)",
-    "urban": "buildings on a street grid, plus free-standing walls",
+    "urban": "a street grid; trucks and walls beside and across the avenue route",
     "random_angle_cylinder": "random cylinders tilted 0-180 deg (paper density 1/36 per m^2)",
     "narrow_gap": "walls across the route, one 0.85-0.90 m gap each, on the line or 1-2 m "
                   "beside it; index = walls",

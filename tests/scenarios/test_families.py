@@ -6,6 +6,7 @@ from __future__ import annotations
 import functools
 import json
 import math
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
@@ -210,13 +211,142 @@ def test_random_angle_cylinder():
     assert 0.0 <= min(tilts) < 10.0 and 170.0 < max(tilts) <= 180.0
 
 
-def test_urban():
+def test_urban_version_1():
     for i in INDICES:
-        sc = built("urban", i)
+        sc = build_scenario("urban", i, version=1)
         lay = sc.provenance["layout"]
         assert lay["buildings_lo_hi"] and lay["walls_lo_hi"]
         assert sc.obstacle_count == len(lay["buildings_lo_hi"]) + len(lay["walls_lo_hi"])
         assert max(b[5] for b in lay["buildings_lo_hi"]) > sc.ceiling
+
+
+# ---- Urban, version 2: the line runs along a street -----------------------------------
+
+
+@functools.cache
+def urban_v2(index: int, seed: int = 0) -> Scenario:
+    return build_scenario("urban", index, seed, version=2)
+
+
+def _pieces(sc: Scenario) -> list[tuple[str, np.ndarray, np.ndarray]]:
+    """(name, lower corner, upper corner) of each obstacle piece, from the mesh itself."""
+    ends = list(sc.piece_first_face[1:]) + [len(sc.mesh.faces)]
+    out = []
+    for name, a, b in zip(sc.piece_names, sc.piece_first_face, ends):
+        v = sc.mesh.vertices[sc.mesh.faces[a:b].ravel()]
+        out.append((name, v.min(axis=0), v.max(axis=0)))
+    return out
+
+
+def _on_route(lo, hi, sc) -> bool:
+    return lo[1] < sc.goal[1] and hi[1] > sc.start[1]
+
+
+@pytest.mark.parametrize("index", INDICES)
+def test_urban_v2_keeps_the_papers_area_and_ceiling(index):
+    sc = urban_v2(index)
+    assert sc.provenance["generator_version"] == 2
+    np.testing.assert_array_equal(sc.bounds_min, [0.0, 0.0, 0.0])
+    np.testing.assert_array_equal(sc.bounds_max, [60.0, 60.0, 10.0])
+    par = sc.provenance["parameters"]
+    assert par["size_m"] == [60.0, 60.0] and par["ceiling_m"] == 10.0
+    np.testing.assert_array_equal(sc.start, [30.0, 3.0, 2.0])
+    np.testing.assert_array_equal(sc.goal, [30.0, 57.0, 2.0])
+    names = {n.rsplit(" ", 1)[0] for n in sc.piece_names}
+    assert {"building", "wall", "low wall"} <= names
+    heights = [hi[2] for n, _, hi in _pieces(sc) if n.startswith("building")]
+    assert min(heights) < sc.ceiling < max(heights)  # some to fly over, some far above
+
+
+@pytest.mark.parametrize("index", INDICES)
+def test_urban_v2_line_runs_along_a_street_lined_with_buildings(index):
+    """No building stands on the line: the nearest is >= 5.5 m beside it (the avenue's
+    half width), and buildings line the avenue on both sides."""
+    sc = urban_v2(index)
+    x = sc.start[0]
+    buildings = [(lo, hi) for n, lo, hi in _pieces(sc) if n.startswith("building")]
+    assert len(buildings) >= 8
+    gaps = [max(lo[0] - x, x - hi[0]) for lo, hi in buildings]
+    assert min(gaps) >= 5.5
+    west, east = sc.provenance["layout"]["avenue_x_m"]
+    assert x - west >= 5.5 and east - x >= 5.5
+    assert not [lo for lo, hi in buildings if hi[0] > west and lo[0] < east]
+    assert any(hi[0] > west - 2.0 for lo, hi in buildings if hi[0] <= west)
+    assert any(lo[0] < east + 2.0 for lo, hi in buildings if lo[0] >= east)
+
+
+@pytest.mark.parametrize("index", INDICES)
+def test_urban_v2_has_obstacles_beside_and_across_the_line(index):
+    """Beside the line: a truck or wall within 2.5 m of it that does not cross it, the
+    nearest within LINE_CORRIDOR_M; across it: a low wall under the flight altitude in
+    every configuration, and trucks or walls at flight altitude, as many as the index says,
+    each crossed >= 0.6 m from its ends and leaving passages on both sides."""
+    sc = urban_v2(index)
+    x, alt = sc.start[0], sc.start[2]
+    pieces = [(n, lo, hi) for n, lo, hi in _pieces(sc) if _on_route(lo, hi, sc)]
+    across = [(n, lo, hi) for n, lo, hi in pieces if lo[0] < x < hi[0]]
+    beside = [max(lo[0] - x, x - hi[0]) for n, lo, hi in pieces
+              if not lo[0] < x < hi[0] and hi[2] > alt]
+    assert beside and min(beside) < 2.5
+    assert any(n.startswith("low wall") and hi[2] < alt - 0.5 for n, lo, hi in across)
+    blocking = [(n, lo, hi) for n, lo, hi in across if lo[2] < alt < hi[2]]
+    expected = [0, 0, 0, 1, 1, 2, 2, 3, 3, 4][index - 1]
+    assert len(blocking) == expected == sc.provenance["parameters"]["barrier_count"]
+    west, east = sc.provenance["layout"]["avenue_x_m"]
+    for n, lo, hi in blocking:
+        assert n.split()[0] in ("truck", "wall")
+        if n.startswith("wall"):
+            assert hi[2] <= 3.0 + 5.0 * (index - 1) / 9 + 1e-9
+        assert min(x - lo[0], hi[0] - x) >= 0.6 - 1e-9  # no platform slips past its end
+        passages = sorted([lo[0] - west, east - hi[0]])
+        assert passages[0] >= 2.5 - 1e-9 and passages[1] >= 4.0 - 1e-9
+    ys = sorted((lo[1] + hi[1]) / 2 for _, lo, hi in blocking)
+    assert all(b - a >= 7.0 for a, b in zip(ys, ys[1:]))
+    if expected:
+        assert sc.line_distance() == 0.0
+    else:  # only the obstacle beside it: a vehicle narrower than the gap flies the line
+        assert 0.0 < sc.line_distance() < LINE_CORRIDOR_M
+        assert min(beside) == pytest.approx(sc.line_distance())
+    # the first 10 m of the avenue after the start are clear
+    assert all(lo[1] >= sc.start[1] + 10.0 for n, lo, hi in pieces
+               if hi[0] > west and lo[0] < east)
+
+
+def test_urban_v2_difficulty_rises_with_the_index():
+    counts = [urban_v2(i).provenance["parameters"]["barrier_count"] for i in INDICES]
+    assert counts == sorted(counts) and counts[0] == 0 and counts[-1] == 4
+    tallest = {i: max([it["hi"][2] for s in range(4) for it in urban_v2(i, s).provenance
+                       ["layout"]["avenue_obstacles"]
+                       if it["role"] == "across" and it["kind"] == "wall"], default=0.0)
+               for i in (4, 10)}
+    assert tallest[4] <= 3.0 + 5.0 / 3 < tallest[10] <= 8.0
+
+
+@pytest.mark.parametrize("index", INDICES)
+def test_urban_v2_is_solvable_for_the_largest_body_at_flight_altitude(index):
+    """The largest platform's body, held level at the start yaw, has a path that stays
+    below 3 m (no climbing: NavRL holds its altitude); an exact fcl check confirms it."""
+    sc = urban_v2(index)
+    big = max(catalog().values(), key=lambda p: p.body().bounding_radius_m)
+    low = replace(sc, bounds_max=(60.0, 60.0, 3.0))
+    found = body_path(low, big.body(), yaws_deg=(0.0,))
+    assert found is not None, f"{sc.name}: no level path for {big.name}'s body"
+    path, yaw = found
+    assert path[:, 2].max() < 3.0
+    world = CollisionWorld(sc.mesh, sc.bounds_min, sc.bounds_max)
+    probe = BodyProbe(big.body())
+    rot = matrix_from_quat([math.cos(yaw / 2), 0.0, 0.0, math.sin(yaw / 2)])
+    for a, b in zip(path[:-1], path[1:]):
+        for t in np.linspace(0.0, 1.0, max(2, int(np.linalg.norm(b - a) / 0.1) + 1)):
+            assert world.body_distance(probe, a + t * (b - a), rot) > 0.0
+
+
+def test_urban_v2_other_seeds():
+    for seed in (1, 2, 3):
+        for index in (1, 6, 10):
+            sc = urban_v2(index, seed)
+            assert sc.line_blocked(LINE_CORRIDOR_M)
+            assert scenario_path(sc, R_MAX) is not None, sc.name
 
 
 def test_narrow_gap_version_1():
