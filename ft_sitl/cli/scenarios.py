@@ -18,6 +18,7 @@ from ft_sitl.scenarios.difficulty import (
     Difficulty,
     cached_difficulty,
     default_cache_dir,
+    num,
     summarise,
 )
 from ft_sitl.scenarios.families import (
@@ -197,8 +198,6 @@ def _difficulty_rows(results: list[Difficulty]) -> None:
           f"{'spare':>6s} {'obstacles':>9s} {'/100m2':>6s} {'filled':>7s} {'time (s)':>8s}  "
           f"in budget")
     for d in results:
-        def num(v, fmt):
-            return "-" if v is None else format(v, fmt)
         print(f"{d.scenario:28s} {num(d.path_m, '.1f'):>8s} {num(d.path_ratio, '.2f'):>6s} "
               f"{num(d.turns, 'd'):>5s} {num(d.passage_width_m, '.3f'):>9s} "
               f"{num(d.passage_spare_m, '.3f'):>6s} {d.obstacle_count:>9d} "

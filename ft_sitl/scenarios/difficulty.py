@@ -420,11 +420,13 @@ MARKDOWN_HEADER = ("| config | path (m) | path / line | turns | narrowest (m) | 
                    "|---|---|---|---|---|---|---|---|---|---|---|")
 
 
+def num(v, fmt: str) -> str:
+    """``v`` formatted, or "-" for a measure that does not exist (no path)."""
+    return "-" if v is None else format(v, fmt)
+
+
 def markdown_row(d: Difficulty) -> str:
     """One configuration as a row of :data:`MARKDOWN_HEADER`'s table."""
-    def num(v, fmt):
-        return "-" if v is None else format(v, fmt)
-
     return (f"| {d.scenario} | {num(d.path_m, '.1f')} | {num(d.path_ratio, '.2f')} | "
             f"{num(d.turns, 'd')} | {num(d.passage_width_m, '.2f')} | "
             f"{num(d.passage_spare_m, '.2f')} | {d.obstacle_count} | "

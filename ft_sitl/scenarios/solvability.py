@@ -503,6 +503,14 @@ def _bfs(free: np.ndarray, start: int, goal: int) -> np.ndarray | None:
         frontier = np.concatenate(new)
     if not visited[goal]:
         return None
+    return _walk_back(came, offsets, start, goal)
+
+
+@njit(cache=True)
+def _walk_back(came, offsets, start, goal):
+    """The flat cell indices from start to goal of a search that reached goal, each cell
+    having come from the one ``offsets[came[cell]]`` before it (compiled: the A* search
+    calls it from its kernel)."""
     path = [goal]
     cur = goal
     while cur != start:
@@ -661,12 +669,7 @@ def _astar(free, start, goal, pitch):
                 heapq.heappush(heap, (cost + heuristic(nb), nb))
     if not np.isfinite(g[goal]):
         return np.zeros(0, np.int64)
-    path = [goal]
-    cur = goal
-    while cur != start:
-        cur -= offs[came[cur]]
-        path.append(cur)
-    return np.array(path[::-1], dtype=np.int64)
+    return _walk_back(came, offs, start, goal)
 
 
 @njit(cache=True)
