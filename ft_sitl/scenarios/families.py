@@ -406,6 +406,12 @@ def _family(name: str, paper_name: str, category: str, schema: Schema,
     return declare
 
 
+def _first(name: str, key: str) -> Param:
+    """Parameter ``key`` as family ``name``'s version 1 declares it: a later version that
+    keeps a parameter unchanged reuses its declaration (one declaration per parameter)."""
+    return REGISTRY[name].versions[1][0][key]
+
+
 def _revise(name: str, version: int, change: str, schema: Schema | None = None):
     """Declare generator ``version`` of family ``name`` (the decorated function, same
     signature as for :func:`_family`; ``schema``: its parameters when they differ from
@@ -671,8 +677,7 @@ def urban_barrier_count(index: int) -> int:
          schema=Schema((
              SIZE,
              CEILING,
-             Param("block_zone_x_m", (4.0, 56.0), "m", (0.0, 500.0), kind=INTERVAL,
-                   doc="the blocks fill x in [lo, hi]"),
+             _first("urban", "block_zone_x_m"),
              Param("block_zone_y_m", (8.0, 52.0), "m", (0.0, 500.0), kind=INTERVAL,
                    doc="the blocks fill y in [lo, hi]; the avenue's obstacles stand in "
                        "[lo + 5, hi - 1]"),
@@ -687,11 +692,10 @@ def urban_barrier_count(index: int) -> int:
              Param("park_probability", 0.15, "-", (0.0, 1.0),
                    doc="a block not facing the avenue is an empty park"),
              Param("tall_probability", 0.7, "-", (0.0, 1.0), doc="a building is tall"),
-             Param("tall_height_m", (12.0, 40.0), "m", (0.5, 500.0), kind=INTERVAL,
-                   doc="a tall building's height, uniform in [lo, hi]"),
+             _first("urban", "tall_height_m"),
              Param("low_height_m", (3.0, 8.0), "m", (0.5, 500.0), kind=INTERVAL,
                    doc="a low building's height, uniform in [lo, hi]"),
-             Param("alley_m", 1.2, "m", (0.0, 20.0), doc="alley between the lots of a block"),
+             _first("urban", "alley_m"),
              Param("barrier_count", None, derived=True,
                    doc="trucks or walls across the line at flight altitude: max(0, "
                        "(index - 2) // 2), 0, 0, 0, 1, 1, 2, 2, 3, 3, 4 for index 1..10"),
@@ -1121,8 +1125,7 @@ def narrow_gap(fam: Family, p: dict, rng: np.random.Generator, index: int,
              CEILING,
              Param("gap_count", None, derived=True,
                    doc="walls, one gap each: the configuration index"),
-             Param("gap_width_m", (0.85, 0.90), "m", (0.1, 10.0), kind=INTERVAL,
-                   doc="gap width, uniform in [lo, hi]"),
+             _first("narrow_gap", "gap_width_m"),
              Param("on_line_probability", 0.4, "-", (0.0, 1.0),
                    doc="a gap is centred on the start->goal line (else beside it)"),
              Param("gap_offset_m", (1.0, 2.0), "m", (0.0, 100.0), kind=INTERVAL,
@@ -1131,8 +1134,8 @@ def narrow_gap(fam: Family, p: dict, rng: np.random.Generator, index: int,
              Param("wall_zone_y_m", (8.0, 42.0), "m", (0.0, 500.0), kind=INTERVAL,
                    doc="the walls stand in y in [lo, hi], one in each of gap_count equal "
                        "slots"),
-             Param("wall_thickness_m", 0.3, "m", (0.05, 5.0), doc="wall thickness"),
-             Param("wall_height_m", 5.0, "m", (0.5, 100.0), doc="wall height"),
+             _first("narrow_gap", "wall_thickness_m"),
+             _first("narrow_gap", "wall_height_m"),
              START_ALTITUDE,
          )).with_defaults(size_m=(50.0, 50.0), ceiling_m=4.0))
 def narrow_gap_v2(fam: Family, p: dict, rng: np.random.Generator, index: int,
@@ -1321,8 +1324,8 @@ MAZE_ATTEMPTS = 20_000
     Param("cells", (7, 10), "-", (2, 200), doc="cells across (x) and along (y)"),
     Param("cell_m", None, derived=True, doc="size_m / cells"),
     Param("corridor_width_m", None, derived=True, doc="min(cell_m) - wall_thickness_m"),
-    Param("wall_thickness_m", 0.2, "m", (0.01, 5.0), doc="wall thickness"),
-    Param("wall_height_m", 2.5, "m", (0.1, 100.0), doc="wall height"),
+    _first("maze", "wall_thickness_m"),
+    _first("maze", "wall_height_m"),
     Param("algorithm", "recursive division", choices=("recursive division",),
           doc="how the walls are drawn"),
     Param("extra_passages", 6, "-", (0, 10_000),
