@@ -11,7 +11,15 @@ from pathlib import Path
 from ft_sitl.autopilot.params import DEFAULT_GAINS, GAIN_MODES
 from ft_sitl.bus.options import parse_broker_url
 from ft_sitl.cli.common import CliError, option_value
-from ft_sitl.missions.campaign import Transport, report_meta, run_campaign
+from ft_sitl.missions.campaign import (
+    GRID_CACHE_DIR,
+    DaskExecutor,
+    ExecutorError,
+    LocalExecutor,
+    Transport,
+    report_meta,
+    run_campaign,
+)
 from ft_sitl.missions.campaign_file import CampaignError, load_campaign
 from ft_sitl.missions.report import write_report
 from ft_sitl.missions.results import rows_from_parquet, to_frame
@@ -73,6 +81,7 @@ def cmd_campaign_run(args) -> int:
         raise CliError(f"--workers: {args.workers} must be at least 1")
     if args.limit is not None and args.limit < 1:
         raise CliError(f"--limit: {args.limit} must be at least 1")
+    executor = _executor(args)
     out = Path(args.out)
     for note in c.notes:
         print(f"note: {note}", file=sys.stderr)
@@ -83,9 +92,9 @@ def cmd_campaign_run(args) -> int:
     if args.mqtt:
         option_value("--mqtt", parse_broker_url, args.mqtt)
     try:
-        summary = run_campaign(c, out, workers=args.workers, progress=not args.quiet,
+        summary = run_campaign(c, out, executor=executor, progress=not args.quiet,
                                limit=args.limit, transport=transport)
-    except StoreError as exc:
+    except (StoreError, ExecutorError, CampaignError) as exc:
         raise CliError(str(exc)) from None
     except KeyboardInterrupt:
         print(f"interrupted: finished trials are in {out}; run the same command again to "
@@ -107,6 +116,30 @@ def cmd_campaign_run(args) -> int:
     if not args.no_report and (summary.ran or summary.skipped):
         _report(out, quiet=False)
     return 1 if summary.errors else 0
+
+
+def _executor(args):
+    """Where ``campaign run`` flies its trials: a local pool of --workers processes (also
+    for one: a crash or a hang then ends a worker, not the campaign), or Dask."""
+    if args.scheduler and args.cluster:
+        raise CliError("--scheduler and --cluster: give one (an existing cluster, or "
+                       "--cluster local to start one here)")
+    if args.chunk_size is not None:
+        if not (args.scheduler or args.cluster):
+            raise CliError("--chunk-size: only with --scheduler or --cluster")
+        if args.chunk_size < 1:
+            raise CliError(f"--chunk-size: {args.chunk_size} must be at least 1")
+    chunk = args.chunk_size or 10
+    if args.scheduler:
+        address = args.scheduler.strip()
+        scheme, sep, rest = address.partition("://")
+        if not sep or scheme not in ("tcp", "tls", "ucx", "ws", "wss", "inproc") or not rest:
+            raise CliError(f"--scheduler: {args.scheduler!r} is not a scheduler address "
+                           f"like tcp://host:8786")
+        return DaskExecutor(scheduler=address, chunk_max=chunk)
+    if args.cluster == "local":
+        return DaskExecutor(local_workers=args.workers, chunk_max=chunk)
+    return LocalExecutor(args.workers, Path(args.out) / GRID_CACHE_DIR)
 
 
 def _report(out: Path, quiet: bool = False) -> Path:

@@ -130,7 +130,16 @@ def _add_missions(sub) -> None:
                                      "--out; rerunning the same command resumes it.")
     cr.add_argument("campaign", help="campaign file (.toml, .yaml) or preset: quick, paper")
     cr.add_argument("--out", required=True, metavar="DIR", help="result directory")
-    cr.add_argument("--workers", type=int, default=1, help="worker processes (default 1)")
+    cr.add_argument("--workers", type=int, default=1,
+                    help="worker processes on this machine (default 1), or with --cluster "
+                         "local the Dask workers to start")
+    cr.add_argument("--scheduler", metavar="ADDRESS",
+                    help="fly the trials on an existing Dask cluster, e.g. "
+                         "tcp://host:8786 (docs/distributed.md)")
+    cr.add_argument("--cluster", choices=("local",),
+                    help="local: start a Dask LocalCluster of --workers processes here")
+    cr.add_argument("--chunk-size", type=int, metavar="N",
+                    help="trials per Dask task (default 10; same scenario configuration)")
     cr.add_argument("--csv", action="store_true", help="also write trials.csv")
     cr.add_argument("--no-report", action="store_true", help="do not write the report")
     cr.add_argument("--limit", type=int, metavar="N", help="stop after N new trials")

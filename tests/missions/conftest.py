@@ -39,6 +39,8 @@ import os
 import signal
 import time
 
+from numba import njit
+
 from ft_sitl.autopilot.setpoints import Setpoint
 from ft_sitl.navigation.base import Navigator
 from ft_sitl.schema import Param, Schema
@@ -73,12 +75,33 @@ class Killer(Navigator):
         return Setpoint.position(self.task.start)
 
 
+class Spin(Navigator):
+    """Enter a compiled loop that does not return in any test's lifetime (about 10^12
+    multiply-adds), 0.2 s into the navigation phase: no signal handler runs meanwhile."""
+
+    name = "t_spin"
+
+    def step(self, obs):
+        if obs.time_s >= 0.2:
+            _spin(10 ** 12)
+        return Setpoint.position(self.task.start)
+
+
+@njit(cache=False)
+def _spin(n):
+    acc = 0.0
+    for i in range(n):
+        acc = acc * 0.999999 + 1.0  # a recurrence: no closed form, cannot be optimised out
+    return acc
+
+
 NOT_A_NAVIGATOR = 42
 '''
 ENTRY_POINTS = f"""\
 [ft_sitl.navigators]
 t_hover = {PLUGIN_PACKAGE}:Hover
 t_killer = {PLUGIN_PACKAGE}:Killer
+t_spin = {PLUGIN_PACKAGE}:Spin
 t_broken = {PLUGIN_PACKAGE}_missing.nav:Broken
 t_notnav = {PLUGIN_PACKAGE}:NOT_A_NAVIGATOR
 """

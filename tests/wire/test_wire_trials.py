@@ -14,6 +14,7 @@ from pathlib import Path
 from ft_sitl.bus.client import BusClient
 from ft_sitl.missions.campaign import Transport, run_campaign
 from ft_sitl.missions.campaign_file import load_campaign
+from ft_sitl.missions.executors import DaskExecutor
 from ft_sitl.missions.results import REASONS
 from ft_sitl.missions.trial import TrialSpec
 from ft_sitl.missions.trial_wire import run_trial_wire, worker_bus
@@ -63,6 +64,33 @@ def test_inprocess_and_mavlink_transports_agree(tmp_path, navrl_checkpoint, monk
                                     - a[("navrl", "forest", 1)]["nav_time_s"]) < 3
     runs = json.loads((tmp_path / "wire" / "runs.json").read_text())
     assert runs[-1]["transport"] == "mavlink"
+
+
+def test_mavlink_trials_on_a_dask_cluster_fly_side_by_side(tmp_path):
+    """Two Dask workers on this machine each serve a SITL vehicle at once: each trial
+    process takes its own instance number, so the UDP ports never collide, and the
+    baseline ends as it does in-process."""
+    p = tmp_path / "c.toml"
+    p.write_text(textwrap.dedent(f"""\
+        name = "side-by-side"
+        trials = 1
+        platforms = ["{AGILE}"]
+        scenarios = [{{family = "forest", indices = [1]}}, {{family = "urban", indices = [1]}}]
+        algorithms = ["straight"]
+        """))
+    c = load_campaign(p)
+    run_campaign(c, tmp_path / "inproc", progress=False)
+    ex = DaskExecutor(local_workers=2, chunk_max=1)
+    run_campaign(c, tmp_path / "wire", progress=False, executor=ex,
+                 transport=Transport("mavlink", speed_factor=2.0))
+    a, b = _rows(tmp_path / "inproc"), _rows(tmp_path / "wire")
+    assert a.keys() == b.keys() and len(a) == 2
+    for key in a:
+        assert b[key]["nav_time_s"] > 0.0, (key, b[key]["detail"])
+        assert a[key]["reason"] == b[key]["reason"], (key, a[key]["detail"], b[key]["detail"])
+    run = json.loads((tmp_path / "wire" / "runs.json").read_text())[-1]
+    assert (run["executor"], run["transport"]) == ("dask", "mavlink")
+    assert len(run["throughput"]) == 2  # one trial on each worker
 
 
 def _command_spec(argv, **kw):
