@@ -28,6 +28,7 @@ from tqdm import tqdm
 
 from ft_sitl import __version__
 from ft_sitl.missions.campaign_file import Campaign, CampaignError
+from ft_sitl.missions.durable import durable_replace
 from ft_sitl.missions.executors import (
     DIED_DETAIL,
     DaskExecutor,
@@ -151,7 +152,7 @@ def record_run(out_dir: Path, entry: dict) -> None:
     runs.append(entry)
     tmp = path.with_suffix(".tmp")
     tmp.write_text(json.dumps(runs, indent=2))
-    os.replace(tmp, path)
+    durable_replace(tmp, path)
 
 
 def report_meta(out_dir: Path, campaign: dict) -> dict:

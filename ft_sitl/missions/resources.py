@@ -16,6 +16,7 @@ import os
 
 import numpy as np
 
+from ft_sitl.missions.durable import durable_replace
 from ft_sitl.missions.spec import TrialSpec
 from ft_sitl.scenarios.camera import DepthCamera
 from ft_sitl.scenarios.collision import CollisionWorld
@@ -104,7 +105,7 @@ class TrialResources:
             tmp = f"{path}.{os.getpid()}.tmp.npz"
             try:
                 np.savez(tmp, data=grid.data, origin=grid.origin, pitch=grid.pitch)
-                os.replace(tmp, path)
+                durable_replace(tmp, path)
                 prune_grids(self.grid_dir)
             except OSError:
                 pass  # sharing is an optimisation only

@@ -15,7 +15,9 @@ write cut short) is dropped on the next open, and the file is truncated back to 
 complete line before anything is appended; a damaged line elsewhere is skipped (counted in
 ``damaged_lines``) without losing the lines after it. Resuming skips every trial id already
 in the file, so no trial is lost or duplicated. An exclusive lock on ``DIR/.lock`` keeps a
-second runner out of a directory in use.
+second runner out of a directory in use. campaign.json and trials.parquet are replaced whole
+(:func:`~ft_sitl.missions.durable.durable_replace`): a power cut leaves the old file or the
+new one, never an empty one.
 """
 
 from __future__ import annotations
@@ -28,6 +30,7 @@ from pathlib import Path
 import numpy as np
 
 from ft_sitl.autopilot.params import DEFAULT_GAINS
+from ft_sitl.missions.durable import durable_replace
 from ft_sitl.missions.results import check_outcome, to_frame
 
 SPEC_FILE = "campaign.json"
@@ -66,7 +69,7 @@ class ResultStore:
         else:
             tmp = self.spec_path.with_suffix(".tmp")
             tmp.write_text(json.dumps(campaign, indent=2, sort_keys=True))
-            os.replace(tmp, self.spec_path)
+            durable_replace(tmp, self.spec_path)
         self._lock()
         self.done = self._load(repair=True)
         self._fh = open(self.trials_path, "ab")  # noqa: SIM115 - kept open while running
@@ -163,7 +166,7 @@ class ResultStore:
         out = [self.dir / PARQUET_FILE]
         tmp = out[0].with_suffix(".parquet.tmp")
         df.to_parquet(tmp, index=False)
-        os.replace(tmp, out[0])
+        durable_replace(tmp, out[0])
         if csv:
             out.append(self.dir / "trials.csv")
             df.to_csv(out[1], index=False)

@@ -14,6 +14,7 @@ import os
 import signal
 import subprocess
 import time
+from pathlib import Path
 
 import pandas as pd
 import pytest
@@ -624,3 +625,50 @@ def test_a_directory_of_another_protocol_version_is_refused_by_version(tmp_path)
         ResultStore(tmp_path).open({"spec": {"name": "x", "trials": 1}})
     with pytest.raises(StoreError, match="holds the results of a different campaign"):
         ResultStore(tmp_path).open({"spec": {"name": "x", "trials": 2}})
+
+
+# --- the result directory: lock, durable writes, lost campaign.json, damaged lines ----------
+STORE = """\
+name = "{name}"
+trials = {trials}
+seed = {seed}
+platforms = ["1.00kg-SunnySky"]
+scenarios = [{{file = "yard.yaml"}}]
+algorithms = ["straight"]
+[limits]
+timeout_s = 3.0
+"""
+
+
+def _store_campaign(root, name="store", trials=2, seed=1, file=None):
+    write_yard(root)
+    return campaign_file(root, file or f"{name}-{seed}.toml",
+                         STORE.format(name=name, trials=trials, seed=seed))
+
+
+def test_every_file_is_replaced_durably(tmp_path, monkeypatch):
+    """campaign.json, runs.json and trials.parquet: the temporary file is fsync'ed before
+    it replaces the old one, and the directory after (else a power cut can leave an empty
+    file)."""
+    campaign = load_campaign(_store_campaign(tmp_path, trials=1))
+    out = (tmp_path / "out").resolve()
+    events = []
+    fsync, replace = os.fsync, os.replace
+
+    def logged_fsync(fd):
+        events.append(("fsync", os.readlink(f"/proc/self/fd/{fd}")))
+        fsync(fd)
+
+    def logged_replace(src, dst):
+        events.append(("replace", str(Path(src).resolve()), str(Path(dst).resolve())))
+        replace(src, dst)
+
+    monkeypatch.setattr(os, "fsync", logged_fsync)
+    monkeypatch.setattr(os, "replace", logged_replace)
+    summary = run_campaign(campaign, out, progress=False)
+    assert (summary.ran, summary.errors) == (1, [])
+    for name in ("campaign.json", "runs.json", "trials.parquet"):
+        (k,) = [k for k, e in enumerate(events) if e[0] == "replace" and e[2] == str(out / name)]
+        assert events[k - 1] == ("fsync", events[k][1]), name  # the new file's data
+        assert events[k + 1] == ("fsync", str(out)), name  # the rename
+    assert ("fsync", str(out / "trials.jsonl")) in events
