@@ -2,6 +2,7 @@
 
 Layout of ``DIR``::
 
+    .lock              held (an exclusive flock) by the one runner using the directory
     campaign.json      the campaign as run (spec, resolved trial count, code version);
                        written once, compared on resume
     trials.jsonl       one finished trial per line (the results-table row as JSON),
@@ -14,8 +15,11 @@ moment (kill -9, power loss) loses at most the trials still in flight; a torn la
 write cut short) is dropped on the next open, and the file is truncated back to its last
 complete line before anything is appended; a damaged line elsewhere is skipped (counted in
 ``damaged_lines``) without losing the lines after it. Resuming skips every trial id already
-in the file, so no trial is lost or duplicated. An exclusive lock on ``DIR/.lock`` keeps a
-second runner out of a directory in use. campaign.json and trials.parquet are replaced whole
+in the file, so no trial is lost or duplicated.
+
+An exclusive lock on ``DIR/.lock`` keeps a second runner out of a directory in use; opening
+takes it before campaign.json is checked or written, so two runners never both see a
+directory without one. campaign.json and trials.parquet are replaced whole
 (:func:`~ft_sitl.missions.durable.durable_replace`): a power cut leaves the old file or the
 new one, never an empty one.
 """
@@ -48,16 +52,31 @@ class ResultStore:
         self.trials_path = self.dir / TRIALS_FILE
         self.spec_path = self.dir / SPEC_FILE
         self._fh = None
+        self._lock_fh = None
         self.done: dict[str, dict] = {}
 
     # --- opening ------------------------------------------------------------------------
     def open(self, campaign: dict) -> None:
-        """Create the directory or reopen it for the same campaign; load finished trials."""
+        """Create the directory or reopen it for the same campaign; load finished trials.
+        Takes the directory's lock first, then compares campaign.json with ``campaign``
+        (writing it when the directory has none). StoreError: the directory is in use,
+        holds another campaign, or is unreadable."""
         try:
             self.dir.mkdir(parents=True, exist_ok=True)
         except OSError as exc:
             raise StoreError(f"--out {self.dir}: cannot create the directory: "
                              f"{exc.strerror}") from None
+        self._lock()
+        try:
+            self._check_campaign(campaign)
+            self.done = self._load(repair=True)
+            self._fh = open(self.trials_path, "ab")  # noqa: SIM115 - kept open while running
+        except BaseException:
+            self.close()
+            raise
+
+    def _check_campaign(self, campaign: dict) -> None:
+        """Compare campaign.json with ``campaign``, or write it (under the lock)."""
         if self.spec_path.exists():
             try:
                 old = json.loads(self.spec_path.read_text())
@@ -70,9 +89,6 @@ class ResultStore:
             tmp = self.spec_path.with_suffix(".tmp")
             tmp.write_text(json.dumps(campaign, indent=2, sort_keys=True))
             durable_replace(tmp, self.spec_path)
-        self._lock()
-        self.done = self._load(repair=True)
-        self._fh = open(self.trials_path, "ab")  # noqa: SIM115 - kept open while running
 
     def load(self) -> dict[str, dict]:
         """Read the finished trials of the directory into :attr:`done` (trial id -> row)."""
@@ -149,7 +165,7 @@ class ResultStore:
         if self._fh is not None:
             self._fh.close()
             self._fh = None
-        if getattr(self, "_lock_fh", None) is not None:
+        if self._lock_fh is not None:
             self._lock_fh.close()  # releases the lock
             self._lock_fh = None
 

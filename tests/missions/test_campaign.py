@@ -8,6 +8,7 @@ recorded and the campaign goes on. Registry: navigators from a real entry point 
 """
 
 import collections
+import fcntl
 import json
 import math
 import os
@@ -644,6 +645,29 @@ def _store_campaign(root, name="store", trials=2, seed=1, file=None):
     write_yard(root)
     return campaign_file(root, file or f"{name}-{seed}.toml",
                          STORE.format(name=name, trials=trials, seed=seed))
+
+
+def test_the_lock_is_taken_before_campaign_json_is_read_or_written(tmp_path):
+    other = open(tmp_path / ".lock", "w")  # noqa: SIM115 - another runner holding the lock
+    fcntl.flock(other, fcntl.LOCK_EX | fcntl.LOCK_NB)
+    with pytest.raises(StoreError, match=f"^{tmp_path} is in use by another campaign run"):
+        ResultStore(tmp_path).open({"spec": {"name": "x"}})
+    assert not (tmp_path / "campaign.json").exists()  # nothing written without the lock
+    other.close()
+    store = ResultStore(tmp_path)
+    store.open({"spec": {"name": "x"}})
+    store.close()
+    other = open(tmp_path / ".lock", "w")  # noqa: SIM115
+    fcntl.flock(other, fcntl.LOCK_EX | fcntl.LOCK_NB)
+    # checked under the lock: a runner waiting on it does not even read campaign.json
+    with pytest.raises(StoreError, match="is in use by another campaign run"):
+        ResultStore(tmp_path).open({"spec": {"name": "y"}})
+    other.close()
+    with pytest.raises(StoreError, match="holds the results of a different campaign"):
+        ResultStore(tmp_path).open({"spec": {"name": "y"}})
+    store = ResultStore(tmp_path)  # the refused open let go of the lock
+    store.open({"spec": {"name": "x"}})
+    store.close()
 
 
 def test_every_file_is_replaced_durably(tmp_path, monkeypatch):
