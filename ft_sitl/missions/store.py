@@ -34,7 +34,7 @@ from pathlib import Path
 import numpy as np
 
 from ft_sitl.autopilot.params import DEFAULT_GAINS
-from ft_sitl.missions.durable import durable_replace
+from ft_sitl.missions.durable import durable_replace, fsync_dir
 from ft_sitl.missions.results import check_outcome, to_frame
 
 SPEC_FILE = "campaign.json"
@@ -71,6 +71,7 @@ class ResultStore:
             self._check_campaign(campaign)
             self.done = self._load(repair=True)
             self._fh = open(self.trials_path, "ab")  # noqa: SIM115 - kept open while running
+            fsync_dir(self.dir)  # trials.jsonl's entry, when it was just created
         except BaseException:
             self.close()
             raise
