@@ -114,7 +114,7 @@ def cmd_campaign_run(args) -> int:
         if store.done:
             print(f"table: {store.write_tables(csv=True)[-1]}")
     if not args.no_report and (summary.ran or summary.skipped):
-        _report(out, quiet=False)
+        _report(out, quiet=False, warn=False)  # (the run has said what it skipped)
     return 1 if summary.errors else 0
 
 
@@ -142,11 +142,20 @@ def _executor(args):
     return LocalExecutor(args.workers, Path(args.out) / GRID_CACHE_DIR)
 
 
-def _report(out: Path, quiet: bool = False) -> Path:
+def _warn(note: str) -> None:
+    print(f"warning: {note}", file=sys.stderr)
+
+
+def _load_rows(directory, warn: bool = True) -> tuple[dict, list[dict]]:
+    """load_rows, its notes (damaged lines skipped) printed on stderr when ``warn``."""
     try:
-        campaign, rows = load_rows(out)
+        return load_rows(directory, on_note=_warn if warn else None)
     except StoreError as exc:
         raise CliError(str(exc)) from None
+
+
+def _report(out: Path, quiet: bool = False, warn: bool = True) -> Path:
+    campaign, rows = _load_rows(out, warn)
     if not rows:
         raise CliError(f"{out}: no finished trials yet")
     paths = write_report(to_frame(rows), out, campaign_spec=campaign.get("spec", {}),
@@ -160,10 +169,7 @@ def _report(out: Path, quiet: bool = False) -> Path:
 def cmd_campaign_report(args) -> int:
     out = Path(args.dir)
     if args.csv:
-        try:
-            load_rows(out)
-        except StoreError as exc:
-            raise CliError(str(exc)) from None
+        _load_rows(out, warn=False)  # (the report below says what it skipped)
         store = ResultStore(out)
         store.load()
         print(f"table: {store.write_tables(csv=True)[-1]}")
@@ -201,11 +207,8 @@ def compare_runs(a_rows: list[dict], b_rows: list[dict]) -> dict:
 
 
 def cmd_campaign_compare(args) -> int:
-    try:
-        _, ra = load_rows(Path(args.a))
-        _, rb = load_rows(Path(args.b))
-    except StoreError as exc:
-        raise CliError(str(exc)) from None
+    _, ra = _load_rows(Path(args.a))
+    _, rb = _load_rows(Path(args.b))
     res = compare_runs(ra, rb)
     if res["common_trials"] == 0:
         raise CliError(f"{args.a} and {args.b} have no trial in common (different "
@@ -238,10 +241,7 @@ def _stored_rows(directory) -> list[dict]:
             return rows_from_parquet(d / PARQUET_FILE)
         except (OSError, ValueError) as exc:
             raise CliError(f"{d / PARQUET_FILE}: unreadable ({exc})") from None
-    try:
-        return load_rows(d)[1]
-    except StoreError as exc:
-        raise CliError(str(exc)) from None
+    return _load_rows(d)[1]
 
 
 def _spec_of(doc):

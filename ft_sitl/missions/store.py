@@ -10,18 +10,16 @@ Layout of ``DIR``::
     trials.parquet     the tidy table, rewritten from trials.jsonl at the end of a run
     report/            ``ft-sitl campaign report``
 
+Opening takes the lock first, then checks or writes campaign.json, so two runners never
+both see a directory without one. campaign.json and trials.parquet (and runs.json) are
+replaced whole (:func:`~ft_sitl.missions.durable.durable_replace`): a power cut leaves the
+old file or the new one, never an empty one.
+
 A trial counts as done once its line is completely on disk. Killing the runner at any
 moment (kill -9, power loss) loses at most the trials still in flight; a torn last line (a
-write cut short) is dropped on the next open, and the file is truncated back to its last
-complete line before anything is appended; a damaged line elsewhere is skipped (counted in
-``damaged_lines``) without losing the lines after it. Resuming skips every trial id already
-in the file, so no trial is lost or duplicated.
-
-An exclusive lock on ``DIR/.lock`` keeps a second runner out of a directory in use; opening
-takes it before campaign.json is checked or written, so two runners never both see a
-directory without one. campaign.json and trials.parquet are replaced whole
-(:func:`~ft_sitl.missions.durable.durable_replace`): a power cut leaves the old file or the
-new one, never an empty one.
+write cut short) is cut off on the next open, before anything is appended; a damaged line
+elsewhere is skipped without losing the lines after it, and reported by its line number.
+Resuming skips every trial id already in the file, so no trial is lost or duplicated.
 """
 
 from __future__ import annotations
@@ -29,6 +27,7 @@ from __future__ import annotations
 import fcntl
 import json
 import os
+from collections.abc import Callable
 from pathlib import Path
 
 import numpy as np
@@ -40,6 +39,9 @@ from ft_sitl.missions.results import check_outcome, to_frame
 SPEC_FILE = "campaign.json"
 TRIALS_FILE = "trials.jsonl"
 PARQUET_FILE = "trials.parquet"
+LOCK_FILE = ".lock"
+#: damaged lines a note lists by number (the count is always given)
+NOTE_LINES_MAX = 10
 
 
 class StoreError(ValueError):
@@ -54,12 +56,17 @@ class ResultStore:
         self._fh = None
         self._lock_fh = None
         self.done: dict[str, dict] = {}
+        #: 1-based numbers of the damaged lines of trials.jsonl (skipped), as last read
+        self.damaged: list[int] = []
+        #: length in bytes of a torn last line of trials.jsonl (no newline), as last read
+        self.torn_bytes = 0
 
     # --- opening ------------------------------------------------------------------------
-    def open(self, campaign: dict) -> None:
+    def open(self, campaign: dict) -> list[str]:
         """Create the directory or reopen it for the same campaign; load finished trials.
         Takes the directory's lock first, then compares campaign.json with ``campaign``
-        (writing it when the directory has none). StoreError: the directory is in use,
+        (writing it when the directory has none). Returns notes for the user: damaged
+        lines skipped, a torn last line cut off. StoreError: the directory is in use,
         holds another campaign, or is unreadable."""
         try:
             self.dir.mkdir(parents=True, exist_ok=True)
@@ -70,11 +77,38 @@ class ResultStore:
         try:
             self._check_campaign(campaign)
             self.done = self._load(repair=True)
+            notes = self.notes(resuming=True)
             self._fh = open(self.trials_path, "ab")  # noqa: SIM115 - kept open while running
             fsync_dir(self.dir)  # trials.jsonl's entry, when it was just created
         except BaseException:
             self.close()
             raise
+        return notes
+
+    def load(self) -> dict[str, dict]:
+        """Read the finished trials of the directory into :attr:`done` (trial id -> row)."""
+        self.done = self._load()
+        return self.done
+
+    def notes(self, resuming: bool = False) -> list[str]:
+        """What the last read of trials.jsonl skipped: damaged lines (by number) and, when
+        ``resuming`` (the torn line was just cut off), a torn last line."""
+        notes = []
+        if self.damaged:
+            n = len(self.damaged)
+            numbers = ", ".join(map(str, self.damaged[:NOTE_LINES_MAX]))
+            if n > NOTE_LINES_MAX:
+                numbers += ", ..."
+            then = ("a trial stored only there is flown again" if resuming else
+                    "a trial stored only there is missing from these results until the "
+                    "campaign is run again")
+            notes.append(f"{self.trials_path}: {n} damaged line{'s' if n != 1 else ''} "
+                         f"skipped (line{'s' if n != 1 else ''} {numbers}: not a trial "
+                         f"row); {then}")
+        if resuming and self.torn_bytes:
+            notes.append(f"{self.trials_path}: a torn last line ({self.torn_bytes} bytes, a "
+                         f"write cut short) was cut off; its trial is flown again")
+        return notes
 
     def _check_campaign(self, campaign: dict) -> None:
         """Compare campaign.json with ``campaign``, or write it (under the lock)."""
@@ -90,11 +124,6 @@ class ResultStore:
             tmp = self.spec_path.with_suffix(".tmp")
             tmp.write_text(json.dumps(campaign, indent=2, sort_keys=True))
             durable_replace(tmp, self.spec_path)
-
-    def load(self) -> dict[str, dict]:
-        """Read the finished trials of the directory into :attr:`done` (trial id -> row)."""
-        self.done = self._load()
-        return self.done
 
     def _mismatch(self, old: dict, new: dict) -> str:
         """Why the directory's campaign is not this one; a different protocol version
@@ -117,23 +146,30 @@ class ResultStore:
                 f"campaign file to resume")
 
     def _load(self, repair: bool = False) -> dict[str, dict]:
+        """The rows of trials.jsonl by trial id (the first of a repeated id); records the
+        damaged lines and a torn last line, which ``repair`` cuts off."""
         done: dict[str, dict] = {}
-        self.damaged_lines = 0
+        self.damaged = []
+        self.torn_bytes = 0
         if not self.trials_path.exists():
             return done
         data = self.trials_path.read_bytes()
         end = data.rfind(b"\n") + 1  # after the last complete line
-        for line in data[:end].splitlines():
+        for number, line in enumerate(data[:end].split(b"\n")[:-1], start=1):
             try:
                 row = json.loads(line)
                 tid = row["trial_id"]
+                if not isinstance(tid, str):
+                    raise TypeError(tid)
             except (ValueError, KeyError, TypeError):
-                self.damaged_lines += 1  # skipped; the trial reruns if it is not elsewhere
+                self.damaged.append(number)  # skipped; the trial reruns if not elsewhere
                 continue
             done.setdefault(tid, row)
-        if repair and end < len(data):  # a torn tail (killed mid-write): cut it off
+        self.torn_bytes = len(data) - end
+        if repair and self.torn_bytes:  # killed mid-write: cut the torn line off
             with open(self.trials_path, "r+b") as fh:
                 fh.truncate(end)
+                os.fsync(fh.fileno())
         return done
 
     # --- writing ------------------------------------------------------------------------
@@ -153,7 +189,7 @@ class ResultStore:
     def _lock(self) -> None:
         """One runner per directory: an exclusive lock on DIR/.lock, held while open."""
 
-        self._lock_fh = open(self.dir / ".lock", "w")  # noqa: SIM115 - held while running
+        self._lock_fh = open(self.dir / LOCK_FILE, "w")  # noqa: SIM115 - held while running
         try:
             fcntl.flock(self._lock_fh, fcntl.LOCK_EX | fcntl.LOCK_NB)
         except OSError:
@@ -190,8 +226,10 @@ class ResultStore:
         return out
 
 
-def load_rows(directory: str | Path) -> tuple[dict, list[dict]]:
-    """(campaign.json contents, finished trial rows) of a result directory."""
+def load_rows(directory: str | Path, on_note: Callable[[str], object] | None = None
+              ) -> tuple[dict, list[dict]]:
+    """(campaign.json contents, finished trial rows) of a result directory; ``on_note`` is
+    called with each note on what was skipped (damaged lines of trials.jsonl)."""
     d = Path(directory)
     spec_path = d / SPEC_FILE
     if not spec_path.exists():
@@ -201,7 +239,11 @@ def load_rows(directory: str | Path) -> tuple[dict, list[dict]]:
     except (OSError, ValueError) as exc:
         raise StoreError(f"{spec_path}: unreadable ({exc})") from None
     store = ResultStore(d)
-    return campaign, list(store._load().values())
+    rows = list(store.load().values())
+    if on_note is not None:
+        for note in store.notes():
+            on_note(note)
+    return campaign, rows
 
 
 def _plain(v):

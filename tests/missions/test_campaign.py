@@ -24,7 +24,7 @@ from ft_sitl.missions.campaign import GRID_CACHE_DIR, run_campaign
 from ft_sitl.missions.campaign_file import CampaignError, load_campaign
 from ft_sitl.missions.results import COLUMNS, RowError, to_frame
 from ft_sitl.missions.spec import platform_for
-from ft_sitl.missions.store import ResultStore, StoreError
+from ft_sitl.missions.store import ResultStore, StoreError, load_rows
 from ft_sitl.navigation.base import Limits, Navigator
 from ft_sitl.navigation.registry import NavigatorError, available, create, parameters
 from ft_sitl.navigation.straight import StraightLine
@@ -655,7 +655,7 @@ def test_the_lock_is_taken_before_campaign_json_is_read_or_written(tmp_path):
     assert not (tmp_path / "campaign.json").exists()  # nothing written without the lock
     other.close()
     store = ResultStore(tmp_path)
-    store.open({"spec": {"name": "x"}})
+    assert store.open({"spec": {"name": "x"}}) == []
     store.close()
     other = open(tmp_path / ".lock", "w")  # noqa: SIM115
     fcntl.flock(other, fcntl.LOCK_EX | fcntl.LOCK_NB)
@@ -696,3 +696,36 @@ def test_every_file_is_replaced_durably(tmp_path, monkeypatch):
         assert events[k - 1] == ("fsync", events[k][1]), name  # the new file's data
         assert events[k + 1] == ("fsync", str(out)), name  # the rename
     assert ("fsync", str(out / "trials.jsonl")) in events
+
+
+def test_a_damaged_line_is_reported_and_its_trial_flown_again_once(tmp_path, cli_env):
+    path = _store_campaign(tmp_path, trials=3)
+    out = tmp_path / "out"
+    assert run_campaign(load_campaign(path), out, progress=False).ran == 3
+    trials = out / "trials.jsonl"
+    lines = trials.read_bytes().split(b"\n")
+    lost = json.loads(lines[1])["trial_id"]
+    lines[1] = b"\0" * len(lines[1])  # what a power cut can leave in the middle of a file
+    trials.write_bytes(b"\n".join(lines))
+
+    notes = []
+    campaign, rows = load_rows(out, on_note=notes.append)
+    assert sorted(r["trial_id"] for r in rows) == sorted(
+        json.loads(lines[k])["trial_id"] for k in (0, 2))
+    assert notes == [f"{trials}: 1 damaged line skipped (line 2: not a trial row); a trial "
+                     "stored only there is missing from these results until the campaign "
+                     "is run again"]
+
+    proc = run_exe("campaign", "run", path, "--out", out, "--no-report", "--quiet",
+                   env=cli_env)
+    assert proc.returncode == 0, proc.stderr
+    assert proc.stdout.startswith("1 trials run, 2 already done, 3 in the campaign;")
+    assert f"warning: {trials}: 1 damaged line skipped (line 2: not a trial row); a trial " \
+           "stored only there is flown again" in proc.stderr
+    after = trials.read_bytes().split(b"\n")
+    assert after[:4] == lines[:3] + [after[3]]  # nothing rewritten; one line appended
+    assert json.loads(after[3])["trial_id"] == lost
+    df = pd.read_parquet(out / "trials.parquet")
+    assert sorted(df["trial_id"]) == sorted(s.trial_id for s in
+                                            load_campaign(path).trial_specs())
+    assert list(df["trial_id"]).count(lost) == 1
