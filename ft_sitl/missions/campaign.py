@@ -201,7 +201,7 @@ def run_campaign(campaign: Campaign, out_dir: str | Path, *, workers: int = 1,
     meta = {"spec": campaign.spec_dict(), "total_trials": len(specs),
             "code_version": __version__}
     store = ResultStore(out_dir)
-    for note in store.open(meta):
+    for note in store.open(meta, trial_ids=[s.trial_id for s in specs]):
         print(f"warning: {note}", file=sys.stderr)
     todo = [s for s in specs if s.trial_id not in store.done]
     skipped = len(specs) - len(todo)

@@ -20,6 +20,10 @@ moment (kill -9, power loss) loses at most the trials still in flight; a torn la
 write cut short) is cut off on the next open, before anything is appended; a damaged line
 elsewhere is skipped without losing the lines after it, and reported by its line number.
 Resuming skips every trial id already in the file, so no trial is lost or duplicated.
+
+A directory that has lost its campaign.json (or holds a damaged one) but holds trials is
+resumed only by the campaign those trials belong to (every stored trial id is one of the
+campaign's, and every row names it); campaign.json is then written again.
 """
 
 from __future__ import annotations
@@ -27,14 +31,14 @@ from __future__ import annotations
 import fcntl
 import json
 import os
-from collections.abc import Callable
+from collections.abc import Callable, Collection
 from pathlib import Path
 
 import numpy as np
 
 from ft_sitl.autopilot.params import DEFAULT_GAINS
 from ft_sitl.missions.durable import durable_replace, fsync_dir
-from ft_sitl.missions.results import check_outcome, to_frame
+from ft_sitl.missions.results import check_outcome, rows_from_parquet, to_frame
 
 SPEC_FILE = "campaign.json"
 TRIALS_FILE = "trials.jsonl"
@@ -62,12 +66,15 @@ class ResultStore:
         self.torn_bytes = 0
 
     # --- opening ------------------------------------------------------------------------
-    def open(self, campaign: dict) -> list[str]:
+    def open(self, campaign: dict, trial_ids: Collection[str] | None = None) -> list[str]:
         """Create the directory or reopen it for the same campaign; load finished trials.
-        Takes the directory's lock first, then compares campaign.json with ``campaign``
-        (writing it when the directory has none). Returns notes for the user: damaged
-        lines skipped, a torn last line cut off. StoreError: the directory is in use,
-        holds another campaign, or is unreadable."""
+
+        Takes the directory's lock first; then compares campaign.json with ``campaign``
+        (writing it when the directory has none). ``trial_ids``, every trial id of the
+        campaign, let a directory whose campaign.json is missing or damaged be recognised
+        by its trials (without them such a directory is refused). Returns notes for the
+        user: damaged lines skipped, a torn last line cut off, campaign.json written again.
+        StoreError: the directory is in use, holds another campaign, or is unreadable."""
         try:
             self.dir.mkdir(parents=True, exist_ok=True)
         except OSError as exc:
@@ -75,9 +82,9 @@ class ResultStore:
                              f"{exc.strerror}") from None
         self._lock()
         try:
-            self._check_campaign(campaign)
+            notes = self._check_campaign(campaign, trial_ids)
             self.done = self._load(repair=True)
-            notes = self.notes(resuming=True)
+            notes += self.notes(resuming=True)
             self._fh = open(self.trials_path, "ab")  # noqa: SIM115 - kept open while running
             fsync_dir(self.dir)  # trials.jsonl's entry, when it was just created
         except BaseException:
@@ -110,20 +117,83 @@ class ResultStore:
                          f"write cut short) was cut off; its trial is flown again")
         return notes
 
-    def _check_campaign(self, campaign: dict) -> None:
+    def _check_campaign(self, campaign: dict, trial_ids: Collection[str] | None
+                        ) -> list[str]:
         """Compare campaign.json with ``campaign``, or write it (under the lock)."""
-        if self.spec_path.exists():
+        damage = None
+        try:
+            text = self.spec_path.read_text()
+        except FileNotFoundError:
+            old = None
+        except (OSError, ValueError) as exc:  # (ValueError: not UTF-8)
+            raise StoreError(f"{self.spec_path}: unreadable ({exc})") from None
+        else:
             try:
-                old = json.loads(self.spec_path.read_text())
-            except (OSError, ValueError) as exc:
-                raise StoreError(f"{self.spec_path}: unreadable ({exc})") from None
+                old = json.loads(text)
+            except ValueError as exc:
+                old, damage = None, "empty" if not text.strip() else f"not JSON: {exc}"
+            if old is not None and not isinstance(old, dict):
+                old, damage = None, "not a JSON object"
+        if old is not None:
             if old.get("spec") != campaign.get("spec"):
                 raise StoreError(self._mismatch(old.get("spec") or {}, campaign.get("spec")
                                                 or {}))
-        else:
-            tmp = self.spec_path.with_suffix(".tmp")
-            tmp.write_text(json.dumps(campaign, indent=2, sort_keys=True))
-            durable_replace(tmp, self.spec_path)
+            return []
+        what = f"has no {SPEC_FILE}" if damage is None else \
+            f"has a damaged {SPEC_FILE} ({damage})"
+        stored = self._stored_trials(what)
+        notes = []
+        if stored:
+            name = self._identify(stored, campaign, trial_ids, what)
+            notes.append(f"{self.dir} {what}; the {len(stored)} trials it holds are all "
+                         f"trials of this campaign ({name!r}): {SPEC_FILE} written again")
+        elif damage is not None:
+            notes.append(f"{self.spec_path} was damaged ({damage}) and no trial is stored: "
+                         f"written again")
+        tmp = self.spec_path.with_suffix(".tmp")
+        tmp.write_text(json.dumps(campaign, indent=2, sort_keys=True))
+        durable_replace(tmp, self.spec_path)
+        return notes
+
+    def _stored_trials(self, what: str) -> dict[str, object]:
+        """Trial id -> campaign name of every row in trials.jsonl and trials.parquet."""
+        stored = {tid: row.get("campaign") for tid, row in self._load().items()}
+        parquet = self.dir / PARQUET_FILE
+        if parquet.exists():
+            try:
+                rows = rows_from_parquet(parquet)
+                for row in rows:
+                    stored.setdefault(row["trial_id"], row.get("campaign"))
+            except (OSError, ValueError, KeyError) as exc:
+                raise StoreError(f"{self.dir} {what} and its {PARQUET_FILE} is unreadable "
+                                 f"({exc}): whose trials it holds is unknown; use another "
+                                 f"--out directory") from None
+        return stored
+
+    def _identify(self, stored: dict[str, object], campaign: dict,
+                  trial_ids: Collection[str] | None, what: str) -> str:
+        """The campaign's name if every stored trial is one of its trials, else
+        StoreError saying what the directory holds."""
+        name = (campaign.get("spec") or {}).get("name")
+        n = len(stored)
+        if trial_ids is None:
+            raise StoreError(f"{self.dir} {what} and holds {n} trials, which cannot be "
+                             f"checked against this campaign: use another --out directory")
+        names = sorted({repr(v) for v in stored.values()})
+        if names != [repr(name)]:
+            raise StoreError(f"{self.dir} {what} and holds {n} trials of campaign "
+                             f"{' and '.join(names)}, not of this one ({name!r}): use "
+                             f"another --out directory, or the campaign file that wrote "
+                             f"them to resume")
+        ids = set(trial_ids)
+        foreign = sum(tid not in ids for tid in stored)
+        if foreign:
+            raise StoreError(f"{self.dir} {what} and holds {n} trials of campaign "
+                             f"{name!r}, {foreign} of which are not trials of this "
+                             f"campaign file (another seed, matrix, limits, protocol or "
+                             f"gains?): use another --out directory, or the campaign file "
+                             f"that wrote them to resume")
+        return name
 
     def _mismatch(self, old: dict, new: dict) -> str:
         """Why the directory's campaign is not this one; a different protocol version

@@ -698,6 +698,55 @@ def test_every_file_is_replaced_durably(tmp_path, monkeypatch):
     assert ("fsync", str(out / "trials.jsonl")) in events
 
 
+def test_a_directory_that_lost_campaign_json_resumes_only_its_own_campaign(tmp_path, cli_env):
+    mine = _store_campaign(tmp_path, name="mine")
+    out = tmp_path / "out"
+    assert run_campaign(load_campaign(mine), out, progress=False).ran == 2
+    spec_path, trials = out / "campaign.json", out / "trials.jsonl"
+    written, rows = spec_path.read_text(), trials.read_bytes()
+    spec_path.unlink()
+
+    # another campaign, and the same name with another seed: refused, nothing written
+    for other, found in ((_store_campaign(tmp_path, name="other"),
+                          "holds 2 trials of campaign 'mine', not of this one ('other')"),
+                         (_store_campaign(tmp_path, name="mine", seed=2),
+                          "holds 2 trials of campaign 'mine', 2 of which are not trials of "
+                          "this campaign file")):
+        proc = run_exe("campaign", "run", other, "--out", out, "--no-report", "--quiet",
+                       env=cli_env)
+        assert proc.returncode == 2, proc.stderr
+        assert proc.stderr.startswith(f"ft-sitl: error: {out} has no campaign.json and "
+                                      f"{found}")
+        assert proc.stderr.count("\n") == 1
+        assert not spec_path.exists() and trials.read_bytes() == rows
+    with pytest.raises(StoreError, match="holds 2 trials, which cannot be checked"):
+        ResultStore(out).open(json.loads(written))  # no trial ids to check them against
+
+    # its own campaign: campaign.json written again, nothing flown twice
+    proc = run_exe("campaign", "run", mine, "--out", out, "--no-report", "--quiet",
+                   env=cli_env)
+    assert proc.returncode == 0, proc.stderr
+    assert proc.stdout.startswith("0 trials run, 2 already done, 2 in the campaign;")
+    assert f"warning: {out} has no campaign.json; the 2 trials it holds are all trials of " \
+           "this campaign ('mine'): campaign.json written again" in proc.stderr
+    assert json.loads(spec_path.read_text()) == json.loads(written)
+    assert trials.read_bytes() == rows
+
+    # an empty campaign.json (what a power cut could leave before it was fsync'ed)
+    spec_path.write_text("")
+    summary = run_campaign(load_campaign(mine), out, progress=False)
+    assert (summary.ran, summary.skipped) == (0, 2)
+    assert json.loads(spec_path.read_text()) == json.loads(written)
+
+    # the rows of trials.parquet count as well
+    spec_path.unlink()
+    trials.unlink()
+    other = load_campaign(_store_campaign(tmp_path, name="other"))
+    with pytest.raises(StoreError, match="has no campaign.json and holds 2 trials of "
+                                         "campaign 'mine', not of this one"):
+        run_campaign(other, out, progress=False)
+
+
 def test_a_damaged_line_is_reported_and_its_trial_flown_again_once(tmp_path, cli_env):
     path = _store_campaign(tmp_path, trials=3)
     out = tmp_path / "out"
