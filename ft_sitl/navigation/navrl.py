@@ -70,7 +70,7 @@ from ft_sitl.navigation.common import (
     camera_config,
     wrap_angle,
 )
-from ft_sitl.navigation.navrl_policy import NavRLPolicy
+from ft_sitl.navigation.navrl_policy import CheckpointError, NavRLPolicy
 from ft_sitl.schema import Param, Schema
 
 ENV_VAR = "FT_SITL_NAVRL_CHECKPOINT"
@@ -373,7 +373,13 @@ class NavRL(Navigator):
         path = find_checkpoint(checkpoint)
         if path is None:
             raise FileNotFoundError(NO_CHECKPOINT)
-        self.policy = load_policy(path)
+        try:
+            self.policy = load_policy(path)
+        except CheckpointError as exc:
+            env = os.environ.get(ENV_VAR)
+            if checkpoint is None and env:  # find_checkpoint took the variable's file
+                raise CheckpointError(f"{ENV_VAR}={env}: {exc}") from None
+            raise
         self.checkpoint_path = path
         self.limit = float(p["action_limit_m_s"])
         self.latency = float(p["latency_s"])

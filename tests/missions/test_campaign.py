@@ -778,3 +778,35 @@ def test_a_damaged_line_is_reported_and_its_trial_flown_again_once(tmp_path, cli
     assert sorted(df["trial_id"]) == sorted(s.trial_id for s in
                                             load_campaign(path).trial_specs())
     assert list(df["trial_id"]).count(lost) == 1
+
+
+def test_a_bad_trial_wall_budget_is_one_error_line_from_the_cli(tmp_path, cli_env):
+    path = _store_campaign(tmp_path)
+    for bad in ("abc", "0"):
+        proc = run_exe("campaign", "run", path, "--out", tmp_path / "out", "--quiet",
+                       env={**cli_env, "FT_SITL_TRIAL_WALL_BUDGET_S": bad})
+        assert (proc.returncode, proc.stdout) == (2, "")
+        assert proc.stderr == (f"ft-sitl: error: FT_SITL_TRIAL_WALL_BUDGET_S='{bad}': must "
+                               "be a positive number of seconds or 'none'\n")
+    assert not (tmp_path / "out").exists()
+
+
+def test_a_bad_navrl_checkpoint_variable_is_one_error_line_from_the_cli(tmp_path, cli_env):
+    navrl = campaign_file(tmp_path, "navrl.toml", STORE.format(name="n", trials=1, seed=1)
+                          .replace('["straight"]', '["navrl"]'))
+    write_yard(tmp_path)
+    spec = load_campaign(_store_campaign(tmp_path)).trial_specs()[0].to_dict()
+    (tmp_path / "spec.json").write_text(json.dumps({**spec, "algorithm": "navrl",
+                                                    "label": "navrl"}))
+    not_a_checkpoint = tmp_path / "navrl.toml"
+    every = [("campaign", "run", navrl, "--out", tmp_path / "out"),
+             ("trial", "rerun", "--spec", tmp_path / "spec.json"),
+             ("navigate", "--algorithm", "navrl", "--scenario", tmp_path / "yard.yaml")]
+    for value, commands in ((tmp_path / "missing.pt", every[:1]), (not_a_checkpoint, every)):
+        for command in commands:
+            proc = run_exe(*command, env={**cli_env, "FT_SITL_NAVRL_CHECKPOINT": str(value)})
+            assert proc.returncode == 2, (command, proc.stderr)
+            assert proc.stderr.startswith("ft-sitl: error: "), command
+            assert f"FT_SITL_NAVRL_CHECKPOINT={value}: " in proc.stderr, command
+            assert proc.stderr.count("\n") == 1, (command, proc.stderr)
+    assert not (tmp_path / "out").exists()
