@@ -3,7 +3,10 @@
 Parsing: every mistake is one CampaignError naming the file and the key. Matrix: trial
 counts, configurations, seeds, ids. Running: a campaign killed with SIGKILL mid-run resumes
 to exactly the trials of an uninterrupted run; a navigator that kills its worker process is
-recorded and the campaign goes on. Registry: navigators from a real entry point (a
+recorded and the campaign goes on. Result directory: the lock comes before campaign.json,
+files are replaced durably, a directory that lost campaign.json resumes only its own
+campaign, damaged lines are reported and their trials flown again; bad environment
+variables are one error line from the CLI. Registry: navigators from a real entry point (a
 ``*.dist-info`` on the path, see conftest), broken ones reported without hiding the others.
 """
 
