@@ -295,7 +295,8 @@ def sample_stratified(rows: list[dict], n: int, seed: int) -> list[dict]:
 
 
 # columns that depend on the wall clock, not on the spec
-_NONDETERMINISTIC = ("wall_time_s", "planner_time_s", "finished_utc", "code_version")
+_NONDETERMINISTIC = ("wall_time_s", "planner_time_s", "finished_utc", "code_version",
+                     "software")
 
 
 def _same(a, b) -> bool:

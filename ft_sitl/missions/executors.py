@@ -28,8 +28,6 @@ from __future__ import annotations
 import collections
 import concurrent.futures as cf
 import ctypes
-import functools
-import hashlib
 import itertools
 import logging
 import math
@@ -49,6 +47,7 @@ from pathlib import Path
 from ft_sitl import __version__
 from ft_sitl.missions.resources import RESOURCES
 from ft_sitl.missions.spec import TrialSpec
+from ft_sitl.provenance import code_digest
 
 __all__ = ["DIED_DETAIL", "KILL_GRACE_S", "DaskExecutor", "Executor", "ExecutorError",
            "LocalExecutor", "SerialExecutor", "code_digest", "overrun_detail", "supervise",
@@ -83,24 +82,6 @@ def marker(d: dict, detail: str) -> tuple[str, dict, None]:
 
 def trial_id(d: dict) -> str:
     return TrialSpec.from_dict(d).trial_id
-
-
-@functools.cache
-def code_digest() -> str:
-    """SHA-256 over the source and data files of the installed ft_sitl package: two
-    processes with the same digest fly the same trials to the same rows (the version
-    string alone does not change between commits)."""
-    root = Path(__file__).resolve().parents[1]
-    h = hashlib.sha256()
-    for path in sorted(root.rglob("*")):
-        if path.suffix not in (".py", ".toml", ".csv", ".json", ".yaml") or \
-                "__pycache__" in path.parts:
-            continue
-        h.update(path.relative_to(root).as_posix().encode())
-        h.update(b"\0")
-        h.update(path.read_bytes())
-        h.update(b"\0")
-    return h.hexdigest()
 
 
 def worker_info() -> dict:

@@ -50,6 +50,7 @@ from ft_sitl.missions.results import Outcome
 from ft_sitl.missions.spec import PROTOCOLS, vehicle_half_span_m
 from ft_sitl.navigation.base import STABLE_FOR_S, STABLE_POS_M, STABLE_SPEED_M_S, Task
 from ft_sitl.navigation.registry import available
+from ft_sitl.provenance import software
 from ft_sitl.sim.fleet import Fleet
 from ft_sitl.sim.guard import CollisionGuard, GuardEventKind
 
@@ -103,7 +104,8 @@ def failed_row(spec, platform, scenario, reason: Outcome, detail: str) -> dict:
     outcome and provenance; the metrics are left out (NaN in the table)."""
     row = identity_row(spec, platform, scenario)
     row.update({"success": False, "reason": Outcome(reason).value, "detail": detail,
-                "code_version": __version__, "protocol_version": spec.protocol,
+                "code_version": __version__, "software": software(),
+                "protocol_version": spec.protocol,
                 "gains": spec.gains, "scenario_version": spec.scenario_version,
                 "spec": spec.to_json(),
                 "finished_utc": utc_now()})
@@ -384,6 +386,7 @@ class TrialReferee:
             "sim_time_s": fleet.time_us * 1e-6,
             "wall_time_s": time.perf_counter() - wall0,
             "code_version": __version__,
+            "software": software(),
             "protocol_version": self.spec.protocol,
             "gains": self.spec.gains,
             "scenario_version": self.spec.scenario_version,

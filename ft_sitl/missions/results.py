@@ -23,7 +23,10 @@ metrics (navigation phase)
     ``energy_j`` (motor mechanical energy), ``replans``, ``planner_time_s`` (navigator
     compute, wall clock), ``planner_calls``.
 run
-    ``sim_time_s``, ``wall_time_s``, ``code_version``, ``protocol_version`` (the trial
+    ``sim_time_s``, ``wall_time_s``, ``code_version``, ``software`` (JSON: ft_sitl's
+    version and code digest, Python's and the numeric libraries' versions,
+    ft_sitl.provenance.software; empty for rows written before it was recorded),
+    ``protocol_version`` (the trial
     protocol's version, ft_sitl.missions.spec.PROTOCOLS; 1 for rows written before it was
     recorded), ``gains`` (the controller-gain mode the trial flew, "bandwidth" or "px4":
     FT_GAIN_MODE 0 or 1; "bandwidth" for rows written before it was recorded),
@@ -86,7 +89,7 @@ OUTCOME = ("success", "reason", "detail")
 METRICS = ("time_to_goal_s", "nav_time_s", "path_length_m", "mean_speed_m_s",
            "max_speed_m_s", "min_clearance_m", "max_tilt_deg", "saturation_fraction",
            "energy_j", "replans", "planner_time_s", "planner_calls")
-RUN = ("sim_time_s", "wall_time_s", "code_version", "protocol_version", "gains",
+RUN = ("sim_time_s", "wall_time_s", "code_version", "software", "protocol_version", "gains",
        "scenario_version", "finished_utc", "spec")
 COLUMNS = IDENTITY + OUTCOME + METRICS + RUN
 

@@ -18,6 +18,7 @@ import sys
 import time
 from pathlib import Path
 
+import numpy as np
 import psutil
 import pytest
 
@@ -25,6 +26,7 @@ from ft_sitl.missions.campaign import run_campaign
 from ft_sitl.missions.campaign_file import load_campaign
 from ft_sitl.missions.executors import KILL_GRACE_S, DaskExecutor, ExecutorError
 from ft_sitl.missions.results import COLUMNS
+from ft_sitl.provenance import code_digest
 from tests.missions.conftest import EXE, campaign_file, read_jsonl, run_exe, write_yard
 from tests.missions.test_campaign import WALL_CLOCK, same
 
@@ -167,6 +169,9 @@ def _assert_equal_to_reference(out: Path, ref: dict) -> list[dict]:
     for r in rows:
         want = ref[r["trial_id"]]
         assert [k for k in COLUMNS if k not in WALL_CLOCK and not same(r[k], want[k])] == []
+        # what made the row: this code, these libraries (the workers' = the client's)
+        sw = json.loads(r["software"])
+        assert sw["code"] == code_digest()[:16] and sw["numpy"] == np.__version__
     return rows
 
 
