@@ -21,6 +21,7 @@ from ft_sitl.autopilot.setpoints import Setpoint
 from ft_sitl.physics import dynamics as d
 from ft_sitl.physics.platform import Platform
 from ft_sitl.physics.quaternion import qfrom_euler, qto_euler
+from ft_sitl.physics.wind import N_WIND, W_ON, Wind, wind_step_one
 from ft_sitl.scenarios.distance_grid import GM_H
 from ft_sitl.sim.guard import (
     G_BMODE,
@@ -44,14 +45,18 @@ from ft_sitl.sim.guard import (
 
 @njit(cache=True)
 def run_steps(n_steps, dt, x, sp, gn, a, cs, prm, alloc, env, status, w_cmd, rec, rec_every,
-              k_done, gd, grid, meta):
+              k_done, gd, grid, meta, wind, k0):
     """Advance every vehicle to step n_steps from step k_done[i]; record the state every
     rec_every steps. A vehicle whose guard row trips (see guard_step) stops after that step
-    with its G_TRIP set, for the caller to resolve and resume."""
+    with its G_TRIP set, for the caller to resolve and resume. ``wind``: each vehicle's
+    wind row (ft_sitl.physics.wind), advanced before the plant; ``k0``: the simulation's
+    step count when this call started (the wind's clock)."""
     for i in range(x.shape[0]):
         # per-vehicle rows sliced once, not every step
         xi, spi, gni, ai, csi, wi = x[i], sp[i], gn[i], a[i], cs[i], w_cmd[i]
         prmi, alloci, envi, sti, gi = prm[i], alloc[i], env[i], status[i], gd[i]
+        wdi = wind[i]
+        windy = wdi[W_ON] != 0.0
         guarded = gi[G_ON] > 0.0 or gi[G_BOUNDS] > 0.0
         bx, by, bz, rr = gi[G_BX], gi[G_BY], gi[G_BZ], gi[G_RR]
         body = gi[G_BMODE] > 0.0
@@ -59,6 +64,8 @@ def run_steps(n_steps, dt, x, sp, gn, a, cs, prm, alloc, env, status, w_cmd, rec
         while k < n_steps:
             px, py, pz = xi[0], xi[1], xi[2]
             c.controller_step_one(xi, spi, gni, ai, csi, dt, wi)
+            if windy:
+                wind_step_one(wdi, envi, k0 + k, dt)
             d.plant_step_one(xi, wi, prmi, alloci, envi, sti, dt)
             k += 1
             if guarded:
@@ -142,6 +149,7 @@ class Simulation:
         self._meta = np.zeros(M_N)
         self._meta[GM_H] = 1.0
         self._k_done = np.zeros(n, dtype=np.int64)
+        self.wind = np.zeros((n, N_WIND))  # no wind: the kernel skips the stage
         self._no_rec = np.empty((0, n, self.x.shape[1]))
 
     # --- configuration ------------------------------------------------------------
@@ -193,6 +201,24 @@ class Simulation:
         self.plant.x[i, d.X_ROTOR :] = self.platforms[i].hover_rotor_speed_rad_s
         self.set_setpoint(i, Setpoint.position(position, yaw=yaw))
 
+    def set_wind(self, i: int, wind: Wind | dict | None, seed: int = 0) -> None:
+        """Fly vehicle i in ``wind`` (a :class:`~ft_sitl.physics.wind.Wind`, its settings
+        as a dict, or None for calm air) from now on; ``seed`` seeds its turbulence. The
+        gust is timed from now."""
+        if wind is None:
+            self.wind[i] = 0.0
+            self.plant.env[i, d.E_WIND_X:d.E_WIND_Z + 1] = 0.0
+            return
+        if not isinstance(wind, Wind):
+            wind = Wind(wind)
+        self.wind[i] = wind.row(self.dt, seed, self.steps)
+        if self.wind[i, W_ON] == 0.0:
+            self.plant.env[i, d.E_WIND_X:d.E_WIND_Z + 1] = 0.0
+
+    def wind_velocity(self, i: int = 0) -> np.ndarray:
+        """The air's velocity at vehicle i in the last physics step (ENU, m/s)."""
+        return self.plant.env[i, d.E_WIND_X:d.E_WIND_Z + 1].copy()
+
     def set_setpoint(self, i: int, sp: Setpoint) -> None:
         self.sp[i] = sp.row
 
@@ -211,6 +237,7 @@ class Simulation:
                 n_steps, self.dt, self.plant.x, self.sp, self.gains, self.mix, self.ctrl,
                 self.plant.prm, self.plant.alloc, self.plant.env, self.plant.status,
                 self.w_cmd, rec, record_every, k_done, self._gd, self._grid, self._meta,
+                self.wind, self.steps,
             )
             trip = self._gd[:, G_TRIP]
             if not trip.any():
