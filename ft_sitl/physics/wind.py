@@ -30,10 +30,13 @@ comes from, clockwise from north; 270 = from the west, blowing east), plus
   otherwise see a field that never changes).
 
 Each component is the exact discretisation of a linear filter driven by white noise
-(first order for u, second order for v and w), so its variance and spectrum hold at any
-physics rate. The noise is a counter-based generator (:func:`gauss`), a pure function of
-the vehicle's wind seed, the physics step and the component: a trial's wind does not
-depend on how its steps are batched.
+(first order for u, second order for v and w), sampled every :data:`TURBULENCE_DT_S`
+(10 ms, or every physics step if that is longer) and held in between, so its variance and
+spectrum hold whatever the physics rate. The noise is a counter-based generator
+(:func:`gauss`), a pure function of the vehicle's wind seed, the physics step and the
+component: a trial's wind does not depend on how its steps are batched. A mean wind
+alone costs the kernel nothing (it is written once); turbulence and a gust are advanced
+in the kernel (docs/benchmarks.md, "Wind").
 
 **Gust:** a 1-cosine gust of ``gust_m_s`` from ``gust_from_deg`` (plus
 ``gust_vertical_m_s``), starting ``gust_start_s`` after the wind is set and lasting
@@ -87,7 +90,11 @@ W_PHIV, W_LV, W_CV = 10, 14, 17      # 2x2 transition, lower Cholesky (3), outpu
 W_PHIW, W_LW, W_CW = 19, 23, 26
 W_XU, W_XV, W_XW = 28, 29, 31        # filter states (1, 2, 2)
 W_GX, W_GY, W_GZ, W_GT0, W_GDUR, W_K0 = 33, 34, 35, 36, 37, 38
-N_WIND = 39
+W_EVERY, W_TX, W_TY, W_TZ = 39, 40, 41, 42  # turbulence update period (steps), held value
+N_WIND = 43
+#: the turbulence is sampled this often (s) and held in between: its spectra have fallen
+#: by orders of magnitude at the 50 Hz this resolves, and the noise is most of its cost
+TURBULENCE_DT_S = 0.01
 
 
 def _to_vector(speed: float, from_deg: float) -> tuple[float, float]:
@@ -162,22 +169,26 @@ class Wind:
 
     def row(self, dt: float, seed: int, k0: int = 0) -> np.ndarray:
         """The kernel's row for a vehicle whose physics step is ``dt`` s, with noise seed
-        ``seed`` (0 <= seed < 2^53), the gust timed from physics step ``k0``."""
+        ``seed`` (0 <= seed < 2^53), the gust timed from physics step ``k0``. A row with
+        neither turbulence nor gust is off (``W_ON`` 0): the mean wind is then constant,
+        written into the plant's environment once (:func:`apply_mean`)."""
         if not (isinstance(seed, (int, np.integer)) and 0 <= seed < 2**53):
             raise SchemaError(f"{self.owner}: seed {seed!r} must be an integer in 0..2^53-1")
         w = np.zeros(N_WIND)
         if self.calm:
             return w
         v = self.values
-        w[W_ON] = 1.0
         w[W_SEED] = float(seed)
         w[W_MX:W_MZ + 1] = self.mean()
+        every = max(1, round(TURBULENCE_DT_S / dt))
+        w[W_EVERY] = float(every)
+        dt = every * dt  # the turbulence filters' step
         ux, uy = (_to_vector(1.0, v["from_deg"]) if v["speed_m_s"] > 0 else (1.0, 0.0))
         w[W_UX], w[W_UY] = ux, uy
         s = self.sigmas()
         if s["sigma_u"] > 0:
             V = self.passing_speed()
-            w[W_TURB] = 1.0
+            w[W_ON] = w[W_TURB] = 1.0
             a = math.exp(-dt * V / s["L_u"])
             w[W_AU] = a
             w[W_BU] = s["sigma_u"] * math.sqrt(-math.expm1(-2.0 * dt * V / s["L_u"]))
@@ -197,6 +208,8 @@ class Wind:
                 w[ix:ix + 2] = Lp @ n
         ge, gn = _to_vector(v["gust_m_s"], v["gust_from_deg"])
         w[W_GX], w[W_GY], w[W_GZ] = ge, gn, v["gust_vertical_m_s"]
+        if w[W_GX] or w[W_GY] or w[W_GZ]:
+            w[W_ON] = 1.0
         w[W_GT0] = v["gust_start_s"]
         w[W_GDUR] = v["gust_duration_s"]
         w[W_K0] = float(k0)
@@ -241,17 +254,18 @@ def gauss(seed, k, j):
 @njit(cache=True)
 def wind_step_one(wd, env, k, dt):
     """Advance one vehicle's wind to physics step ``k`` (counted since the simulation
-    started) and write it into the plant's environment row."""
+    started) and write it into the plant's environment row: the mean, the turbulence
+    (sampled every ``W_EVERY`` steps from the gust's reference step, held in between) and
+    the gust."""
     if wd[W_ON] == 0.0:
         return
-    wx = wd[W_MX]
-    wy = wd[W_MY]
-    wz = wd[W_MZ]
-    if wd[W_TURB] != 0.0:
+    j = k - np.int64(wd[W_K0])
+    if wd[W_TURB] != 0.0 and j % np.int64(wd[W_EVERY]) == 0:
         seed = np.int64(wd[W_SEED])
         xu = wd[W_AU] * wd[W_XU] + wd[W_BU] * gauss(seed, k, 0)
         wd[W_XU] = xu
-        out = np.empty(2)
+        tv = 0.0
+        tw = 0.0
         for c in range(2):
             iphi = W_PHIV if c == 0 else W_PHIW
             il = W_LV if c == 0 else W_LW
@@ -265,13 +279,19 @@ def wind_step_one(wd, env, k, dt):
             y1 = wd[iphi + 2] * x0 + wd[iphi + 3] * x1 + wd[il + 1] * n0 + wd[il + 2] * n1
             wd[ix] = y0
             wd[ix + 1] = y1
-            out[c] = wd[ic] * y0 + wd[ic + 1] * y1
+            if c == 0:
+                tv = wd[ic] * y0 + wd[ic + 1] * y1
+            else:
+                tw = wd[ic] * y0 + wd[ic + 1] * y1
         ux = wd[W_UX]
         uy = wd[W_UY]
-        wx += ux * xu - uy * out[0]
-        wy += uy * xu + ux * out[0]
-        wz += out[1]
-    t = (k - wd[W_K0]) * dt
+        wd[W_TX] = ux * xu - uy * tv
+        wd[W_TY] = uy * xu + ux * tv
+        wd[W_TZ] = tw
+    wx = wd[W_MX] + wd[W_TX]
+    wy = wd[W_MY] + wd[W_TY]
+    wz = wd[W_MZ] + wd[W_TZ]
+    t = j * dt
     t0 = wd[W_GT0]
     dur = wd[W_GDUR]
     if t >= t0 and t <= t0 + dur and dur > 0.0:
@@ -284,11 +304,20 @@ def wind_step_one(wd, env, k, dt):
     env[d.E_WIND_Z] = wz
 
 
+def apply_mean(wd: np.ndarray, env: np.ndarray) -> None:
+    """Write a row's mean wind into the plant's environment row (its value between
+    kernel updates, and for good when the row has no turbulence or gust)."""
+    env[d.E_WIND_X:d.E_WIND_Z + 1] = wd[W_MX:W_MZ + 1]
+
+
 @njit(cache=True)
 def wind_series(row, n, dt, k0=0):
     """The wind (n, 3) a vehicle with this row feels over physics steps k0 .. k0+n-1 (the
     row's filter states advance; pass a copy to keep it)."""
     env = np.zeros(d.N_ENV)
+    env[d.E_WIND_X] = row[W_MX]
+    env[d.E_WIND_Y] = row[W_MY]
+    env[d.E_WIND_Z] = row[W_MZ]
     out = np.empty((n, 3))
     for k in range(n):
         wind_step_one(row, env, k0 + k, dt)

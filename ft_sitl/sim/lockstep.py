@@ -21,7 +21,7 @@ from ft_sitl.autopilot.setpoints import Setpoint
 from ft_sitl.physics import dynamics as d
 from ft_sitl.physics.platform import Platform
 from ft_sitl.physics.quaternion import qfrom_euler, qto_euler
-from ft_sitl.physics.wind import N_WIND, W_ON, Wind, wind_step_one
+from ft_sitl.physics.wind import N_WIND, W_ON, Wind, apply_mean, wind_step_one
 from ft_sitl.scenarios.distance_grid import GM_H
 from ft_sitl.sim.guard import (
     G_BMODE,
@@ -212,8 +212,7 @@ class Simulation:
         if not isinstance(wind, Wind):
             wind = Wind(wind)
         self.wind[i] = wind.row(self.dt, seed, self.steps)
-        if self.wind[i, W_ON] == 0.0:
-            self.plant.env[i, d.E_WIND_X:d.E_WIND_Z + 1] = 0.0
+        apply_mean(self.wind[i], self.plant.env[i])
 
     def wind_velocity(self, i: int = 0) -> np.ndarray:
         """The air's velocity at vehicle i in the last physics step (ENU, m/s)."""

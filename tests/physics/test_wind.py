@@ -76,6 +76,15 @@ def test_turbulence_variance_and_spectrum_match_the_dryden_model():
             assert ratio == pytest.approx(1.0, abs=0.2), (name, lo, hi, ratio)
 
 
+def test_at_a_1_khz_physics_rate_the_held_turbulence_keeps_its_variance():
+    wind = Wind({"speed_m_s": 5.0, "turbulence": "moderate"})
+    s = wind_series(wind.row(0.001, 2), 1_500_000, 0.001) - wind.mean()
+    # sampled every 10 ms, held between: each value ten times
+    assert np.array_equal(s[0:10], np.repeat(s[0:1], 10, axis=0))
+    assert not np.array_equal(s[9], s[10])
+    assert np.var(s[:, 2]) == pytest.approx(wind.sigmas()["sigma_w"] ** 2, rel=0.15)
+
+
 def test_the_noise_is_a_pure_function_of_seed_step_and_component():
     a = [gauss(5, k, j) for k in (0, 1, 1000) for j in range(5)]
     assert a == [gauss(5, k, j) for k in (0, 1, 1000) for j in range(5)]
