@@ -56,17 +56,21 @@ def cmd_campaign_check(args) -> int:
             "scenarios": [{"family": s.family, "indices": list(s.indices)}
                           for s in c.scenarios],
             "trials_per_combination": c.trials, "limits": c.limits.as_dict(),
-            "notes": list(c.notes)}
+            "wind": [w or {} for w in c.winds], "notes": list(c.notes)}
     if args.json:
         print(json.dumps(info, indent=2))
         return 0
+    winds = f" x {len(c.winds)} winds" if len(c.winds) > 1 else ""
     print(f"campaign {c.name!r}: {len(specs)} trials = {len(c.algorithms)} algorithms x "
           f"{len(c.platforms)} platforms x {len(c.scenarios)} scenario families x "
-          f"{c.trials} trials")
+          f"{c.trials} trials{winds}")
     print(f"  algorithms: {', '.join(info['algorithms'])}")
     print(f"  platforms:  {', '.join(info['platforms'])}")
     print("  scenarios:  " + ", ".join(
         f"{s.family} {list(s.indices)}" for s in c.scenarios))
+    if c.winds != [None]:
+        print("  wind:       " + "; ".join(
+            ", ".join(f"{k} {v}" for k, v in w.items()) if w else "calm" for w in c.winds))
     lim = c.limits
     print(f"  limits: {lim.max_speed_m_s:g} m/s, {lim.timeout_s:g} s, goal sphere "
           f"{lim.goal_radius_m:g} m held {lim.hold_s:g} s")

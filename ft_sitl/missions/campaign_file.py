@@ -49,6 +49,7 @@ file is read, by the scorer's own rule (:mod:`ft_sitl.missions.scoring`).
 from __future__ import annotations
 
 import hashlib
+import json
 import shlex
 from dataclasses import dataclass, field
 from importlib import resources
@@ -57,7 +58,13 @@ from pathlib import Path
 from ft_sitl.autopilot.params import DEFAULT_GAINS, GAIN_MODES
 from ft_sitl.config import Table, integer, read_document
 from ft_sitl.missions import scoring
-from ft_sitl.missions.spec import PROTOCOL_VERSION, PROTOCOLS, TrialSpec
+from ft_sitl.missions.spec import (
+    PROTOCOL_VERSION,
+    PROTOCOLS,
+    TrialSpec,
+    TrialSpecError,
+    wind_settings,
+)
 from ft_sitl.navigation.base import Limits
 from ft_sitl.navigation.registry import NavigatorError, available, create
 from ft_sitl.physics.catalog import PlatformRegistry
@@ -69,7 +76,7 @@ from ft_sitl.scenarios.scenario import ScenarioError
 PRESETS = ("quick", "paper")
 TOP_KEYS = ("name", "trials", "seed", "scenario_seed", "platforms", "platform_files",
             "scenarios", "indices", "physics_hz", "protocol", "gains", "algorithms", "limits",
-            "weights", "description")
+            "weights", "description", "wind")
 LIMIT_KEYS = ("max_speed_m_s", "timeout_s", "goal_radius_m", "hold_s", "max_acc_m_s2")
 WEIGHT_KEYS = ("scenarios", "platforms", "beta")
 
@@ -112,6 +119,8 @@ class Campaign:
     doc: dict = field(default_factory=dict)
     #: what "all" left out and why (e.g. a navigator without its model weights)
     notes: list[str] = field(default_factory=list)
+    #: the wind axis: every trial of the matrix flies in each (None: calm air)
+    winds: list = field(default_factory=lambda: [None])
 
     def spec_dict(self) -> dict:
         """The campaign as data: what resuming compares, what reports print."""
@@ -131,6 +140,7 @@ class Campaign:
             **({"protocol": self.protocol} if self.protocol != 1 else {}),
             # (left out at the default: directories written before the key existed resume)
             **({"gains": self.gains} if self.gains != DEFAULT_GAINS else {}),
+            **({"wind": [w or {} for w in self.winds]} if self.winds != [None] else {}),
         }
 
     def trial_specs(self) -> list[TrialSpec]:
@@ -141,9 +151,10 @@ class Campaign:
                 for p in self.platforms:
                     for t in range(self.trials):
                         index = sc.indices[t % len(sc.indices)]
+                        # (the same seed in every wind: the axis compares like with like)
                         key = f"{self.seed}|{a.label}|{p.name}|{sc.family}|{t}".encode()
                         seed = int.from_bytes(hashlib.sha256(key).digest()[:4], "little")
-                        out.append(TrialSpec(
+                        out.extend(TrialSpec(
                             algorithm=a.name, label=a.label, algorithm_params=a.params,
                             platform=p.name,
                             platform_def=p.physical_dict() if p.category == "user" else None,
@@ -151,7 +162,8 @@ class Campaign:
                             scenario_seed=self.scenario_seed, scenario_file=sc.file,
                             trial=t, seed=seed, limits=self.limits, campaign=self.name,
                             physics_hz=self.physics_hz, protocol=self.protocol,
-                            gains=self.gains, scenario_version=sc.version))
+                            gains=self.gains, scenario_version=sc.version, wind=w)
+                            for w in self.winds)
         out.sort(key=lambda s: (s.scenario_file or "", s.family, s.scenario_index))
         return out
 
@@ -201,13 +213,39 @@ def parse_campaign(doc: dict, path: Path | None = None) -> Campaign:
     platforms = _platforms(t, base)
     scenarios = _scenarios(t, base)
     weights = _weights(t, platforms, scenarios)
+    winds = _winds(t)
     notes: list[str] = []
-    return Campaign(
+    return Campaign(winds=winds,
         name=name, algorithms=parse_algorithms(where, doc["algorithms"], notes),
         platforms=platforms, scenarios=scenarios, trials=trials, seed=seed,
         scenario_seed=scenario_seed, limits=limits, weights=weights, physics_hz=physics_hz,
         protocol=protocol, gains=gains, source=str(path) if path is not None else "", doc=doc,
         notes=notes)
+
+
+def _winds(t: Table) -> list:
+    """The ``wind`` axis: one table of wind settings (ft_sitl.physics.wind, docs/platforms.md)
+    or a list of them, each flown by every trial of the matrix; absent: calm air."""
+    raw = t.get("wind", None)
+    if raw is None:
+        return [None]
+    items = [raw] if isinstance(raw, dict) else raw
+    if not isinstance(items, list) or not items:
+        raise t.fail("wind", "must be a table of wind settings or a non-empty list of them, "
+                             f"got {raw!r}")
+    winds, seen = [], set()
+    for k, item in enumerate(items):
+        owner = "wind" if isinstance(raw, dict) else f"wind[{k}]"
+        try:
+            w = wind_settings(item, f"{t.where}: {owner}")
+        except TrialSpecError as exc:
+            raise CampaignError(str(exc)) from None
+        key = json.dumps(w, sort_keys=True)
+        if key in seen:
+            raise t.fail(owner, f"the same wind twice ({item!r})")
+        seen.add(key)
+        winds.append(w)
+    return winds
 
 
 def _weights(t: Table, platforms, scenarios) -> dict:

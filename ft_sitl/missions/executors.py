@@ -44,6 +44,8 @@ import uuid
 from collections.abc import Callable, Iterator
 from pathlib import Path
 
+from pebble import ProcessExpired, ProcessPool
+
 from ft_sitl import __version__
 from ft_sitl.missions.resources import RESOURCES
 from ft_sitl.missions.spec import TrialSpec
@@ -128,7 +130,6 @@ def _labelled(fn: Callable, chunk: list[dict]) -> tuple[str, list]:
 def new_pool(workers: int, grid_dir: str | None):
     """A pebble pool of ``workers`` spawned processes (ft_sitl imported first in each, so
     its BLAS settings hold) sharing distance grids through ``grid_dir``."""
-    from pebble import ProcessPool
     return ProcessPool(max_workers=workers, initializer=_worker_init,
                        initargs=(os.getpid(), grid_dir), context=mp.get_context("spawn"))
 
@@ -138,8 +139,6 @@ def supervise(pool, fn: Callable, trials: list[dict], budget_s: float | None,
     """Fly ``trials`` one per task on a pebble ``pool``, at most ``window`` scheduled at a
     time, in order; yield ``(worker, results)`` per trial as each ends. The module's rule
     for overruns and deaths applies."""
-    from pebble import ProcessExpired
-
     timeout = None if budget_s is None else budget_s + KILL_GRACE_S
     queue = collections.deque(trials)
     deaths: collections.Counter = collections.Counter()
@@ -259,7 +258,7 @@ def dask_chunk(fn: Callable, chunk: list[dict], code: str,
         raise ExecutorError(f"worker {worker_label()} runs ft-sitl {__version__} with code "
                             f"digest {mine[:12]}, the campaign {code[:12]}: install the same "
                             f"ft-sitl on every worker")
-    from distributed import get_worker
+    from distributed import get_worker  # (distributed loads only where Dask is used)
     label = get_worker().address
     with _DASK_POOL_LOCK:
         if _DASK_POOL is None or not _DASK_POOL.active:
@@ -300,8 +299,8 @@ class DaskExecutor(Executor):
         self._cluster = None
 
     def start(self) -> None:
-        import dask
-        from distributed import Client, LocalCluster
+        import dask  # (dask and distributed load only where Dask is used: ~1 s)
+        from distributed import Client, LocalCluster  # (likewise)
         if self.scheduler is None:
             # trials fly in a process of each worker's own: workers must not be daemons
             with dask.config.set({"distributed.worker.daemon": False}):
@@ -345,9 +344,9 @@ class DaskExecutor(Executor):
             return None
 
     def imap(self, fn, chunks):
-        from distributed import as_completed
-        from distributed.client import FutureCancelledError
-        from distributed.scheduler import KilledWorker
+        from distributed import as_completed  # (distributed only where Dask is used)
+        from distributed.client import FutureCancelledError  # (likewise)
+        from distributed.scheduler import KilledWorker  # (likewise)
 
         client = self.client
         code = code_digest()

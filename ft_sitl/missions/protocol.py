@@ -47,9 +47,10 @@ from ft_sitl.autopilot.cascade import C_SAT_STEPS
 from ft_sitl.autopilot.params import GAIN_MODES, ParamSet
 from ft_sitl.missions.resources import RESOURCES, TrialResources
 from ft_sitl.missions.results import Outcome
-from ft_sitl.missions.spec import PROTOCOLS, vehicle_half_span_m
+from ft_sitl.missions.spec import PROTOCOLS, vehicle_half_span_m, wind_seed
 from ft_sitl.navigation.base import STABLE_FOR_S, STABLE_POS_M, STABLE_SPEED_M_S, Task
 from ft_sitl.navigation.registry import available
+from ft_sitl.physics.wind import Wind
 from ft_sitl.provenance import software
 from ft_sitl.sim.fleet import Fleet
 from ft_sitl.sim.guard import CollisionGuard, GuardEventKind
@@ -96,7 +97,18 @@ def identity_row(spec, platform, scenario) -> dict:
         "family": scenario.family, "scenario_category": scenario.category,
         "scenario_index": scenario.index, "scenario_seed": scenario.seed,
         "scenario": scenario.name, "trial": spec.trial, "seed": spec.seed,
+        **wind_columns(spec.wind),
     }
+
+
+def wind_columns(wind: dict | None) -> dict:
+    """The wind axis columns of a row (results.WIND): the mean speed, the turbulence
+    intensity, the gust amplitude, and every non-default setting as JSON ("" in calm
+    air)."""
+    w = Wind(wind).values
+    return {"wind_speed_m_s": w["speed_m_s"], "turbulence": w["turbulence"],
+            "gust_m_s": w["gust_m_s"],
+            "wind": json.dumps(wind, sort_keys=True, separators=(",", ":")) if wind else ""}
 
 
 def failed_row(spec, platform, scenario, reason: Outcome, detail: str) -> dict:
@@ -459,4 +471,6 @@ def trial_vehicle(spec, scenario, platform, resources: TrialResources = RESOURCE
                        "FT_GAIN_MODE": GAIN_MODES[spec.gains]})
     fleet = Fleet([platform], params=[params], spawn=[scenario.takeoff],
                   spawn_yaw=[scenario.start_yaw], physics_hz=spec.physics_hz, guard=guard)
+    if spec.wind is not None:  # from the trial's first step (the gust timed from it)
+        fleet.sim.set_wind(0, spec.wind, seed=wind_seed(spec))
     return guard, fleet

@@ -12,6 +12,9 @@ identity
     virtual / user), ``mass_kg``, ``twr_max``, ``alpha_xy_max``, ``alpha_z_max`` (rad/s^2),
     ``family``, ``scenario_category`` (classic / theoretical / user), ``scenario_index``,
     ``scenario_seed``, ``scenario`` (name), ``trial`` (0-based repetition), ``seed``.
+wind (the trial's wind, ft_sitl.physics.wind; calm air for rows written before it existed)
+    ``wind_speed_m_s`` (mean), ``turbulence`` (Dryden intensity), ``gust_m_s``, ``wind``
+    (every setting that differs from the defaults, as JSON; "" in calm air).
 outcome
     ``success`` (bool), ``reason`` (an :class:`Outcome` value), ``detail`` (what was hit,
     which bound, the navigator's exception ...).
@@ -85,19 +88,21 @@ IDENTITY = ("trial_id", "campaign", "algorithm", "algorithm_params", "platform",
             "platform_category", "mass_kg", "twr_max", "alpha_xy_max", "alpha_z_max",
             "family", "scenario_category", "scenario_index", "scenario_seed", "scenario",
             "trial", "seed")
+WIND = ("wind_speed_m_s", "turbulence", "gust_m_s", "wind")
 OUTCOME = ("success", "reason", "detail")
 METRICS = ("time_to_goal_s", "nav_time_s", "path_length_m", "mean_speed_m_s",
            "max_speed_m_s", "min_clearance_m", "max_tilt_deg", "saturation_fraction",
            "energy_j", "replans", "planner_time_s", "planner_calls")
 RUN = ("sim_time_s", "wall_time_s", "code_version", "software", "protocol_version", "gains",
        "scenario_version", "finished_utc", "spec")
-COLUMNS = IDENTITY + OUTCOME + METRICS + RUN
+COLUMNS = IDENTITY + WIND + OUTCOME + METRICS + RUN
 
 CATEGORICAL = ("campaign", "algorithm", "platform", "platform_category", "family",
-               "scenario_category", "scenario", "reason", "gains")
+               "scenario_category", "scenario", "reason", "gains", "turbulence")
 INTEGER = ("scenario_index", "scenario_seed", "trial", "seed", "replans", "planner_calls",
            "protocol_version", "scenario_version")
-FLOAT = ("mass_kg", "twr_max", "alpha_xy_max", "alpha_z_max") + tuple(
+FLOAT = ("mass_kg", "twr_max", "alpha_xy_max", "alpha_z_max", "wind_speed_m_s",
+         "gust_m_s") + tuple(
     m for m in METRICS if m not in ("replans", "planner_calls")) + ("sim_time_s",
                                                                      "wall_time_s")
 
@@ -121,6 +126,11 @@ def to_frame(rows):
         df["scenario_version"].isna() & ~df["spec"].astype(str).str.contains(
             '"scenario_file":"', regex=False), 1)
     df["gains"] = df["gains"].astype(object).fillna(DEFAULT_GAINS)  # (likewise: the default)
+    # ... and in calm air
+    df["wind_speed_m_s"] = df["wind_speed_m_s"].fillna(0.0)
+    df["gust_m_s"] = df["gust_m_s"].fillna(0.0)
+    df["turbulence"] = df["turbulence"].astype(object).fillna("none")
+    df["wind"] = df["wind"].astype(object).fillna("")
     for c in FLOAT:
         df[c] = pd.to_numeric(df[c], errors="coerce").astype("float64")
     df["success"] = df["success"].astype(bool)

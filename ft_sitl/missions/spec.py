@@ -16,9 +16,12 @@ from ft_sitl.autopilot.params import DEFAULT_GAINS, GAIN_MODES
 from ft_sitl.navigation.base import Limits
 from ft_sitl.physics.catalog import get_platform, platform_from_mapping
 from ft_sitl.physics.platform import Platform
+from ft_sitl.physics.wind import SCHEMA as WIND_SCHEMA
+from ft_sitl.physics.wind import Wind
 from ft_sitl.scenarios.difficulty import FlightBudget
 from ft_sitl.scenarios.families import describe_family
 from ft_sitl.scenarios.scenario import ScenarioError
+from ft_sitl.schema import SchemaError
 
 
 @dataclass(frozen=True)
@@ -138,6 +141,9 @@ class TrialSpec:
     #: the family generator's version (scenarios.families.Family.versions; None: the
     #: newest, written into the spec; absent from a stored spec: 1). None for a file.
     scenario_version: int | None = None
+    #: the wind the trial flies in (ft_sitl.physics.wind settings; None: calm air),
+    #: kept as its settings that differ from the defaults
+    wind: dict | None = None
 
     def __post_init__(self):
         for name in ("algorithm", "platform", "family"):
@@ -155,6 +161,7 @@ class TrialSpec:
             raise TrialSpecError("limits: must be a Limits")
         check_protocol(self.protocol)
         check_gains(self.gains)
+        object.__setattr__(self, "wind", wind_settings(self.wind))
         if self.scenario_file is None:
             try:
                 fam = describe_family(self.family)
@@ -193,6 +200,8 @@ class TrialSpec:
             d["gains"] = self.gains
         if self.scenario_version not in (None, 1):
             d["scenario_version"] = self.scenario_version
+        if self.wind is not None:  # (calm air left out: ids of calm trials unchanged)
+            d["wind"] = self.wind
         return d
 
     @classmethod
@@ -222,6 +231,31 @@ class TrialSpec:
     def trial_id(self) -> str:
         """16 hex digits of the SHA-256 of the canonical spec (the campaign's key)."""
         return hashlib.sha256(self.to_json().encode()).hexdigest()[:16]
+
+
+def wind_settings(values, owner: str = "wind") -> dict | None:
+    """A trial's wind as its canonical settings: those that differ from the defaults, in
+    declaration order; None for calm air (no settings, or only defaults). TrialSpecError
+    naming ``owner``, the key and the allowed range for a bad one."""
+    if values is None:
+        return None
+    if not isinstance(values, dict):
+        raise TrialSpecError(f"{owner}: must be a table of wind settings "
+                             f"({', '.join(WIND_SCHEMA.names())}), got {values!r}")
+    try:
+        resolved = Wind(values, owner).values
+    except SchemaError as exc:
+        raise TrialSpecError(str(exc)) from None
+    defaults = WIND_SCHEMA.defaults()
+    out = {k: (float(v) if isinstance(v, int) and not isinstance(v, bool) else v)
+           for k, v in resolved.items() if v != defaults[k]}
+    return out or None
+
+
+def wind_seed(spec: TrialSpec) -> int:
+    """The seed of a trial's turbulence (the camera's noise has stream 1, this 2)."""
+    import numpy as np  # (kept off this module's import path: specs are built everywhere)
+    return int(np.random.SeedSequence([spec.seed, spec.trial, 2]).generate_state(1)[0])
 
 
 def check_protocol(version) -> int:

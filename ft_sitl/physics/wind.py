@@ -49,7 +49,7 @@ import math
 
 import numpy as np
 from numba import njit
-from scipy.linalg import cholesky, expm
+from scipy.linalg import cholesky, expm, solve_discrete_lyapunov
 
 from ft_sitl.physics import dynamics as d
 from ft_sitl.schema import Param, Schema, SchemaError
@@ -218,7 +218,6 @@ class Wind:
 
 def _stationary(phi: np.ndarray, l3: np.ndarray) -> np.ndarray:
     """The stationary covariance of x <- phi x + L n (a discrete Lyapunov equation)."""
-    from scipy.linalg import solve_discrete_lyapunov
     L = np.array([[l3[0], 0.0], [l3[1], l3[2]]])
     return solve_discrete_lyapunov(phi, L @ L.T)
 

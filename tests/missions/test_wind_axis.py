@@ -1,0 +1,85 @@
+"""Wind as a campaign axis: every trial of the matrix flies in each wind of the campaign
+file's ``wind`` list, with the same seed in each; rows carry the wind; calm trials keep
+their ids; a turbulent trial reruns bit for bit; bad winds are named by file, axis entry,
+key and range."""
+
+import json
+
+import pytest
+
+from ft_sitl.missions.campaign import run_campaign
+from ft_sitl.missions.campaign_file import CampaignError, load_campaign
+from ft_sitl.missions.spec import TrialSpec
+from ft_sitl.missions.trial import run_trial
+from tests.missions.conftest import campaign_file, read_jsonl, run_exe
+
+WINDY = """\
+name = "windy"
+algorithms = ["straight"]
+platforms = ["0.98kg-EGO Planner DIY"]
+scenarios = [{file = "yard.yaml"}]
+trials = 1
+wind = [
+  {},
+  {speed_m_s = 7, from_deg = 90},
+  {speed_m_s = 7, from_deg = 90, turbulence = "standard", gust_m_s = 4, gust_start_s = 6},
+]
+[limits]
+timeout_s = 6.0
+"""
+
+
+def test_every_trial_flies_in_every_wind_with_one_seed(yard, tmp_path, cli_env):
+    path = campaign_file(yard.parent, "windy.toml", WINDY)
+    c = load_campaign(path)
+    specs = c.trial_specs()
+    assert [s.wind for s in specs] == [None, {"speed_m_s": 7.0, "from_deg": 90.0},
+                                       {"speed_m_s": 7.0, "from_deg": 90.0,
+                                        "turbulence": "standard", "gust_m_s": 4.0,
+                                        "gust_start_s": 6.0}]
+    assert len({s.seed for s in specs}) == 1 and len({s.trial_id for s in specs}) == 3
+    # a calm trial's spec (and id) is what it was before winds existed
+    calm = specs[0]
+    assert "wind" not in calm.to_dict()
+    assert calm.trial_id == TrialSpec.from_dict(
+        {k: v for k, v in calm.to_dict().items()}).trial_id
+
+    summary = run_campaign(c, tmp_path / "out", progress=False)
+    assert (summary.ran, summary.errors) == (3, [])
+    rows = {r["wind"]: r for r in read_jsonl(tmp_path / "out" / "trials.jsonl")}
+    assert set(rows) == {"", '{"from_deg":90.0,"speed_m_s":7.0}',
+                         '{"from_deg":90.0,"gust_m_s":4.0,"gust_start_s":6.0,"speed_m_s":7.0,'
+                         '"turbulence":"standard"}'}
+    calm_row = rows[""]
+    assert (calm_row["wind_speed_m_s"], calm_row["turbulence"], calm_row["gust_m_s"]) == \
+        (0.0, "none", 0.0)
+    steady = rows['{"from_deg":90.0,"speed_m_s":7.0}']
+    assert (steady["wind_speed_m_s"], steady["turbulence"]) == (7.0, "none")
+    # a 7 m/s wind from the east across the yard's north-bound line: the flight differs
+    assert steady["path_length_m"] != calm_row["path_length_m"]
+    assert steady["max_tilt_deg"] > calm_row["max_tilt_deg"]
+
+    # the turbulent, gusty trial reruns bit for bit from its row
+    gusty = next(r for r in rows.values() if r["turbulence"] == "standard")
+    proc = run_exe("trial", "rerun", tmp_path / "out", gusty["trial_id"], env=cli_env)
+    assert proc.returncode == 0, proc.stdout + proc.stderr
+    assert "identical" in proc.stdout
+    again = run_trial(TrialSpec.from_dict(json.loads(gusty["spec"]))).row
+    assert again["path_length_m"] == gusty["path_length_m"]
+
+
+@pytest.mark.parametrize("wind,message", [
+    ("[{speed_m_s = -3}]", "wind[0]: speed_m_s: must be a number 0..40 (m/s), got -3"),
+    ("[{}, {speed = 3}]", "wind[1] has no parameter 'speed'; did you mean 'speed_m_s'?"),
+    ('{turbulence = "strong"}', "wind: turbulence: must be 'none' or 'light' or 'moderate' "
+                                "or 'severe' or 'standard', got 'strong'"),
+    ("5", "wind: must be a table of wind settings or a non-empty list of them, got 5"),
+    ("[]", "wind: must be a table of wind settings or a non-empty list of them"),
+    ("[{speed_m_s = 3}, {speed_m_s = 3.0}]", "wind[1]: the same wind twice"),
+    ("[{gust_duration_s = 0}]", "wind[0]: gust_duration_s: must be a number 0.05..120 (s)"),
+])
+def test_bad_winds_are_named_by_file_and_entry(tmp_path, wind, message):
+    path = campaign_file(tmp_path, "bad.toml", f'algorithms = ["straight"]\nwind = {wind}\n')
+    with pytest.raises(CampaignError) as exc:
+        load_campaign(path)
+    assert str(exc.value).startswith(f"{path}: {message}")
