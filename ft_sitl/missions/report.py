@@ -234,6 +234,44 @@ def _fig_success_by_family(t: _Tables):
     return fig
 
 
+TURBULENCE_STYLE = {"none": "-", "light": "--", "moderate": "-.", "severe": ":",
+                    "standard": (0, (6, 2, 1, 2))}
+
+
+def has_wind_axis(df: pd.DataFrame) -> bool:
+    """Whether the trials flew in more than one wind (the campaign's wind axis)."""
+    return "wind" in df and df["wind"].astype(str).nunique() > 1
+
+
+def _fig_success_vs_wind(t: _Tables):
+    """Success against the mean wind speed, per algorithm (line style: turbulence)."""
+    g = (t.df.groupby(["algorithm", "turbulence", "wind_speed_m_s"], observed=True)["success"]
+         .agg(["sum", "count"]).reset_index())
+    kinds = sorted(g["turbulence"].astype(str).unique())
+    fig = _new_figure(7.0, 3.8)
+    ax = fig.add_subplot()
+    for algo in t.algorithms:
+        for kind in kinds:
+            sub = g[(g["algorithm"].astype(str) == algo) & (g["turbulence"].astype(str) == kind)]
+            if sub.empty:
+                continue
+            sub = sub.sort_values("wind_speed_m_s")
+            n, k = sub["count"].to_numpy(), sub["sum"].to_numpy()
+            rate = k / n
+            ci = np.array([scoring.wilson_interval(int(a), int(b)) for a, b in zip(n, k)])
+            label = algo if len(kinds) == 1 else f"{algo}, turbulence {kind}"
+            ax.errorbar(sub["wind_speed_m_s"], rate, yerr=_yerr(rate, ci[:, 0], ci[:, 1]),
+                        color=t.colour(algo), ls=TURBULENCE_STYLE.get(kind, "-"), marker="o",
+                        ms=3, capsize=2, elinewidth=0.8, label=label)
+    ax.set_xlabel("mean wind speed (m/s)")
+    ax.set_ylabel("success rate")
+    ax.set_ylim(-0.02, 1.05)
+    ax.grid(alpha=0.3)
+    fig.legend(loc="outside upper center", ncols=min(len(t.algorithms), 5), frameon=False,
+               fontsize=7)
+    return fig
+
+
 def _fig_success_vs_indicators(t: _Tables):
     fig = _new_figure(12.0, 3.8)
     axes = fig.subplots(1, 3, sharey=True)
@@ -504,6 +542,11 @@ def _figures(t: _Tables) -> list[tuple[str, str, object]]:
          "scenario families, 95 % CI. Rows are bands of alpha_xy,max (bottom: lowest); "
          "within a row, TWR_max increases to the right.", _fig_platform_grid),
     ]
+    if has_wind_axis(t.df):
+        figs.append(("success_vs_wind", "Success against the mean wind speed per algorithm, "
+                     "pooled over platforms and scenario families (line style: the "
+                     "turbulence intensity); bars: 95 % Wilson intervals.",
+                     _fig_success_vs_wind))
     used = set()
     for algo in t.algorithms:
         slug = _slug(algo)

@@ -9,6 +9,8 @@ import pytest
 
 from ft_sitl.missions.campaign import run_campaign
 from ft_sitl.missions.campaign_file import CampaignError, load_campaign
+from ft_sitl.missions.report import write_report
+from ft_sitl.missions.results import to_frame
 from ft_sitl.missions.spec import TrialSpec
 from ft_sitl.missions.trial import run_trial
 from tests.missions.conftest import campaign_file, read_jsonl, run_exe
@@ -66,6 +68,17 @@ def test_every_trial_flies_in_every_wind_with_one_seed(yard, tmp_path, cli_env):
     assert "identical" in proc.stdout
     again = run_trial(TrialSpec.from_dict(json.loads(gusty["spec"]))).row
     assert again["path_length_m"] == gusty["path_length_m"]
+
+    # the report plots success against the wind when there is an axis, and not without
+    proc = run_exe("campaign", "report", tmp_path / "out", env=cli_env)
+    assert proc.returncode == 0, proc.stderr
+    page = (tmp_path / "out" / "report" / "report.html").read_text()
+    assert 'alt="success_vs_wind"' in page and "Success against the mean wind speed" in page
+    assert (tmp_path / "out" / "report" / "success_vs_wind.png").stat().st_size > 5000
+    calm_only = to_frame([r for r in read_jsonl(tmp_path / "out" / "trials.jsonl")
+                          if r["wind"] == ""])
+    paths = write_report(calm_only, tmp_path / "calm", campaign_spec={}, meta={})
+    assert "success_vs_wind" not in paths["report.html"].read_text()
 
 
 @pytest.mark.parametrize("wind,message", [
