@@ -380,7 +380,8 @@ def run_ardupilot_bridge(platform_name, scenario_spec=None, port: int = DEFAULT_
                          speed_factor: float | None = None, *, host: str = "127.0.0.1",
                          seed: int = 0, physics_hz: int = DEFAULT_PHYSICS_HZ,
                          accel_noise_m_s2: float = 0.0, platform_files=(),
-                         params_path=None, echo=print, on_start=None) -> dict:
+                         params_path=None, echo=print, on_start=None,
+                         wind: dict | None = None) -> dict:
     """Serve one ArduPilot SITL until Ctrl-C; returns a summary (counters, time, crash).
 
     platform_name: a catalog or user-file name (``platform_files``), or a Platform.
@@ -390,6 +391,8 @@ def run_ardupilot_bridge(platform_name, scenario_spec=None, port: int = DEFAULT_
     echo: where the start-up lines go (``print``; ``None`` for silence).
     on_start: called with the open :class:`ArduPilotBridge` before serving (e.g. to keep a
     handle for ``stop()`` from a signal handler or another thread).
+    wind: wind settings (ft_sitl.physics.wind) the vehicle flies in, turbulence seeded by
+    ``seed``; None: calm air.
     """
 
     platform = (platform_name if isinstance(platform_name, Platform)
@@ -399,6 +402,7 @@ def run_ardupilot_bridge(platform_name, scenario_spec=None, port: int = DEFAULT_
     bridge = ArduPilotBridge(platform, scenario=scenario, port=port, host=host,
                              speed_factor=speed_factor, seed=seed, physics_hz=physics_hz,
                              accel_noise_m_s2=accel_noise_m_s2)
+    bridge.vehicle.sim.set_wind(0, wind, seed=seed)
     if params_path is not None:
 
         Path(params_path).write_text(ardupilot_params(platform), encoding="utf-8")

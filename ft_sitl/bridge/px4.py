@@ -670,19 +670,23 @@ def run_px4_bridge(platform_name: str, scenario=None, *, instance: int = 0,
                    speed_factor: float | None = None, ground_truth: bool = False,
                    seed: int = 0, host: str = "127.0.0.1", platform_files=(),
                    duration_s: float | None = None, status_every_s: float = 10.0,
-                   echo: Callable[[str], None] = print) -> Px4BridgeStats:
+                   echo: Callable[[str], None] = print,
+                   wind: dict | None = None) -> Px4BridgeStats:
     """Serve PX4 SITL instance ``instance`` until Ctrl-C (or ``duration_s`` of wall time).
 
     ``platform_name``: a catalog platform, or one from ``platform_files``; ``scenario``:
     None, a Scenario, ``FAMILY:INDEX[:SEED]`` or a spec file. Prints a banner, a status
     line every ``status_every_s`` and the final counters through ``echo``; returns them.
     Raises ValueError for a bad platform/scenario/option, BridgeError if it cannot listen.
+    ``wind``: wind settings (ft_sitl.physics.wind) the vehicle flies in, turbulence seeded
+    by ``seed``; None: calm air.
     """
 
     platform = PlatformRegistry(platform_files).get(platform_name)
     bridge = Px4Bridge(platform, scenario=scenario_from_spec(scenario), instance=instance,
                        speed_factor=speed_factor, ground_truth=ground_truth, seed=seed,
                        host=host)
+    bridge.vehicle.sim.set_wind(0, wind, seed=seed)
     bridge.start()
     sc = bridge.scenario
     echo(f"PX4 bridge: {platform.name} ({platform.layout}, PX4 motor i -> our rotor "

@@ -115,7 +115,7 @@ _Q_NORM_TOL_JSON = 1e-3
 _Q_NORM_TOL_BIN = 1e-6
 #: Decimal places kept in JSON telemetry: 1 um, 1 um/s, 1e-9, 1 urad/s, 1e-4.
 _DECIMALS = {"p_world_m": 6, "v_world_m_s": 6, "q_world_body": 9, "w_body_rad_s": 6,
-             "motors": 4}
+             "motors": 4, "wind_world_m_s": 6}
 
 
 class BusPayloadError(ValueError):
@@ -317,8 +317,14 @@ _ENCODER = msgspec.json.Encoder()
 
 
 # --- telemetry ------------------------------------------------------------------------------
-class TelemetryPayload(Struct, frozen=True, forbid_unknown_fields=True):
-    """The telemetry JSON object; every field is required, unknown fields are rejected."""
+#: the wind of calm air (msgspec omits a default by identity: encode passes this object)
+CALM = (0.0, 0.0, 0.0)
+
+
+class TelemetryPayload(Struct, frozen=True, forbid_unknown_fields=True, omit_defaults=True):
+    """The telemetry JSON object; every field but the wind is required (the wind is left
+    out in calm air, so calm telemetry is what it was before it existed), unknown fields
+    are rejected."""
 
     v: SchemaVersion
     t: Seconds
@@ -333,6 +339,8 @@ class TelemetryPayload(Struct, frozen=True, forbid_unknown_fields=True):
     w_body_rad_s: Vec3
     #: 1 to 16 motor outputs in [0, 1], PX4 motor order
     motors: Annotated[tuple[MotorOutput, ...], Meta(min_length=1, max_length=MAX_MOTORS)]
+    #: the air's velocity at the vehicle (wind), world ENU, m/s; optional, calm when absent
+    wind_world_m_s: Vec3 = CALM
 
     def __post_init__(self):
         what = "telemetry"
@@ -345,7 +353,8 @@ class TelemetryPayload(Struct, frozen=True, forbid_unknown_fields=True):
 
 
 _TELEMETRY_DECODER = msgspec.json.Decoder(TelemetryPayload)
-_VECTORS = ("p_world_m", "v_world_m_s", "q_world_body", "w_body_rad_s", "motors")
+_VECTORS = ("p_world_m", "v_world_m_s", "q_world_body", "w_body_rad_s", "motors",
+            "wind_world_m_s")
 
 
 @dataclass(frozen=True)
@@ -356,7 +365,8 @@ class Telemetry:
     ``p_world_m`` position and ``v_world_m_s`` velocity in world ENU; ``q_world_body`` the
     attitude quaternion (w, x, y, z) rotating body FLU vectors into world ENU (unit norm
     within 1e-3); ``w_body_rad_s`` body rates (FLU); ``motors`` 1 to 16 motor outputs in
-    [0, 1], PX4 motor order. Sequences are stored as tuples of floats.
+    [0, 1], PX4 motor order; ``wind_world_m_s`` the air's velocity at the vehicle (world
+    ENU; calm by default). Sequences are stored as tuples of floats.
     """
 
     time_usec: int
@@ -365,6 +375,7 @@ class Telemetry:
     q_world_body: tuple[float, float, float, float]
     w_body_rad_s: tuple[float, float, float]
     motors: tuple[float, ...]
+    wind_world_m_s: tuple[float, float, float] = (0.0, 0.0, 0.0)
 
     def __post_init__(self):
         what = "telemetry"
@@ -398,9 +409,11 @@ def encode_telemetry(sample: Telemetry) -> bytes:
     """Compact JSON of a Telemetry sample (values rounded: 1 um, 1 um/s, 1e-9, 1e-4)."""
     if not isinstance(sample, Telemetry):
         raise BusPayloadError(f"telemetry: expected a Telemetry, got {type(sample).__name__}")
-    return _ENCODER.encode(TelemetryPayload(
-        SCHEMA_VERSION, sample.t, sample.time_usec,
-        *(_round(getattr(sample, name), decimals) for name, decimals in _DECIMALS.items())))
+    values = [_round(getattr(sample, name), decimals) for name, decimals in _DECIMALS.items()]
+    if values[-1] == CALM:  # (the wind, last: left out in calm air)
+        values[-1] = CALM
+    return _ENCODER.encode(TelemetryPayload(SCHEMA_VERSION, sample.t, sample.time_usec,
+                                            *values))
 
 
 def decode_telemetry(payload) -> Telemetry:

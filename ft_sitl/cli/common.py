@@ -11,7 +11,7 @@ from pathlib import Path
 from ft_sitl.physics.catalog import PlatformRegistry
 
 __all__ = ["EXIT_BAD_INPUT", "CliError", "check_out_dir", "fmt_point", "option_value",
-           "platform_registry"]
+           "platform_registry", "wind_option"]
 
 EXIT_BAD_INPUT = 2
 
@@ -54,3 +54,31 @@ def print_schema_rows(rows: list[dict[str, str]]) -> None:
     print("  ".join(f"{head[k]:{width[k]}s}" for k in head) + "  meaning")
     for r in rows:
         print("  ".join(f"{r[k]:{width[k]}s}" for k in head) + f"  {r['doc']}")
+
+
+def wind_option(text: str | None) -> dict | None:
+    """``--wind KEY=VALUE[,KEY=VALUE...]`` as wind settings (ft_sitl.physics.wind; numbers
+    where they parse as numbers), checked: a CliError names the option, the key and the
+    allowed range. None when not given."""
+    if text is None:
+        return None
+    # (the wind model only for commands given --wind)
+    from ft_sitl.physics.wind import Wind
+    from ft_sitl.schema import SchemaError
+
+    values: dict = {}
+    for item in (s.strip() for s in text.split(",")):
+        key, eq, raw = item.partition("=")
+        if not eq or not key.strip() or not raw.strip():
+            raise CliError(f"--wind: {item!r} is not KEY=VALUE (e.g. --wind "
+                           f"speed_m_s=6,from_deg=270,turbulence=moderate)")
+        try:
+            value: object = float(raw)
+        except ValueError:
+            value = raw.strip()
+        values[key.strip()] = value
+    try:
+        Wind(values, "--wind")
+    except SchemaError as exc:
+        raise CliError(str(exc)) from None
+    return values

@@ -104,6 +104,12 @@ def build_parser() -> argparse.ArgumentParser:
                       help="fly in a scenario world (e.g. forest:3, or a .yaml/.toml spec): "
                            "spawn at its takeoff point, crash on collision")
     sitl.add_argument("--json", action="store_true", help="print the vehicle URLs as JSON")
+    sitl.add_argument("--wind", metavar="SETTINGS",
+                      help="wind as KEY=VALUE,... (speed_m_s, from_deg, vertical_m_s, "
+                         "turbulence none|light|moderate|severe|standard, gust_m_s, ...; "
+                         "docs/platforms.md, Wind)")
+    sitl.add_argument("--wind-seed", type=int, default=0, metavar="N",
+                      help="turbulence seed (vehicle i uses N + i; default 0)")
     sitl.set_defaults(handler="sitl:cmd_sitl")
 
     par = sub.add_parser("params", help="flight-controller parameters")
@@ -257,6 +263,10 @@ def _bridge_options(p) -> None:
     p.add_argument("--scenario", metavar="FAMILY:INDEX[:SEED]|SPEC",
                    help="fly in a scenario world (collisions crash the vehicle)")
     p.add_argument("--bind", default="127.0.0.1", help="address to listen on")
+    p.add_argument("--wind", metavar="SETTINGS",
+                   help="wind as KEY=VALUE,... (speed_m_s, from_deg, vertical_m_s, "
+                      "turbulence none|light|moderate|severe|standard, gust_m_s, ...; "
+                      "docs/platforms.md, Wind)")
 
 
 def _add_bridge(sub) -> None:

@@ -103,7 +103,8 @@ class SitlBus:
                 v_world_m_s=tuple(x[d.X_VEL:d.X_VEL + 3]),
                 q_world_body=tuple(x[d.X_QUAT:d.X_QUAT + 4]),
                 w_body_rad_s=tuple(x[d.X_OMEGA:d.X_OMEGA + 3]),
-                motors=tuple(float(min(max(v, 0.0), 1.0)) for v in w)))
+                motors=tuple(float(min(max(v, 0.0), 1.0)) for v in w),
+                wind_world_m_s=tuple(fleet.sim.wind_velocity(i))))
         if want_frames and self.camera is not None and t_us >= self._next_frame_us:
             period = round(1e6 / self.camera_config.rate_hz)
             self._next_frame_us = (t_us // period + 1) * period

@@ -57,13 +57,19 @@ def test_telemetry_round_trip():
     obj = json.loads(payload)
     assert obj["v"] == 1 and obj["time_usec"] == 12_345_678 and obj["t"] == 12.345678
     assert set(obj) == {"v", "t", "time_usec", "p_world_m", "v_world_m_s", "q_world_body",
-                        "w_body_rad_s", "motors"}
+                        "w_body_rad_s", "motors"}  # (calm air: no wind field)
     back = decode_telemetry(payload)
     assert back.time_usec == s.time_usec and back.t == pytest.approx(12.345678)
     for name, tol in (("p_world_m", 5e-7), ("v_world_m_s", 5e-7), ("q_world_body", 5e-10),
                       ("w_body_rad_s", 5e-7), ("motors", 5e-5)):
         np.testing.assert_allclose(getattr(back, name), getattr(s, name), rtol=0, atol=tol)
     assert decode_telemetry(payload.decode()) == back  # str payloads too
+    # the wind is optional: a payload without it is calm air; with it, it round-trips
+    assert back.wind_world_m_s == (0.0, 0.0, 0.0)
+    windy = decode_telemetry(dumps({**obj, "wind_world_m_s": [6.0, -1.5, 0.25]}))
+    assert windy.wind_world_m_s == (6.0, -1.5, 0.25)
+    again = json.loads(encode_telemetry(windy))
+    assert again["wind_world_m_s"] == [6.0, -1.5, 0.25]
 
 
 @pytest.mark.parametrize("overrides, message", [

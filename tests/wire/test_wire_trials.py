@@ -11,6 +11,8 @@ import textwrap
 import time
 from pathlib import Path
 
+import numpy as np
+
 from ft_sitl.bus.client import BusClient
 from ft_sitl.missions.campaign import Transport, run_campaign
 from ft_sitl.missions.campaign_file import load_campaign
@@ -153,6 +155,41 @@ def test_navigate_cli_against_sitl_cli_through_mosquitto(tmp_path):
     counts = dict(re.findall(r"(\w+) (\d+)", dropped)) if dropped != "none" else {}
     assert set(counts) <= {"depth"}, err
     assert int(counts.get("depth", 0)) <= 0.01 * sent, err
+
+
+def test_sitl_wind_reaches_the_vehicle_and_the_bus(tmp_path):
+    """`ft-sitl sitl --wind`: the hovering-on-the-ground vehicle's telemetry carries the
+    wind (a steady 6 m/s from the west blows east: +x in ENU), turbulent when asked."""
+    broker = Mosquitto(tmp_path / "mq").start()
+    inst = 16
+    sitl = subprocess.Popen([FT_SITL, "sitl", "--instance", str(inst), "--speed-factor", "2",
+                             "--mqtt", broker.url, "--duration", "60", "--wind",
+                             "speed_m_s=6,from_deg=270,turbulence=light", "--wind-seed", "3"],
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+
+    async def winds():
+        out = []
+        async with BusClient(broker.url, str(inst), kinds=("telemetry",)) as client:
+            async with asyncio.timeout(40):
+                while len(out) < 100:
+                    msg = await client.receive()
+                    out.append(msg.data.wind_world_m_s)
+        return np.array(out)
+
+    try:
+        w = asyncio.run(winds())
+    finally:
+        sitl.terminate()
+        out, err = sitl.communicate(timeout=30)
+        broker.kill()
+    assert "wind: speed_m_s 6, from_deg 270, turbulence light" in out, out + err
+    assert 3.0 < w[:, 0].mean() < 9.0 and abs(w[:, 1].mean()) < 3.0
+    assert w[:, 0].std() > 0.05  # turbulent, not a constant
+    bad = subprocess.run([FT_SITL, "sitl", "--wind", "speed_m_s=-1"], capture_output=True,
+                         text=True, timeout=60)
+    assert bad.returncode == 2
+    assert bad.stderr.strip() == "ft-sitl: error: --wind: speed_m_s: must be a number 0..40 " \
+                                 "(m/s), got -1.0"
 
 
 def test_broker_killed_mid_flight_the_vehicle_flies_on_and_the_bus_reconnects(tmp_path):
