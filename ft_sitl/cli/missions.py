@@ -56,14 +56,17 @@ def cmd_campaign_check(args) -> int:
             "scenarios": [{"family": s.family, "indices": list(s.indices)}
                           for s in c.scenarios],
             "trials_per_combination": c.trials, "limits": c.limits.as_dict(),
-            "wind": [w or {} for w in c.winds], "notes": list(c.notes)}
+            "wind": [w or {} for w in c.winds], "gains": c.modes(),
+            "params": [p or {} for p in c.param_sets], "notes": list(c.notes)}
     if args.json:
         print(json.dumps(info, indent=2))
         return 0
-    winds = f" x {len(c.winds)} winds" if len(c.winds) > 1 else ""
+    axes = "".join(f" x {n} {what}" for n, what in (
+        (len(c.winds), "winds"), (len(c.modes()), "gain modes"),
+        (len(c.param_sets), "parameter sets")) if n > 1)
     print(f"campaign {c.name!r}: {len(specs)} trials = {len(c.algorithms)} algorithms x "
           f"{len(c.platforms)} platforms x {len(c.scenarios)} scenario families x "
-          f"{c.trials} trials{winds}")
+          f"{c.trials} trials{axes}")
     print(f"  algorithms: {', '.join(info['algorithms'])}")
     print(f"  platforms:  {', '.join(info['platforms'])}")
     print("  scenarios:  " + ", ".join(
@@ -71,6 +74,12 @@ def cmd_campaign_check(args) -> int:
     if c.winds != [None]:
         print("  wind:       " + "; ".join(
             ", ".join(f"{k} {v}" for k, v in w.items()) if w else "calm" for w in c.winds))
+    if len(c.modes()) > 1:
+        print(f"  gains:      {', '.join(c.modes())}")
+    if c.param_sets != [None]:
+        print("  params:     " + "; ".join(
+            ", ".join(f"{k} {v:g}" for k, v in p.items()) if p else "defaults"
+            for p in c.param_sets))
     lim = c.limits
     print(f"  limits: {lim.max_speed_m_s:g} m/s, {lim.timeout_s:g} s, goal sphere "
           f"{lim.goal_radius_m:g} m held {lim.hold_s:g} s")

@@ -132,9 +132,9 @@ def _add_missions(sub) -> None:
                                       "scenarios x trials) and report it.")
     csub = camp.add_subparsers(dest="campaign_command", metavar="ACTION", required=True)
     cr = csub.add_parser("run", help="run (or resume) a campaign",
-                         description="Run a campaign file or preset (quick, paper) into "
+                         description="Run a campaign file or preset (quick, paper, gains) into "
                                      "--out; rerunning the same command resumes it.")
-    cr.add_argument("campaign", help="campaign file (.toml, .yaml) or preset: quick, paper")
+    cr.add_argument("campaign", help="campaign file (.toml, .yaml) or preset: quick, paper, gains")
     cr.add_argument("--out", required=True, metavar="DIR", help="result directory")
     cr.add_argument("--workers", type=int, default=1,
                     help="worker processes on this machine (default 1), or with --cluster "
@@ -160,7 +160,7 @@ def _add_missions(sub) -> None:
                     "(default: an embedded broker per worker)")
     cr.set_defaults(handler="missions:cmd_campaign_run")
     cc = csub.add_parser("check", help="validate a campaign and show its matrix")
-    cc.add_argument("campaign", help="campaign file (.toml, .yaml) or preset: quick, paper")
+    cc.add_argument("campaign", help="campaign file (.toml, .yaml) or preset: quick, paper, gains")
     cc.add_argument("--json", action="store_true", help="machine-readable output")
     cc.set_defaults(handler="missions:cmd_campaign_check")
     crep = csub.add_parser("report", help="write the HTML/Markdown report of a result dir")

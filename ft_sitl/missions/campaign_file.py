@@ -63,6 +63,7 @@ from ft_sitl.missions.spec import (
     PROTOCOLS,
     TrialSpec,
     TrialSpecError,
+    px4_params,
     wind_settings,
 )
 from ft_sitl.navigation.base import Limits
@@ -73,10 +74,10 @@ from ft_sitl.scenarios.families import CATEGORY, FAMILIES, REGISTRY, resolve_fam
 from ft_sitl.scenarios.io import load_scenario
 from ft_sitl.scenarios.scenario import ScenarioError
 
-PRESETS = ("quick", "paper")
+PRESETS = ("quick", "paper", "gains")
 TOP_KEYS = ("name", "trials", "seed", "scenario_seed", "platforms", "platform_files",
             "scenarios", "indices", "physics_hz", "protocol", "gains", "algorithms", "limits",
-            "weights", "description", "wind")
+            "weights", "description", "wind", "params")
 LIMIT_KEYS = ("max_speed_m_s", "timeout_s", "goal_radius_m", "hold_s", "max_acc_m_s2")
 WEIGHT_KEYS = ("scenarios", "platforms", "beta")
 
@@ -121,6 +122,10 @@ class Campaign:
     notes: list[str] = field(default_factory=list)
     #: the wind axis: every trial of the matrix flies in each (None: calm air)
     winds: list = field(default_factory=lambda: [None])
+    #: the controller-gain axis: every trial flies with each mode ([gains] when one)
+    gain_modes: list = field(default_factory=list)
+    #: the PX4-parameter axis: every trial flies with each set (None: the defaults)
+    param_sets: list = field(default_factory=lambda: [None])
 
     def spec_dict(self) -> dict:
         """The campaign as data: what resuming compares, what reports print."""
@@ -141,7 +146,14 @@ class Campaign:
             # (left out at the default: directories written before the key existed resume)
             **({"gains": self.gains} if self.gains != DEFAULT_GAINS else {}),
             **({"wind": [w or {} for w in self.winds]} if self.winds != [None] else {}),
+            **({"gains": self.modes()} if len(self.modes()) > 1 else {}),
+            **({"params": [p or {} for p in self.param_sets]}
+               if self.param_sets != [None] else {}),
         }
+
+    def modes(self) -> list[str]:
+        """The controller-gain modes the matrix flies (the axis, or the one mode)."""
+        return list(self.gain_modes) or [self.gains]
 
     def trial_specs(self) -> list[TrialSpec]:
         """Every trial of the matrix, grouped by scenario configuration."""
@@ -162,7 +174,8 @@ class Campaign:
                             scenario_seed=self.scenario_seed, scenario_file=sc.file,
                             trial=t, seed=seed, limits=self.limits, campaign=self.name,
                             physics_hz=self.physics_hz, protocol=self.protocol,
-                            gains=self.gains, scenario_version=sc.version, wind=w)
+                            gains=g, scenario_version=sc.version, wind=w, params=ps)
+                            for g in self.modes() for ps in self.param_sets
                             for w in self.winds)
         out.sort(key=lambda s: (s.scenario_file or "", s.family, s.scenario_index))
         return out
@@ -201,9 +214,14 @@ def parse_campaign(doc: dict, path: Path | None = None) -> Campaign:
         raise t.fail("physics_hz", f"{physics_hz} must divide 1,000,000")
     protocol = t.integer("protocol", PROTOCOL_VERSION, lo=min(PROTOCOLS), hi=max(PROTOCOLS))
     gains = t.get("gains", DEFAULT_GAINS)
-    if not isinstance(gains, str) or gains not in GAIN_MODES:
+    modes = gains if isinstance(gains, list) else [gains]
+    if not modes or len(set(map(str, modes))) != len(modes) or any(
+            not isinstance(m, str) or m not in GAIN_MODES for m in modes):
         raise t.fail("gains", f"must be one of {', '.join(map(repr, GAIN_MODES))} (the "
-                              f"controller-gain mode, docs/missions.md), got {gains!r}")
+                              f"controller-gain mode, docs/missions.md) or a list of "
+                              f"different ones, got {gains!r}")
+    gain_modes = modes if isinstance(gains, list) else []
+    gains = modes[0]
     limits_t = t.table("limits", {})
     limits_t.check_keys(LIMIT_KEYS)
     try:
@@ -214,8 +232,9 @@ def parse_campaign(doc: dict, path: Path | None = None) -> Campaign:
     scenarios = _scenarios(t, base)
     weights = _weights(t, platforms, scenarios)
     winds = _winds(t)
+    param_sets = _param_sets(t)
     notes: list[str] = []
-    return Campaign(winds=winds,
+    return Campaign(winds=winds, gain_modes=gain_modes, param_sets=param_sets,
         name=name, algorithms=parse_algorithms(where, doc["algorithms"], notes),
         platforms=platforms, scenarios=scenarios, trials=trials, seed=seed,
         scenario_seed=scenario_seed, limits=limits, weights=weights, physics_hz=physics_hz,
@@ -246,6 +265,31 @@ def _winds(t: Table) -> list:
         seen.add(key)
         winds.append(w)
     return winds
+
+
+def _param_sets(t: Table) -> list:
+    """The ``params`` axis: one table of PX4 parameters (autopilot.params: name = value) or a
+    list of them, each flown by every trial of the matrix; absent: the defaults."""
+    raw = t.get("params", None)
+    if raw is None:
+        return [None]
+    items = [raw] if isinstance(raw, dict) else raw
+    if not isinstance(items, list) or not items:
+        raise t.fail("params", "must be a table of PX4 parameters or a non-empty list of "
+                               f"them, got {raw!r}")
+    out, seen = [], set()
+    for k, item in enumerate(items):
+        owner = "params" if isinstance(raw, dict) else f"params[{k}]"
+        try:
+            ps = px4_params(item, f"{t.where}: {owner}")
+        except TrialSpecError as exc:
+            raise CampaignError(str(exc)) from None
+        key = json.dumps(ps, sort_keys=True)
+        if key in seen:
+            raise t.fail(owner, f"the same parameters twice ({item!r})")
+        seen.add(key)
+        out.append(ps)
+    return out
 
 
 def _weights(t: Table, platforms, scenarios) -> dict:

@@ -98,11 +98,13 @@ def identity_row(spec, platform, scenario) -> dict:
         "scenario_index": scenario.index, "scenario_seed": scenario.seed,
         "scenario": scenario.name, "trial": spec.trial, "seed": spec.seed,
         **wind_columns(spec.wind),
+        "params": json.dumps(spec.params, sort_keys=True, separators=(",", ":"))
+        if spec.params else "",
     }
 
 
 def wind_columns(wind: dict | None) -> dict:
-    """The wind axis columns of a row (results.WIND): the mean speed, the turbulence
+    """The wind columns of a row (results.AXES): the mean speed, the turbulence
     intensity, the gust amplitude, and every non-default setting as JSON ("" in calm
     air)."""
     w = Wind(wind).values
@@ -466,7 +468,8 @@ def trial_vehicle(spec, scenario, platform, resources: TrialResources = RESOURCE
     else:
         guard = CollisionGuard(world, [platform.collision_radius_m], grid=grid,
                                names=scenario.obstacle_name)
-    params = ParamSet({"MPC_XY_VEL_MAX": spec.limits.max_speed_m_s,
+    params = ParamSet({**(spec.params or {}),
+                       "MPC_XY_VEL_MAX": spec.limits.max_speed_m_s,
                        "FT_OFFB_ACC_LIM": int(rules.offboard_acc_clamp),
                        "FT_GAIN_MODE": GAIN_MODES[spec.gains]})
     fleet = Fleet([platform], params=[params], spawn=[scenario.takeoff],

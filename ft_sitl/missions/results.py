@@ -12,9 +12,11 @@ identity
     virtual / user), ``mass_kg``, ``twr_max``, ``alpha_xy_max``, ``alpha_z_max`` (rad/s^2),
     ``family``, ``scenario_category`` (classic / theoretical / user), ``scenario_index``,
     ``scenario_seed``, ``scenario`` (name), ``trial`` (0-based repetition), ``seed``.
-wind (the trial's wind, ft_sitl.physics.wind; calm air for rows written before it existed)
+axes (the trial's wind, ft_sitl.physics.wind, and PX4 parameters; calm air and the
+default parameters for rows written before they existed)
     ``wind_speed_m_s`` (mean), ``turbulence`` (Dryden intensity), ``gust_m_s``, ``wind``
-    (every setting that differs from the defaults, as JSON; "" in calm air).
+    (every setting that differs from the defaults, as JSON; "" in calm air); ``params``
+    (the PX4 parameters the trial set, as JSON; "" for the defaults).
 outcome
     ``success`` (bool), ``reason`` (an :class:`Outcome` value), ``detail`` (what was hit,
     which bound, the navigator's exception ...).
@@ -88,14 +90,14 @@ IDENTITY = ("trial_id", "campaign", "algorithm", "algorithm_params", "platform",
             "platform_category", "mass_kg", "twr_max", "alpha_xy_max", "alpha_z_max",
             "family", "scenario_category", "scenario_index", "scenario_seed", "scenario",
             "trial", "seed")
-WIND = ("wind_speed_m_s", "turbulence", "gust_m_s", "wind")
+AXES = ("wind_speed_m_s", "turbulence", "gust_m_s", "wind", "params")
 OUTCOME = ("success", "reason", "detail")
 METRICS = ("time_to_goal_s", "nav_time_s", "path_length_m", "mean_speed_m_s",
            "max_speed_m_s", "min_clearance_m", "max_tilt_deg", "saturation_fraction",
            "energy_j", "replans", "planner_time_s", "planner_calls")
 RUN = ("sim_time_s", "wall_time_s", "code_version", "software", "protocol_version", "gains",
        "scenario_version", "finished_utc", "spec")
-COLUMNS = IDENTITY + WIND + OUTCOME + METRICS + RUN
+COLUMNS = IDENTITY + AXES + OUTCOME + METRICS + RUN
 
 CATEGORICAL = ("campaign", "algorithm", "platform", "platform_category", "family",
                "scenario_category", "scenario", "reason", "gains", "turbulence")
@@ -131,6 +133,7 @@ def to_frame(rows):
     df["gust_m_s"] = df["gust_m_s"].fillna(0.0)
     df["turbulence"] = df["turbulence"].astype(object).fillna("none")
     df["wind"] = df["wind"].astype(object).fillna("")
+    df["params"] = df["params"].astype(object).fillna("")
     for c in FLOAT:
         df[c] = pd.to_numeric(df[c], errors="coerce").astype("float64")
     df["success"] = df["success"].astype(bool)

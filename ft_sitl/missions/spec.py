@@ -12,7 +12,7 @@ import hashlib
 import json
 from dataclasses import dataclass, field, replace
 
-from ft_sitl.autopilot.params import DEFAULT_GAINS, GAIN_MODES
+from ft_sitl.autopilot.params import DEFAULT_GAINS, GAIN_MODES, ParamError, ParamSet
 from ft_sitl.navigation.base import Limits
 from ft_sitl.physics.catalog import get_platform, platform_from_mapping
 from ft_sitl.physics.platform import Platform
@@ -144,6 +144,9 @@ class TrialSpec:
     #: the wind the trial flies in (ft_sitl.physics.wind settings; None: calm air),
     #: kept as its settings that differ from the defaults
     wind: dict | None = None
+    #: PX4 parameters the trial's flight controller sets (autopilot.params; None: the
+    #: defaults), kept sorted by name
+    params: dict | None = None
 
     def __post_init__(self):
         for name in ("algorithm", "platform", "family"):
@@ -162,6 +165,7 @@ class TrialSpec:
         check_protocol(self.protocol)
         check_gains(self.gains)
         object.__setattr__(self, "wind", wind_settings(self.wind))
+        object.__setattr__(self, "params", px4_params(self.params))
         if self.scenario_file is None:
             try:
                 fam = describe_family(self.family)
@@ -202,6 +206,8 @@ class TrialSpec:
             d["scenario_version"] = self.scenario_version
         if self.wind is not None:  # (calm air left out: ids of calm trials unchanged)
             d["wind"] = self.wind
+        if self.params is not None:  # (likewise: the default parameters)
+            d["params"] = self.params
         return d
 
     @classmethod
@@ -249,6 +255,34 @@ def wind_settings(values, owner: str = "wind") -> dict | None:
     defaults = WIND_SCHEMA.defaults()
     out = {k: (float(v) if isinstance(v, int) and not isinstance(v, bool) else v)
            for k, v in resolved.items() if v != defaults[k]}
+    return out or None
+
+
+#: parameters the trial protocol sets itself, and the campaign key that sets each
+PROTOCOL_PARAMS = {"MPC_XY_VEL_MAX": "limits.max_speed_m_s",
+                   "FT_OFFB_ACC_LIM": "protocol (its version decides it)",
+                   "FT_GAIN_MODE": "gains"}
+
+
+def px4_params(values, owner: str = "params") -> dict | None:
+    """A trial's PX4 parameter overrides, checked against the parameter table (names,
+    bounds, integers) and sorted by name; None for none. TrialSpecError naming ``owner``
+    and the parameter; the parameters the protocol sets are refused with the key that
+    sets them."""
+    if values is None:
+        return None
+    if not isinstance(values, dict):
+        raise TrialSpecError(f"{owner}: must be a table of PX4 parameters "
+                             f"(e.g. {{MPC_XY_P = 1.2}}), got {values!r}")
+    for name in values:
+        if name in PROTOCOL_PARAMS:
+            raise TrialSpecError(f"{owner}: {name} is set by the trial protocol: use "
+                                 f"{PROTOCOL_PARAMS[name]} instead")
+    try:
+        ps = ParamSet({k: values[k] for k in values})
+    except ParamError as exc:
+        raise TrialSpecError(f"{owner}: {exc}") from None
+    out = {k: ps[k] for k in sorted(values)}
     return out or None
 
 

@@ -1,7 +1,7 @@
-"""Wind as a campaign axis: every trial of the matrix flies in each wind of the campaign
-file's ``wind`` list, with the same seed in each; rows carry the wind; calm trials keep
-their ids; a turbulent trial reruns bit for bit; bad winds are named by file, axis entry,
-key and range."""
+"""Campaign axes: wind, controller-gain modes and PX4 parameters. Every trial of the matrix
+flies in each value of each axis, with the same seed; rows carry the values; trials at the
+defaults keep their ids; a turbulent trial reruns bit for bit; the report plots success
+against the wind; bad values are named by file, axis entry, key and range."""
 
 import json
 
@@ -96,3 +96,56 @@ def test_bad_winds_are_named_by_file_and_entry(tmp_path, wind, message):
     with pytest.raises(CampaignError) as exc:
         load_campaign(path)
     assert str(exc.value).startswith(f"{path}: {message}")
+
+
+# --- the controller axes: gain modes and PX4 parameters -------------------------------------------
+GAINS = """\
+name = "gains"
+algorithms = ["straight"]
+platforms = ["2.00kg-T-MOTOR"]
+scenarios = [{file = "yard.yaml"}]
+trials = 1
+gains = ["bandwidth", "px4"]
+params = [{}, {MPC_XY_P = 0.5, MPC_XY_VEL_P_ACC = 1.2}]
+[limits]
+timeout_s = 5.0
+"""
+
+
+def test_gain_modes_and_px4_parameters_are_axes(yard, tmp_path):
+    c = load_campaign(campaign_file(yard.parent, "gains.toml", GAINS))
+    specs = c.trial_specs()
+    assert [(s.gains, s.params) for s in specs] == [
+        ("bandwidth", None), ("bandwidth", {"MPC_XY_P": 0.5, "MPC_XY_VEL_P_ACC": 1.2}),
+        ("px4", None), ("px4", {"MPC_XY_P": 0.5, "MPC_XY_VEL_P_ACC": 1.2})]
+    assert len({s.seed for s in specs}) == 1
+    assert "params" not in specs[0].to_dict() and "gains" not in specs[0].to_dict()
+    summary = run_campaign(c, tmp_path / "out", progress=False)
+    assert (summary.ran, summary.errors) == (4, [])
+    rows = read_jsonl(tmp_path / "out" / "trials.jsonl")
+    by = {(r["gains"], r["params"]): r for r in rows}
+    assert set(by) == {("bandwidth", ""), ("px4", ""),
+                       ("bandwidth", '{"MPC_XY_P":0.5,"MPC_XY_VEL_P_ACC":1.2}'),
+                       ("px4", '{"MPC_XY_P":0.5,"MPC_XY_VEL_P_ACC":1.2}')}
+    # the parameters reach the controller: the same trial flies differently
+    paths = {k: r["path_length_m"] for k, r in by.items()}
+    assert len(set(paths.values())) == 4, paths
+
+
+@pytest.mark.parametrize("text,message", [
+    ('params = {MPC_XY_Q = 1}', "params: unknown parameter 'MPC_XY_Q'; did you mean 'MPC_XY_P'"),
+    ('params = {MPC_XY_P = 9}', "params: MPC_XY_P: 9 1/s is outside [0, 2] 1/s"),
+    ('params = [{}, {MPC_XY_VEL_MAX = 2}]', "params[1]: MPC_XY_VEL_MAX is set by the trial "
+                                            "protocol: use limits.max_speed_m_s instead"),
+    ('params = [{FT_GAIN_MODE = 1}]', "params[0]: FT_GAIN_MODE is set by the trial protocol: "
+                                      "use gains instead"),
+    ('params = [{MPC_XY_P = 1}, {MPC_XY_P = 1.0}]', "params[1]: the same parameters twice"),
+    ('gains = ["px4", "px4"]', "gains: must be one of 'bandwidth', 'px4'"),
+    ('gains = ["px4", "PX4"]', "gains: must be one of 'bandwidth', 'px4'"),
+    ('gains = []', "gains: must be one of"),
+])
+def test_bad_controller_axes_are_named(tmp_path, text, message):
+    path = campaign_file(tmp_path, "bad.toml", f'algorithms = ["straight"]\n{text}\n')
+    with pytest.raises(CampaignError) as exc:
+        load_campaign(path)
+    assert str(exc.value).startswith(f"{path}: {message}"), str(exc.value)
