@@ -242,54 +242,42 @@ def parse_campaign(doc: dict, path: Path | None = None) -> Campaign:
         notes=notes)
 
 
-def _winds(t: Table) -> list:
-    """The ``wind`` axis: one table of wind settings (ft_sitl.physics.wind, docs/platforms.md)
-    or a list of them, each flown by every trial of the matrix; absent: calm air."""
-    raw = t.get("wind", None)
+def _table_axis(t: Table, key: str, what: str, check) -> list:
+    """An axis of tables: ``key`` is one table (``what``) or a non-empty list of different
+    ones, each checked by ``check(value, owner)`` (a TrialSpecError naming the entry);
+    absent: [None], the default alone."""
+    raw = t.get(key, None)
     if raw is None:
         return [None]
     items = [raw] if isinstance(raw, dict) else raw
     if not isinstance(items, list) or not items:
-        raise t.fail("wind", "must be a table of wind settings or a non-empty list of them, "
-                             f"got {raw!r}")
-    winds, seen = [], set()
+        raise t.fail(key, f"must be a table of {what} or a non-empty list of them, "
+                          f"got {raw!r}")
+    out, seen = [], set()
     for k, item in enumerate(items):
-        owner = "wind" if isinstance(raw, dict) else f"wind[{k}]"
+        owner = key if isinstance(raw, dict) else f"{key}[{k}]"
         try:
-            w = wind_settings(item, f"{t.where}: {owner}")
+            value = check(item, f"{t.where}: {owner}")
         except TrialSpecError as exc:
             raise CampaignError(str(exc)) from None
-        key = json.dumps(w, sort_keys=True)
-        if key in seen:
-            raise t.fail(owner, f"the same wind twice ({item!r})")
-        seen.add(key)
-        winds.append(w)
-    return winds
+        canonical = json.dumps(value, sort_keys=True)
+        if canonical in seen:
+            raise t.fail(owner, f"the same {what} twice ({item!r})")
+        seen.add(canonical)
+        out.append(value)
+    return out
+
+
+def _winds(t: Table) -> list:
+    """The ``wind`` axis: wind settings (ft_sitl.physics.wind, docs/platforms.md), each
+    flown by every trial of the matrix; absent: calm air."""
+    return _table_axis(t, "wind", "wind settings", wind_settings)
 
 
 def _param_sets(t: Table) -> list:
-    """The ``params`` axis: one table of PX4 parameters (autopilot.params: name = value) or a
-    list of them, each flown by every trial of the matrix; absent: the defaults."""
-    raw = t.get("params", None)
-    if raw is None:
-        return [None]
-    items = [raw] if isinstance(raw, dict) else raw
-    if not isinstance(items, list) or not items:
-        raise t.fail("params", "must be a table of PX4 parameters or a non-empty list of "
-                               f"them, got {raw!r}")
-    out, seen = [], set()
-    for k, item in enumerate(items):
-        owner = "params" if isinstance(raw, dict) else f"params[{k}]"
-        try:
-            ps = px4_params(item, f"{t.where}: {owner}")
-        except TrialSpecError as exc:
-            raise CampaignError(str(exc)) from None
-        key = json.dumps(ps, sort_keys=True)
-        if key in seen:
-            raise t.fail(owner, f"the same parameters twice ({item!r})")
-        seen.add(key)
-        out.append(ps)
-    return out
+    """The ``params`` axis: PX4 parameters (autopilot.params: name = value), each set flown
+    by every trial of the matrix; absent: the defaults."""
+    return _table_axis(t, "params", "PX4 parameters", px4_params)
 
 
 def _weights(t: Table, platforms, scenarios) -> dict:

@@ -88,7 +88,7 @@ def test_every_trial_flies_in_every_wind_with_one_seed(yard, tmp_path, cli_env):
                                 "or 'severe' or 'standard', got 'strong'"),
     ("5", "wind: must be a table of wind settings or a non-empty list of them, got 5"),
     ("[]", "wind: must be a table of wind settings or a non-empty list of them"),
-    ("[{speed_m_s = 3}, {speed_m_s = 3.0}]", "wind[1]: the same wind twice"),
+    ("[{speed_m_s = 3}, {speed_m_s = 3.0}]", "wind[1]: the same wind settings twice"),
     ("[{gust_duration_s = 0}]", "wind[0]: gust_duration_s: must be a number 0.05..120 (s)"),
 ])
 def test_bad_winds_are_named_by_file_and_entry(tmp_path, wind, message):
@@ -139,7 +139,7 @@ def test_gain_modes_and_px4_parameters_are_axes(yard, tmp_path):
                                             "protocol: use limits.max_speed_m_s instead"),
     ('params = [{FT_GAIN_MODE = 1}]', "params[0]: FT_GAIN_MODE is set by the trial protocol: "
                                       "use gains instead"),
-    ('params = [{MPC_XY_P = 1}, {MPC_XY_P = 1.0}]', "params[1]: the same parameters twice"),
+    ('params = [{MPC_XY_P = 1}, {MPC_XY_P = 1.0}]', "params[1]: the same PX4 parameters twice"),
     ('gains = ["px4", "px4"]', "gains: must be one of 'bandwidth', 'px4'"),
     ('gains = ["px4", "PX4"]', "gains: must be one of 'bandwidth', 'px4'"),
     ('gains = []', "gains: must be one of"),
