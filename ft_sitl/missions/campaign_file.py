@@ -63,6 +63,7 @@ from ft_sitl.missions.spec import (
     PROTOCOLS,
     TrialSpec,
     TrialSpecError,
+    actuator_settings,
     px4_params,
     wind_settings,
 )
@@ -77,7 +78,7 @@ from ft_sitl.scenarios.scenario import ScenarioError
 PRESETS = ("quick", "paper", "gains")
 TOP_KEYS = ("name", "trials", "seed", "scenario_seed", "platforms", "platform_files",
             "scenarios", "indices", "physics_hz", "protocol", "gains", "algorithms", "limits",
-            "weights", "description", "wind", "params")
+            "weights", "description", "wind", "params", "actuators")
 LIMIT_KEYS = ("max_speed_m_s", "timeout_s", "goal_radius_m", "hold_s", "max_acc_m_s2")
 WEIGHT_KEYS = ("scenarios", "platforms", "beta")
 
@@ -126,6 +127,8 @@ class Campaign:
     gain_modes: list = field(default_factory=list)
     #: the PX4-parameter axis: every trial flies with each set (None: the defaults)
     param_sets: list = field(default_factory=lambda: [None])
+    #: the actuator axis: every trial flies with each (None: actuators as built)
+    actuator_sets: list = field(default_factory=lambda: [None])
 
     def spec_dict(self) -> dict:
         """The campaign as data: what resuming compares, what reports print."""
@@ -149,6 +152,8 @@ class Campaign:
             **({"gains": self.modes()} if len(self.modes()) > 1 else {}),
             **({"params": [p or {} for p in self.param_sets]}
                if self.param_sets != [None] else {}),
+            **({"actuators": [a or {} for a in self.actuator_sets]}
+               if self.actuator_sets != [None] else {}),
         }
 
     def modes(self) -> list[str]:
@@ -174,9 +179,10 @@ class Campaign:
                             scenario_seed=self.scenario_seed, scenario_file=sc.file,
                             trial=t, seed=seed, limits=self.limits, campaign=self.name,
                             physics_hz=self.physics_hz, protocol=self.protocol,
-                            gains=g, scenario_version=sc.version, wind=w, params=ps)
+                            gains=g, scenario_version=sc.version, wind=w, params=ps,
+                            actuators=ac)
                             for g in self.modes() for ps in self.param_sets
-                            for w in self.winds)
+                            for ac in self.actuator_sets for w in self.winds)
         out.sort(key=lambda s: (s.scenario_file or "", s.family, s.scenario_index))
         return out
 
@@ -233,8 +239,11 @@ def parse_campaign(doc: dict, path: Path | None = None) -> Campaign:
     weights = _weights(t, platforms, scenarios)
     winds = _winds(t)
     param_sets = _param_sets(t)
+    actuator_sets = _table_axis(t, "actuators", "actuator settings", actuator_settings)
+    _check_motors(t, actuator_sets, platforms)
     notes: list[str] = []
     return Campaign(winds=winds, gain_modes=gain_modes, param_sets=param_sets,
+                    actuator_sets=actuator_sets,
         name=name, algorithms=parse_algorithms(where, doc["algorithms"], notes),
         platforms=platforms, scenarios=scenarios, trials=trials, seed=seed,
         scenario_seed=scenario_seed, limits=limits, weights=weights, physics_hz=physics_hz,
@@ -278,6 +287,19 @@ def _param_sets(t: Table) -> list:
     """The ``params`` axis: PX4 parameters (autopilot.params: name = value), each set flown
     by every trial of the matrix; absent: the defaults."""
     return _table_axis(t, "params", "PX4 parameters", px4_params)
+
+
+def _check_motors(t: Table, actuator_sets: list, platforms) -> None:
+    """The motors an actuator setting names exist on every platform of the campaign."""
+    fewest = min((p.n_rotors for p in platforms), default=0)
+    for k, a in enumerate(actuator_sets):
+        for key in ("degraded_motor", "fail_motor"):
+            m = (a or {}).get(key, 0)
+            if m > fewest:
+                owner = "actuators" if len(actuator_sets) == 1 else f"actuators[{k}]"
+                raise t.fail(owner,
+                             f"{key}: {m} must be within 0..{fewest} (the fewest motors of "
+                             f"the campaign's platforms)")
 
 
 def _weights(t: Table, platforms, scenarios) -> dict:

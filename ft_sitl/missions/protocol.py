@@ -47,11 +47,18 @@ from ft_sitl.autopilot.cascade import C_SAT_STEPS
 from ft_sitl.autopilot.params import GAIN_MODES, ParamSet
 from ft_sitl.missions.resources import RESOURCES, TrialResources
 from ft_sitl.missions.results import Outcome
-from ft_sitl.missions.spec import PROTOCOLS, vehicle_half_span_m, wind_seed
+from ft_sitl.missions.spec import (
+    PROTOCOLS,
+    TrialSpecError,
+    actuator_seed,
+    vehicle_half_span_m,
+    wind_seed,
+)
 from ft_sitl.navigation.base import STABLE_FOR_S, STABLE_POS_M, STABLE_SPEED_M_S, Task
 from ft_sitl.navigation.registry import available
 from ft_sitl.physics.wind import Wind
 from ft_sitl.provenance import software
+from ft_sitl.schema import SchemaError
 from ft_sitl.sim.fleet import Fleet
 from ft_sitl.sim.guard import CollisionGuard, GuardEventKind
 
@@ -100,6 +107,8 @@ def identity_row(spec, platform, scenario) -> dict:
         **wind_columns(spec.wind),
         "params": json.dumps(spec.params, sort_keys=True, separators=(",", ":"))
         if spec.params else "",
+        "actuators": json.dumps(spec.actuators, sort_keys=True, separators=(",", ":"))
+        if spec.actuators else "",
     }
 
 
@@ -476,4 +485,9 @@ def trial_vehicle(spec, scenario, platform, resources: TrialResources = RESOURCE
                   spawn_yaw=[scenario.start_yaw], physics_hz=spec.physics_hz, guard=guard)
     if spec.wind is not None:  # from the trial's first step (the gust timed from it)
         fleet.sim.set_wind(0, spec.wind, seed=wind_seed(spec))
+    if spec.actuators is not None:  # likewise (a failure timed from it)
+        try:
+            fleet.sim.set_actuators(0, spec.actuators, seed=actuator_seed(spec))
+        except SchemaError as exc:
+            raise TrialSpecError(f"actuators: {exc}") from None
     return guard, fleet

@@ -16,7 +16,8 @@ axes (the trial's wind, ft_sitl.physics.wind, and PX4 parameters; calm air and t
 default parameters for rows written before they existed)
     ``wind_speed_m_s`` (mean), ``turbulence`` (Dryden intensity), ``gust_m_s``, ``wind``
     (every setting that differs from the defaults, as JSON; "" in calm air); ``params``
-    (the PX4 parameters the trial set, as JSON; "" for the defaults).
+    (the PX4 parameters the trial set, as JSON; "" for the defaults); ``actuators``
+    (imperfect actuators, ft_sitl.physics.actuators, as JSON; "" as built).
 outcome
     ``success`` (bool), ``reason`` (an :class:`Outcome` value), ``detail`` (what was hit,
     which bound, the navigator's exception ...).
@@ -90,7 +91,7 @@ IDENTITY = ("trial_id", "campaign", "algorithm", "algorithm_params", "platform",
             "platform_category", "mass_kg", "twr_max", "alpha_xy_max", "alpha_z_max",
             "family", "scenario_category", "scenario_index", "scenario_seed", "scenario",
             "trial", "seed")
-AXES = ("wind_speed_m_s", "turbulence", "gust_m_s", "wind", "params")
+AXES = ("wind_speed_m_s", "turbulence", "gust_m_s", "wind", "params", "actuators")
 OUTCOME = ("success", "reason", "detail")
 METRICS = ("time_to_goal_s", "nav_time_s", "path_length_m", "mean_speed_m_s",
            "max_speed_m_s", "min_clearance_m", "max_tilt_deg", "saturation_fraction",
@@ -134,6 +135,7 @@ def to_frame(rows):
     df["turbulence"] = df["turbulence"].astype(object).fillna("none")
     df["wind"] = df["wind"].astype(object).fillna("")
     df["params"] = df["params"].astype(object).fillna("")
+    df["actuators"] = df["actuators"].astype(object).fillna("")
     for c in FLOAT:
         df[c] = pd.to_numeric(df[c], errors="coerce").astype("float64")
     df["success"] = df["success"].astype(bool)

@@ -14,6 +14,8 @@ from dataclasses import dataclass, field, replace
 
 from ft_sitl.autopilot.params import DEFAULT_GAINS, GAIN_MODES, ParamError, ParamSet
 from ft_sitl.navigation.base import Limits
+from ft_sitl.physics.actuators import SCHEMA as ACTUATOR_SCHEMA
+from ft_sitl.physics.actuators import Actuators
 from ft_sitl.physics.catalog import get_platform, platform_from_mapping
 from ft_sitl.physics.platform import Platform
 from ft_sitl.physics.wind import SCHEMA as WIND_SCHEMA
@@ -147,6 +149,9 @@ class TrialSpec:
     #: PX4 parameters the trial's flight controller sets (autopilot.params; None: the
     #: defaults), kept sorted by name
     params: dict | None = None
+    #: imperfect actuators (ft_sitl.physics.actuators settings; None: as built), kept as
+    #: the settings that differ from the defaults
+    actuators: dict | None = None
 
     def __post_init__(self):
         for name in ("algorithm", "platform", "family"):
@@ -166,6 +171,7 @@ class TrialSpec:
         check_gains(self.gains)
         object.__setattr__(self, "wind", wind_settings(self.wind))
         object.__setattr__(self, "params", px4_params(self.params))
+        object.__setattr__(self, "actuators", actuator_settings(self.actuators))
         if self.scenario_file is None:
             try:
                 fam = describe_family(self.family)
@@ -208,6 +214,8 @@ class TrialSpec:
             d["wind"] = self.wind
         if self.params is not None:  # (likewise: the default parameters)
             d["params"] = self.params
+        if self.actuators is not None:  # (likewise: nominal actuators)
+            d["actuators"] = self.actuators
         return d
 
     @classmethod
@@ -239,23 +247,37 @@ class TrialSpec:
         return hashlib.sha256(self.to_json().encode()).hexdigest()[:16]
 
 
+def _non_default(values, owner: str, schema, model, what: str) -> dict | None:
+    """``values`` checked by ``model(values, owner)`` and reduced to the settings that
+    differ from ``schema``'s defaults (floats for numbers given as integers where the
+    parameter is a float); None when none differ."""
+    if values is None:
+        return None
+    if not isinstance(values, dict):
+        raise TrialSpecError(f"{owner}: must be a table of {what} "
+                             f"({', '.join(schema.names())}), got {values!r}")
+    try:
+        resolved = model(values, owner).values
+    except SchemaError as exc:
+        raise TrialSpecError(str(exc)) from None
+    defaults = schema.defaults()
+    out = {k: (float(v) if isinstance(v, int) and not isinstance(v, bool)
+               and schema[k].kind == "float" else v)
+           for k, v in resolved.items() if v != defaults[k]}
+    return out or None
+
+
+def actuator_settings(values, owner: str = "actuators") -> dict | None:
+    """A trial's actuators as their canonical settings (those that differ from the
+    defaults); None for actuators as built. TrialSpecError naming ``owner`` and the key."""
+    return _non_default(values, owner, ACTUATOR_SCHEMA, Actuators, "actuator settings")
+
+
 def wind_settings(values, owner: str = "wind") -> dict | None:
     """A trial's wind as its canonical settings: those that differ from the defaults, in
     declaration order; None for calm air (no settings, or only defaults). TrialSpecError
     naming ``owner``, the key and the allowed range for a bad one."""
-    if values is None:
-        return None
-    if not isinstance(values, dict):
-        raise TrialSpecError(f"{owner}: must be a table of wind settings "
-                             f"({', '.join(WIND_SCHEMA.names())}), got {values!r}")
-    try:
-        resolved = Wind(values, owner).values
-    except SchemaError as exc:
-        raise TrialSpecError(str(exc)) from None
-    defaults = WIND_SCHEMA.defaults()
-    out = {k: (float(v) if isinstance(v, int) and not isinstance(v, bool) else v)
-           for k, v in resolved.items() if v != defaults[k]}
-    return out or None
+    return _non_default(values, owner, WIND_SCHEMA, Wind, "wind settings")
 
 
 #: parameters the trial protocol sets itself, and the campaign key that sets each
@@ -288,8 +310,17 @@ def px4_params(values, owner: str = "params") -> dict | None:
 
 def wind_seed(spec: TrialSpec) -> int:
     """The seed of a trial's turbulence (the camera's noise has stream 1, this 2)."""
+    return _stream_seed(spec, 2)
+
+
+def actuator_seed(spec: TrialSpec) -> int:
+    """The seed of a trial's actuator command noise (stream 3)."""
+    return _stream_seed(spec, 3)
+
+
+def _stream_seed(spec: TrialSpec, stream: int) -> int:
     import numpy as np  # (kept off this module's import path: specs are built everywhere)
-    return int(np.random.SeedSequence([spec.seed, spec.trial, 2]).generate_state(1)[0])
+    return int(np.random.SeedSequence([spec.seed, spec.trial, stream]).generate_state(1)[0])
 
 
 def check_protocol(version) -> int:

@@ -32,11 +32,11 @@ comes from, clockwise from north; 270 = from the west, blowing east), plus
 Each component is the exact discretisation of a linear filter driven by white noise
 (first order for u, second order for v and w), sampled every :data:`TURBULENCE_DT_S`
 (10 ms, or every physics step if that is longer) and held in between, so its variance and
-spectrum hold whatever the physics rate. The noise is a counter-based generator
-(:func:`gauss`), a pure function of the vehicle's wind seed, the physics step and the
-component: a trial's wind does not depend on how its steps are batched. A mean wind
-alone costs the kernel nothing (it is written once); turbulence and a gust are advanced
-in the kernel (docs/benchmarks.md, "Wind").
+spectrum hold whatever the physics rate. The noise is counter-based
+(:func:`ft_sitl.physics.noise.gauss`), a pure function of the vehicle's wind seed, the
+physics step and the component: a trial's wind does not depend on how its steps are
+batched. A mean wind alone costs the kernel nothing (it is written once); turbulence and a
+gust are advanced in the kernel (docs/benchmarks.md, "Wind").
 
 **Gust:** a 1-cosine gust of ``gust_m_s`` from ``gust_from_deg`` (plus
 ``gust_vertical_m_s``), starting ``gust_start_s`` after the wind is set and lasting
@@ -52,6 +52,7 @@ from numba import njit
 from scipy.linalg import cholesky, expm, solve_discrete_lyapunov
 
 from ft_sitl.physics import dynamics as d
+from ft_sitl.physics.noise import gauss
 from ft_sitl.schema import Param, Schema, SchemaError
 
 FT = 0.3048  # m per foot
@@ -220,34 +221,6 @@ def _stationary(phi: np.ndarray, l3: np.ndarray) -> np.ndarray:
     """The stationary covariance of x <- phi x + L n (a discrete Lyapunov equation)."""
     L = np.array([[l3[0], 0.0], [l3[1], l3[2]]])
     return solve_discrete_lyapunov(phi, L @ L.T)
-
-
-# --- the noise: counter-based, so a pure function of (seed, step, component) ----------------
-_M1 = np.uint64(0xBF58476D1CE4E5B9)
-_M2 = np.uint64(0x94D049BB133111EB)
-_GOLD = np.uint64(0x9E3779B97F4A7C15)
-
-
-@njit(cache=True, inline="always")
-def _mix(z):
-    z = (z ^ (z >> np.uint64(30))) * _M1
-    z = (z ^ (z >> np.uint64(27))) * _M2
-    return z ^ (z >> np.uint64(31))
-
-
-@njit(cache=True)
-def gauss(seed, k, j):
-    """A standard normal number, a pure function of (seed, step k, component j).
-
-    Hand-written (SplitMix64 finalizer + Box-Muller) because it runs inside the compiled
-    physics step, where numpy's Generator objects are not available and numba's global
-    np.random state would make a trial's wind depend on what else drew from it."""
-    z = (np.uint64(seed) * _GOLD + np.uint64(k + 1) * np.uint64(8) + np.uint64(j))
-    a = _mix(z)
-    b = _mix(a ^ _GOLD)
-    u1 = (float(a >> np.uint64(11)) + 0.5) * (1.0 / 9007199254740992.0)
-    u2 = float(b >> np.uint64(11)) * (1.0 / 9007199254740992.0)
-    return math.sqrt(-2.0 * math.log(u1)) * math.cos(2.0 * math.pi * u2)
 
 
 @njit(cache=True)

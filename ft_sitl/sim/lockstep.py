@@ -19,6 +19,13 @@ from ft_sitl.autopilot.gains import build_gains, mixer
 from ft_sitl.autopilot.params import ParamSet
 from ft_sitl.autopilot.setpoints import Setpoint
 from ft_sitl.physics import dynamics as d
+from ft_sitl.physics.actuators import (
+    A_ON,
+    N_ACT,
+    Actuators,
+    actuator_step_one,
+    apply_constant,
+)
 from ft_sitl.physics.platform import Platform
 from ft_sitl.physics.quaternion import qfrom_euler, qto_euler
 from ft_sitl.physics.wind import N_WIND, W_ON, Wind, apply_mean, wind_step_one
@@ -45,18 +52,21 @@ from ft_sitl.sim.guard import (
 
 @njit(cache=True)
 def run_steps(n_steps, dt, x, sp, gn, a, cs, prm, alloc, env, status, w_cmd, rec, rec_every,
-              k_done, gd, grid, meta, wind, k0):
+              k_done, gd, grid, meta, wind, act, k0):
     """Advance every vehicle to step n_steps from step k_done[i]; record the state every
     rec_every steps. A vehicle whose guard row trips (see guard_step) stops after that step
     with its G_TRIP set, for the caller to resolve and resume. ``wind``: each vehicle's
-    wind row (ft_sitl.physics.wind), advanced before the plant; ``k0``: the simulation's
-    step count when this call started (the wind's clock)."""
+    wind row (ft_sitl.physics.wind), advanced before the plant; ``act``: its actuator row
+    (ft_sitl.physics.actuators: command noise, a failed motor), applied to the controller's
+    commands; ``k0``: the simulation's step count when this call started (their clock)."""
     for i in range(x.shape[0]):
         # per-vehicle rows sliced once, not every step
         xi, spi, gni, ai, csi, wi = x[i], sp[i], gn[i], a[i], cs[i], w_cmd[i]
         prmi, alloci, envi, sti, gi = prm[i], alloc[i], env[i], status[i], gd[i]
         wdi = wind[i]
         windy = wdi[W_ON] != 0.0
+        adi = act[i]
+        imperfect = adi[A_ON] != 0.0
         guarded = gi[G_ON] > 0.0 or gi[G_BOUNDS] > 0.0
         bx, by, bz, rr = gi[G_BX], gi[G_BY], gi[G_BZ], gi[G_RR]
         body = gi[G_BMODE] > 0.0
@@ -64,6 +74,8 @@ def run_steps(n_steps, dt, x, sp, gn, a, cs, prm, alloc, env, status, w_cmd, rec
         while k < n_steps:
             px, py, pz = xi[0], xi[1], xi[2]
             c.controller_step_one(xi, spi, gni, ai, csi, dt, wi)
+            if imperfect:
+                actuator_step_one(adi, wi, k0 + k)
             if windy:
                 wind_step_one(wdi, envi, k0 + k, dt)
             d.plant_step_one(xi, wi, prmi, alloci, envi, sti, dt)
@@ -150,6 +162,8 @@ class Simulation:
         self._meta[GM_H] = 1.0
         self._k_done = np.zeros(n, dtype=np.int64)
         self.wind = np.zeros((n, N_WIND))  # no wind: the kernel skips the stage
+        self.act = np.zeros((n, N_ACT))  # nominal actuators: likewise
+        self._nominal = (self.plant.prm.copy(), self.plant.alloc.copy())
         self._no_rec = np.empty((0, n, self.x.shape[1]))
 
     # --- configuration ------------------------------------------------------------
@@ -214,6 +228,21 @@ class Simulation:
         self.wind[i] = wind.row(self.dt, seed, self.steps)
         apply_mean(self.wind[i], self.plant.env[i])
 
+    def set_actuators(self, i: int, actuators: Actuators | dict | None,
+                      seed: int = 0) -> None:
+        """Give vehicle i imperfect actuators (an :class:`~ft_sitl.physics.actuators.
+        Actuators`, its settings as a dict, or None for nominal ones) from now on; ``seed``
+        seeds the command noise; a failure is timed from now."""
+        n_rot = self.platforms[i].n_rotors
+        if actuators is None:
+            actuators = Actuators(n_rotors=n_rot)
+        elif not isinstance(actuators, Actuators):
+            actuators = Actuators(actuators, n_rotors=n_rot)
+        apply_constant(actuators, self.plant.prm[i], self.plant.alloc[i],
+                       self._nominal[0][i], self._nominal[1][i])
+        self.act[i] = actuators.row(self.dt, self.platforms[i].rotor_speed_max_rad_s, seed,
+                                    self.steps)
+
     def wind_velocity(self, i: int = 0) -> np.ndarray:
         """The air's velocity at vehicle i in the last physics step (ENU, m/s)."""
         return self.plant.env[i, d.E_WIND_X:d.E_WIND_Z + 1].copy()
@@ -236,7 +265,7 @@ class Simulation:
                 n_steps, self.dt, self.plant.x, self.sp, self.gains, self.mix, self.ctrl,
                 self.plant.prm, self.plant.alloc, self.plant.env, self.plant.status,
                 self.w_cmd, rec, record_every, k_done, self._gd, self._grid, self._meta,
-                self.wind, self.steps,
+                self.wind, self.act, self.steps,
             )
             trip = self._gd[:, G_TRIP]
             if not trip.any():

@@ -149,3 +149,56 @@ def test_bad_controller_axes_are_named(tmp_path, text, message):
     with pytest.raises(CampaignError) as exc:
         load_campaign(path)
     assert str(exc.value).startswith(f"{path}: {message}"), str(exc.value)
+
+
+# --- the actuator axis --------------------------------------------------------------------------
+ACTUATORS = """\
+name = "actuators"
+algorithms = ["straight"]
+platforms = ["1.00kg-SunnySky"]
+scenarios = [{file = "yard.yaml"}]
+trials = 1
+actuators = [{}, {fail_motor = 3, fail_at_s = 4}]
+[limits]
+timeout_s = 6.0
+"""
+
+
+def test_actuators_are_an_axis_and_a_failed_motor_ends_the_flight(yard, tmp_path):
+    c = load_campaign(campaign_file(yard.parent, "act.toml", ACTUATORS))
+    specs = c.trial_specs()
+    assert [s.actuators for s in specs] == [None, {"fail_motor": 3, "fail_at_s": 4.0}]
+    summary = run_campaign(c, tmp_path / "out", progress=False)
+    assert (summary.ran, summary.errors) == (2, [])
+    rows = {r["actuators"]: r for r in read_jsonl(tmp_path / "out" / "trials.jsonl")}
+    nominal, failed = rows[""], rows['{"fail_at_s":4.0,"fail_motor":3}']
+    assert nominal["reason"] != failed["reason"] or \
+        failed["saturation_fraction"] > nominal["saturation_fraction"]
+    assert failed["saturation_fraction"] > 0.0
+
+
+@pytest.mark.parametrize("text,message", [
+    ("actuators = {fail_motor = 7}", "actuators: fail_motor: 7 must be within 0..4 (the "
+                                     "fewest motors of the campaign's platforms)"),
+    ("actuators = [{}, {efficiency = 0}]", "actuators[1]: efficiency: must be a number "
+                                           "0.05..1"),
+    ("actuators = [{lag = 1}]", "actuators[0] has no parameter 'lag'; did you mean 'lag_s'?"),
+])
+def test_bad_actuator_axes_are_named(tmp_path, text, message):
+    path = campaign_file(tmp_path, "bad.toml",
+                         f'algorithms = ["straight"]\nplatforms = ["1.00kg-SunnySky"]\n{text}\n')
+    with pytest.raises(CampaignError) as exc:
+        load_campaign(path)
+    assert str(exc.value).startswith(f"{path}: {message}"), str(exc.value)
+
+
+def test_the_gains_preset_flies_both_gain_modes_across_the_catalog():
+    c = load_campaign("gains")
+    specs = c.trial_specs()
+    assert c.modes() == ["bandwidth", "px4"] and len(c.platforms) == 36
+    assert [s.family for s in c.scenarios] == ["forest", "urban", "random_angle_cylinder"]
+    assert len(specs) == len(c.algorithms) * 36 * 3 * 3 * 2
+    pairs = {}
+    for s in specs:  # each trial in both modes, with one seed
+        pairs.setdefault((s.label, s.platform, s.family, s.trial), set()).add((s.gains, s.seed))
+    assert all(len(v) == 2 and len({seed for _, seed in v}) == 1 for v in pairs.values())

@@ -98,7 +98,7 @@ ERRORS = [
     (BASE + "seed = -1", "seed: must be an integer >= 0, got -1"),
     (BASE + "physics_hz = 333", "physics_hz: 333 must divide 1,000,000"),
     (BASE + 'gains = "PX4"', "gains: must be one of 'bandwidth', 'px4' (the controller-gain "
-     "mode, docs/missions.md), got 'PX4'"),
+     "mode, docs/missions.md) or a list of different ones, got 'PX4'"),
     (BASE + "gains = 1", "gains: must be one of 'bandwidth', 'px4'"),
     (BASE + 'name = ""', "name: must be a non-empty string"),
     (BASE + "limits = 3", "limits: must be a table, got 3"),
@@ -157,8 +157,8 @@ def test_wrong_suffix_and_missing_file(tmp_path):
     path = campaign_file(tmp_path, "c.json", '{"algorithms": ["straight"]}')
     assert _error(path) == f"{path}: unknown campaign file type .json; use .toml, .yaml or .yml"
     missing = tmp_path / "nothere.toml"
-    assert _error(missing) == f"{missing}: no such campaign file (presets: quick, paper)"
-    assert _error("quik") == "quik: no such campaign file (presets: quick, paper)"
+    assert _error(missing) == f"{missing}: no such campaign file (presets: quick, paper, gains)"
+    assert _error("quik") == "quik: no such campaign file (presets: quick, paper, gains)"
 
 
 # --- presets and the matrix ------------------------------------------------------------------

@@ -317,15 +317,15 @@ def test_navigators_list_shows_plugins_and_broken_entry_points(capsys, plugins):
 
 # --- bad input -------------------------------------------------------------------------------
 @pytest.mark.parametrize("args, message", [
-    (["campaign", "check", "quik"], "quik: no such campaign file (presets: quick, paper)"),
+    (["campaign", "check", "quik"], "quik: no such campaign file (presets: quick, paper, gains)"),
     (["campaign", "run", "quik", "--out", "{tmp}/o"],
-     "quik: no such campaign file (presets: quick, paper)"),
+     "quik: no such campaign file (presets: quick, paper, gains)"),
     (["campaign", "run", "{campaign}", "--out", "{tmp}/o", "--workers", "0"],
      "--workers: 0 must be at least 1"),
     (["campaign", "check", "{tmp}/bad.toml"],
      "{tmp}/bad.toml: unknown key(s) 'trails' (did you mean 'trials'?); allowed: name, trials, "
      "seed, scenario_seed, platforms, platform_files, scenarios, indices, physics_hz, protocol, "
-     "gains, algorithms, limits, weights, description, wind, params"),
+     "gains, algorithms, limits, weights, description, wind, params, actuators"),
     (["campaign", "report", "{tmp}"],
      "{tmp}: not a campaign result directory (no campaign.json)"),
     (["campaign", "report", "{tmp}/empty"], "{tmp}/empty: no finished trials yet"),
@@ -373,7 +373,7 @@ def test_bad_input_from_the_installed_script(tmp_path):
     proc = run_exe("campaign", "run", "quik", "--out", tmp_path / "o")
     assert proc.returncode == 2 and proc.stdout == ""
     assert proc.stderr == "ft-sitl: error: quik: no such campaign file (presets: quick, " \
-                          "paper)\n"
+                          "paper, gains)\n"
     proc = run_exe("trial", "rerun", tmp_path, "abc")
     assert proc.returncode == 2 and proc.stderr.count("\n") == 1
     assert "not a campaign result directory" in proc.stderr and "Traceback" not in proc.stderr

@@ -112,9 +112,10 @@ class Cluster:
         self._spawn("scheduler", "scheduler", "--host", "127.0.0.1", "--port",
                     str(self.port), "--dashboard-address", "127.0.0.1:0")
         for _ in range(workers):
+            # (--death-timeout: a worker whose test was killed does not linger)
             self._spawn("worker", "worker", self.address, "--nthreads", "1",
                         "--nworkers", "1", "--host", "127.0.0.1",
-                        "--dashboard-address", "127.0.0.1:0")
+                        "--dashboard-address", "127.0.0.1:0", "--death-timeout", "60")
         from distributed import Client
         with Client(self.address, timeout=60) as c:
             c.wait_for_workers(workers, timeout=120)
@@ -280,7 +281,8 @@ def test_workers_with_other_code_or_that_cannot_spawn_are_refused(cluster, monke
         # a worker started without DASK_DISTRIBUTED__WORKER__DAEMON=False
         cluster.env = cli_env
         cluster._spawn("worker", "worker", cluster.address, "--nthreads", "1",
-                       "--host", "127.0.0.1", "--dashboard-address", "127.0.0.1:0")
+                       "--host", "127.0.0.1", "--dashboard-address", "127.0.0.1:0",
+                       "--death-timeout", "60")
         ex.client.wait_for_workers(3, timeout=120)
         with pytest.raises(ExecutorError) as exc:
             ex.check_workers()

@@ -12,13 +12,8 @@ from scipy.signal import welch
 
 from ft_sitl import G
 from ft_sitl.physics.catalog import catalog
-from ft_sitl.physics.wind import (
-    INTENSITY_W20_M_S,
-    Wind,
-    dryden_scales,
-    gauss,
-    wind_series,
-)
+from ft_sitl.physics.noise import gauss
+from ft_sitl.physics.wind import INTENSITY_W20_M_S, Wind, dryden_scales, wind_series
 from ft_sitl.schema import SchemaError
 from ft_sitl.sim.lockstep import Simulation
 
