@@ -44,7 +44,7 @@ from ft_sitl.missions.results import Outcome
 from ft_sitl.missions.spec import TrialSpec, platform_for
 from ft_sitl.missions.store import ResultStore
 from ft_sitl.missions.trial import run_trial
-from ft_sitl.missions.trial_wire import run_trial_wire, worker_bus
+from ft_sitl.missions.trial_wire import PERCEPTION_WIRE, run_trial_wire, worker_bus
 from ft_sitl.missions.watchdog import TRIAL_WALL_BUDGET_S, wall_budget_from_env
 
 __all__ = ["CHUNK_MAX", "GRID_CACHE_DIR", "DaskExecutor", "Executor", "ExecutorError",
@@ -198,6 +198,9 @@ def run_campaign(campaign: Campaign, out_dir: str | Path, *, workers: int = 1,
     except ValueError as exc:
         raise CampaignError(str(exc)) from None
     specs = campaign.trial_specs()
+    if (transport or Transport()).kind == "mavlink" and any(
+            s.perception is not None for s in specs):
+        raise CampaignError(f"--transport mavlink: {PERCEPTION_WIRE}")
     meta = {"spec": campaign.spec_dict(), "total_trials": len(specs),
             "code_version": __version__}
     store = ResultStore(out_dir)

@@ -64,6 +64,7 @@ from ft_sitl.missions.spec import (
     TrialSpec,
     TrialSpecError,
     actuator_settings,
+    perception_settings,
     px4_params,
     wind_settings,
 )
@@ -78,7 +79,7 @@ from ft_sitl.scenarios.scenario import ScenarioError
 PRESETS = ("quick", "paper", "gains")
 TOP_KEYS = ("name", "trials", "seed", "scenario_seed", "platforms", "platform_files",
             "scenarios", "indices", "physics_hz", "protocol", "gains", "algorithms", "limits",
-            "weights", "description", "wind", "params", "actuators")
+            "weights", "description", "wind", "params", "actuators", "perception")
 LIMIT_KEYS = ("max_speed_m_s", "timeout_s", "goal_radius_m", "hold_s", "max_acc_m_s2")
 WEIGHT_KEYS = ("scenarios", "platforms", "beta")
 
@@ -129,6 +130,8 @@ class Campaign:
     param_sets: list = field(default_factory=lambda: [None])
     #: the actuator axis: every trial flies with each (None: actuators as built)
     actuator_sets: list = field(default_factory=lambda: [None])
+    #: the perception axis: every trial flies with each (None: ideal perception)
+    perceptions: list = field(default_factory=lambda: [None])
 
     def spec_dict(self) -> dict:
         """The campaign as data: what resuming compares, what reports print."""
@@ -154,6 +157,8 @@ class Campaign:
                if self.param_sets != [None] else {}),
             **({"actuators": [a or {} for a in self.actuator_sets]}
                if self.actuator_sets != [None] else {}),
+            **({"perception": [p or {} for p in self.perceptions]}
+               if self.perceptions != [None] else {}),
         }
 
     def modes(self) -> list[str]:
@@ -180,9 +185,10 @@ class Campaign:
                             trial=t, seed=seed, limits=self.limits, campaign=self.name,
                             physics_hz=self.physics_hz, protocol=self.protocol,
                             gains=g, scenario_version=sc.version, wind=w, params=ps,
-                            actuators=ac)
+                            actuators=ac, perception=pe)
                             for g in self.modes() for ps in self.param_sets
-                            for ac in self.actuator_sets for w in self.winds)
+                            for ac in self.actuator_sets for pe in self.perceptions
+                            for w in self.winds)
         out.sort(key=lambda s: (s.scenario_file or "", s.family, s.scenario_index))
         return out
 
@@ -241,9 +247,10 @@ def parse_campaign(doc: dict, path: Path | None = None) -> Campaign:
     param_sets = _param_sets(t)
     actuator_sets = _table_axis(t, "actuators", "actuator settings", actuator_settings)
     _check_motors(t, actuator_sets, platforms)
+    perceptions = _table_axis(t, "perception", "perception settings", perception_settings)
     notes: list[str] = []
     return Campaign(winds=winds, gain_modes=gain_modes, param_sets=param_sets,
-                    actuator_sets=actuator_sets,
+                    actuator_sets=actuator_sets, perceptions=perceptions,
         name=name, algorithms=parse_algorithms(where, doc["algorithms"], notes),
         platforms=platforms, scenarios=scenarios, trials=trials, seed=seed,
         scenario_seed=scenario_seed, limits=limits, weights=weights, physics_hz=physics_hz,

@@ -109,6 +109,8 @@ def identity_row(spec, platform, scenario) -> dict:
         if spec.params else "",
         "actuators": json.dumps(spec.actuators, sort_keys=True, separators=(",", ":"))
         if spec.actuators else "",
+        "perception": json.dumps(spec.perception, sort_keys=True, separators=(",", ":"))
+        if spec.perception else "",
     }
 
 

@@ -238,32 +238,64 @@ TURBULENCE_STYLE = {"none": "-", "light": "--", "moderate": "-.", "severe": ":",
                     "standard": (0, (6, 2, 1, 2))}
 
 
-def has_wind_axis(df: pd.DataFrame) -> bool:
-    """Whether the trials flew in more than one wind (the campaign's wind axis)."""
-    return "wind" in df and df["wind"].astype(str).nunique() > 1
+def _setting(df: pd.DataFrame, column: str, key: str, default: float) -> pd.Series:
+    """One numeric setting out of a JSON settings column ("" or missing: the default)."""
+    def get(text):
+        if not isinstance(text, str) or not text:
+            return default
+        return float(json.loads(text).get(key, default))
+    return df[column].map(get).astype(float) if column in df else \
+        pd.Series(default, index=df.index)
 
 
-def _fig_success_vs_wind(t: _Tables):
-    """Success against the mean wind speed, per algorithm (line style: turbulence)."""
-    g = (t.df.groupby(["algorithm", "turbulence", "wind_speed_m_s"], observed=True)["success"]
+def axis_values(df: pd.DataFrame) -> dict[str, pd.Series]:
+    """The numeric axes the trials vary, by name (only those with more than one value):
+    mean wind speed, perception latency, and the weakest motor's efficiency."""
+    out = {}
+    if "wind_speed_m_s" in df:
+        out["wind"] = df["wind_speed_m_s"].astype(float)
+    out["latency"] = _setting(df, "perception", "latency_s", 0.0)
+    eff = _setting(df, "actuators", "efficiency", 1.0)
+    one = _setting(df, "actuators", "degraded_efficiency", 1.0)
+    weak = _setting(df, "actuators", "degraded_motor", 0.0)
+    out["efficiency"] = eff.where(weak == 0, np.minimum(eff, one))
+    return {k: v for k, v in out.items() if v.nunique() > 1}
+
+
+#: per axis: figure name, x label, caption's words
+AXIS_FIGURES = {
+    "wind": ("success_vs_wind", "mean wind speed (m/s)", "the mean wind speed"),
+    "latency": ("success_vs_latency", "perception latency (s)",
+                "the navigator's perception latency"),
+    "efficiency": ("success_vs_efficiency", "weakest motor's thrust efficiency",
+                   "the weakest motor's thrust efficiency"),
+}
+
+
+def _fig_success_vs_axis(t: _Tables, axis: str):
+    """Success against one axis's value, per algorithm (for the wind, line style: the
+    turbulence), pooled over everything else; Wilson intervals."""
+    x = axis_values(t.df)[axis]
+    df = t.df.assign(_x=x, _kind=t.df["turbulence"].astype(str) if axis == "wind" else "")
+    g = (df.groupby(["algorithm", "_kind", "_x"], observed=True)["success"]
          .agg(["sum", "count"]).reset_index())
-    kinds = sorted(g["turbulence"].astype(str).unique())
+    kinds = sorted(g["_kind"].unique())
     fig = _new_figure(7.0, 3.8)
     ax = fig.add_subplot()
     for algo in t.algorithms:
         for kind in kinds:
-            sub = g[(g["algorithm"].astype(str) == algo) & (g["turbulence"].astype(str) == kind)]
+            sub = g[(g["algorithm"].astype(str) == algo) & (g["_kind"] == kind)]
             if sub.empty:
                 continue
-            sub = sub.sort_values("wind_speed_m_s")
+            sub = sub.sort_values("_x")
             n, k = sub["count"].to_numpy(), sub["sum"].to_numpy()
             rate = k / n
             ci = np.array([scoring.wilson_interval(int(a), int(b)) for a, b in zip(n, k)])
             label = algo if len(kinds) == 1 else f"{algo}, turbulence {kind}"
-            ax.errorbar(sub["wind_speed_m_s"], rate, yerr=_yerr(rate, ci[:, 0], ci[:, 1]),
+            ax.errorbar(sub["_x"], rate, yerr=_yerr(rate, ci[:, 0], ci[:, 1]),
                         color=t.colour(algo), ls=TURBULENCE_STYLE.get(kind, "-"), marker="o",
                         ms=3, capsize=2, elinewidth=0.8, label=label)
-    ax.set_xlabel("mean wind speed (m/s)")
+    ax.set_xlabel(AXIS_FIGURES[axis][1])
     ax.set_ylabel("success rate")
     ax.set_ylim(-0.02, 1.05)
     ax.grid(alpha=0.3)
@@ -542,11 +574,12 @@ def _figures(t: _Tables) -> list[tuple[str, str, object]]:
          "scenario families, 95 % CI. Rows are bands of alpha_xy,max (bottom: lowest); "
          "within a row, TWR_max increases to the right.", _fig_platform_grid),
     ]
-    if has_wind_axis(t.df):
-        figs.append(("success_vs_wind", "Success against the mean wind speed per algorithm, "
-                     "pooled over platforms and scenario families (line style: the "
-                     "turbulence intensity); bars: 95 % Wilson intervals.",
-                     _fig_success_vs_wind))
+    for axis in axis_values(t.df):
+        name, _, words = AXIS_FIGURES[axis]
+        style = " (line style: the turbulence intensity)" if axis == "wind" else ""
+        figs.append((name, f"Success against {words} per algorithm, pooled over platforms, "
+                     f"scenario families and the other axes{style}; bars: 95 % Wilson "
+                     f"intervals.", lambda t, a=axis: _fig_success_vs_axis(t, a)))
     used = set()
     for algo in t.algorithms:
         slug = _slug(algo)

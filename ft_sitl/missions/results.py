@@ -17,7 +17,9 @@ default parameters for rows written before they existed)
     ``wind_speed_m_s`` (mean), ``turbulence`` (Dryden intensity), ``gust_m_s``, ``wind``
     (every setting that differs from the defaults, as JSON; "" in calm air); ``params``
     (the PX4 parameters the trial set, as JSON; "" for the defaults); ``actuators``
-    (imperfect actuators, ft_sitl.physics.actuators, as JSON; "" as built).
+    (imperfect actuators, ft_sitl.physics.actuators, as JSON; "" as built);
+    ``perception`` (the navigator's latency, state noise and dropped frames,
+    ft_sitl.missions.perception, as JSON; "" ideal).
 outcome
     ``success`` (bool), ``reason`` (an :class:`Outcome` value), ``detail`` (what was hit,
     which bound, the navigator's exception ...).
@@ -91,7 +93,8 @@ IDENTITY = ("trial_id", "campaign", "algorithm", "algorithm_params", "platform",
             "platform_category", "mass_kg", "twr_max", "alpha_xy_max", "alpha_z_max",
             "family", "scenario_category", "scenario_index", "scenario_seed", "scenario",
             "trial", "seed")
-AXES = ("wind_speed_m_s", "turbulence", "gust_m_s", "wind", "params", "actuators")
+AXES = ("wind_speed_m_s", "turbulence", "gust_m_s", "wind", "params", "actuators",
+        "perception")
 OUTCOME = ("success", "reason", "detail")
 METRICS = ("time_to_goal_s", "nav_time_s", "path_length_m", "mean_speed_m_s",
            "max_speed_m_s", "min_clearance_m", "max_tilt_deg", "saturation_fraction",
@@ -136,6 +139,7 @@ def to_frame(rows):
     df["wind"] = df["wind"].astype(object).fillna("")
     df["params"] = df["params"].astype(object).fillna("")
     df["actuators"] = df["actuators"].astype(object).fillna("")
+    df["perception"] = df["perception"].astype(object).fillna("")
     for c in FLOAT:
         df[c] = pd.to_numeric(df[c], errors="coerce").astype("float64")
     df["success"] = df["success"].astype(bool)

@@ -13,6 +13,8 @@ import json
 from dataclasses import dataclass, field, replace
 
 from ft_sitl.autopilot.params import DEFAULT_GAINS, GAIN_MODES, ParamError, ParamSet
+from ft_sitl.missions.perception import SCHEMA as PERCEPTION_SCHEMA
+from ft_sitl.missions.perception import Perception
 from ft_sitl.navigation.base import Limits
 from ft_sitl.physics.actuators import SCHEMA as ACTUATOR_SCHEMA
 from ft_sitl.physics.actuators import Actuators
@@ -152,6 +154,9 @@ class TrialSpec:
     #: imperfect actuators (ft_sitl.physics.actuators settings; None: as built), kept as
     #: the settings that differ from the defaults
     actuators: dict | None = None
+    #: what the navigator perceives, made imperfect (missions.perception settings: latency,
+    #: state noise, dropped frames; None: ideal), the settings that differ from the defaults
+    perception: dict | None = None
 
     def __post_init__(self):
         for name in ("algorithm", "platform", "family"):
@@ -172,6 +177,7 @@ class TrialSpec:
         object.__setattr__(self, "wind", wind_settings(self.wind))
         object.__setattr__(self, "params", px4_params(self.params))
         object.__setattr__(self, "actuators", actuator_settings(self.actuators))
+        object.__setattr__(self, "perception", perception_settings(self.perception))
         if self.scenario_file is None:
             try:
                 fam = describe_family(self.family)
@@ -216,6 +222,8 @@ class TrialSpec:
             d["params"] = self.params
         if self.actuators is not None:  # (likewise: nominal actuators)
             d["actuators"] = self.actuators
+        if self.perception is not None:  # (likewise: ideal perception)
+            d["perception"] = self.perception
         return d
 
     @classmethod
@@ -273,6 +281,12 @@ def actuator_settings(values, owner: str = "actuators") -> dict | None:
     return _non_default(values, owner, ACTUATOR_SCHEMA, Actuators, "actuator settings")
 
 
+def perception_settings(values, owner: str = "perception") -> dict | None:
+    """A trial's perception as its canonical settings (those that differ from the
+    defaults); None for ideal perception. TrialSpecError naming ``owner`` and the key."""
+    return _non_default(values, owner, PERCEPTION_SCHEMA, Perception, "perception settings")
+
+
 def wind_settings(values, owner: str = "wind") -> dict | None:
     """A trial's wind as its canonical settings: those that differ from the defaults, in
     declaration order; None for calm air (no settings, or only defaults). TrialSpecError
@@ -316,6 +330,12 @@ def wind_seed(spec: TrialSpec) -> int:
 def actuator_seed(spec: TrialSpec) -> int:
     """The seed of a trial's actuator command noise (stream 3)."""
     return _stream_seed(spec, 3)
+
+
+def perception_rng(spec: TrialSpec):
+    """The random stream of a trial's perception noise and dropouts (stream 4)."""
+    import numpy as np  # (kept off this module's import path: specs are built everywhere)
+    return np.random.default_rng(np.random.SeedSequence([spec.seed, spec.trial, 4]))
 
 
 def _stream_seed(spec: TrialSpec, stream: int) -> int:

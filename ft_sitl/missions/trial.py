@@ -31,6 +31,7 @@ import numpy as np
 
 from ft_sitl.autopilot.commander import MAIN_OFFBOARD
 from ft_sitl.autopilot.setpoints import Setpoint, offboard_problem
+from ft_sitl.missions.perception import Perception
 from ft_sitl.missions.protocol import (
     STABLE_POS_M,
     TICK_S,
@@ -44,7 +45,13 @@ from ft_sitl.missions.protocol import (
 )
 from ft_sitl.missions.resources import RESOURCES
 from ft_sitl.missions.results import Outcome
-from ft_sitl.missions.spec import PROTOCOLS, TrialSpec, TrialSpecError, platform_for
+from ft_sitl.missions.spec import (
+    PROTOCOLS,
+    TrialSpec,
+    TrialSpecError,
+    perception_rng,
+    platform_for,
+)
 from ft_sitl.missions.watchdog import TRIAL_WALL_BUDGET_S, WallBudgetExceeded, WallWatchdog
 from ft_sitl.navigation.base import GiveUp, Observation
 from ft_sitl.navigation.registry import create
@@ -224,6 +231,8 @@ def _navigate(nav, fleet, sc, platform, spec: TrialSpec, ref: TrialReferee,
     period_us = _period_us(nav, fleet.sim.dt_us)
     next_nav_us = t_nav0_us
     eyes.start(period_us, floor=False)
+    seen = Perception(spec.perception)
+    seen.start(perception_rng(spec))
     judge = ref.judge
     tick_us = round(TICK_S * 1e6)
     while True:
@@ -232,7 +241,14 @@ def _navigate(nav, fleet, sc, platform, spec: TrialSpec, ref: TrialReferee,
         if now >= next_nav_us:
             s = judge.state_at(now)
             depth = eyes.due(fleet, t_nav_us)
-            sp = _ask(nav, _observation(fleet, t_nav_us, s, depth), m)
+            obs = _observation(fleet, t_nav_us, s, depth)
+            if spec.perception is not None:
+                (p, v, yaw, att, rates), depth = seen.pass_through(
+                    t_nav_us, (obs.position, obs.velocity, obs.yaw, obs.attitude,
+                               obs.angular_velocity), depth)
+                obs = Observation(time_s=obs.time_s, position=p, velocity=v, yaw=yaw,
+                                  attitude=att, angular_velocity=rates, depth=depth)
+            sp = _ask(nav, obs, m)
             fleet.offboard_setpoint(0, sp)
             if cmd.main_mode != MAIN_OFFBOARD:  # PX4: a setpoint first, then the mode
                 res = cmd.set_mode(MAIN_OFFBOARD)

@@ -54,13 +54,17 @@ from ft_sitl.missions.protocol import (
 )
 from ft_sitl.missions.resources import RESOURCES
 from ft_sitl.missions.results import Outcome
-from ft_sitl.missions.spec import PROTOCOLS, TrialSpec, platform_for
+from ft_sitl.missions.spec import PROTOCOLS, TrialSpec, TrialSpecError, platform_for
 from ft_sitl.navigation.common import camera_config
 from ft_sitl.navigation.registry import create
 from ft_sitl.wire.navigate import ClientResult, WireTask
 from ft_sitl.wire.sitl_bus import SitlBus
 
 COMMAND = "command"  # the pseudo-navigator: a user's program
+#: why a trial with perception settings does not fly over MAVLink
+PERCEPTION_WIRE = ("perception: latency, state noise and dropped frames are applied by the "
+                   "in-process driver; over MAVLink the navigator runs in its own process "
+                   "with the transport's own timing (fly this campaign in-process)")
 INSTANCE_BASE = 20
 INSTANCE_SLOTS = 40
 ARM_TIMEOUT_S = 90.0
@@ -184,6 +188,8 @@ def run_trial_wire(spec: TrialSpec, *, speed_factor: float = 2.0, mqtt: str | No
                    bus_factory=None) -> TrialOutcome:
     """Fly one trial with the navigator in another process (module docstring)."""
 
+    if spec.perception is not None:
+        raise TrialSpecError(PERCEPTION_WIRE)
     wall0 = time.perf_counter()
     sc, platform = RESOURCES.scenario(spec), platform_for(spec)
     guard, fleet = trial_vehicle(spec, sc, platform)

@@ -5,10 +5,12 @@ against the wind; bad values are named by file, axis entry, key and range."""
 
 import json
 
+import numpy as np
 import pytest
 
-from ft_sitl.missions.campaign import run_campaign
+from ft_sitl.missions.campaign import Transport, run_campaign
 from ft_sitl.missions.campaign_file import CampaignError, load_campaign
+from ft_sitl.missions.perception import Perception
 from ft_sitl.missions.report import write_report
 from ft_sitl.missions.results import to_frame
 from ft_sitl.missions.spec import TrialSpec
@@ -202,3 +204,83 @@ def test_the_gains_preset_flies_both_gain_modes_across_the_catalog():
     for s in specs:  # each trial in both modes, with one seed
         pairs.setdefault((s.label, s.platform, s.family, s.trial), set()).add((s.gains, s.seed))
     assert all(len(v) == 2 and len({seed for _, seed in v}) == 1 for v in pairs.values())
+
+
+# --- the perception axis ------------------------------------------------------------------------
+def test_latency_delays_what_the_navigator_sees_by_whole_steps():
+    p = Perception({"latency_s": 0.1})
+    p.start(np.random.default_rng(0))
+    seen = []
+    for k in range(8):  # a navigator stepping every 40 ms; frames at 0, 80, 160 ms
+        t_us = 40_000 * k
+        sample = (np.array([k, 0.0, 0.0]), np.zeros(3), 0.0, np.array([1.0, 0, 0, 0]),
+                  np.zeros(3))
+        (pos, *_), frame = p.pass_through(t_us, sample, f"frame@{t_us}" if k % 2 == 0 else None)
+        seen.append((int(pos[0]), frame))
+    # 100 ms late, served at the first step at or after: measured at 40 ms (k = 1), it is
+    # released at 140 ms and shows at the 160 ms step; before any release, the first one
+    assert seen == [(0, None), (0, None), (0, None), (0, "frame@0"), (1, None),
+                    (2, "frame@80000"), (3, None), (4, "frame@160000")]
+
+
+def test_noise_and_dropouts_are_seeded_and_ideal_perception_changes_nothing():
+    def run(values, seed):
+        p = Perception(values)
+        p.start(np.random.default_rng(seed))
+        sample = (np.zeros(3), np.zeros(3), 0.0, np.array([1.0, 0, 0, 0]), np.zeros(3))
+        out = [p.pass_through(k * 20_000, sample, "f") for k in range(2000)]
+        return np.array([o[0][0] for o in out]), [o[1] for o in out]
+    pos, frames = run({"position_noise_m": 0.3, "frame_dropout": 0.25}, 1)
+    assert pos.std(axis=0) == pytest.approx([0.3] * 3, rel=0.1)
+    assert frames.count(None) / len(frames) == pytest.approx(0.25, abs=0.04)
+    again, _ = run({"position_noise_m": 0.3, "frame_dropout": 0.25}, 1)
+    assert np.array_equal(pos, again)
+    ideal, kept = run(None, 1)
+    assert not ideal.any() and kept.count(None) == 0 and Perception().ideal
+
+
+PERCEIVING = """\
+name = "perceiving"
+algorithms = ["ego"]
+platforms = ["0.98kg-EGO Planner DIY"]
+scenarios = [{file = "yard.yaml"}]
+trials = 1
+perception = [{}, {latency_s = 0.3, position_noise_m = 0.2}]
+[limits]
+timeout_s = 12.0
+"""
+
+
+def test_perception_is_an_axis_that_reruns_and_is_refused_over_mavlink(yard, tmp_path,
+                                                                       cli_env):
+    c = load_campaign(campaign_file(yard.parent, "perceiving.toml", PERCEIVING))
+    specs = c.trial_specs()
+    assert [s.perception for s in specs] == [None, {"latency_s": 0.3,
+                                                    "position_noise_m": 0.2}]
+    assert "perception" not in specs[0].to_dict()
+    summary = run_campaign(c, tmp_path / "out", progress=False)
+    assert (summary.ran, summary.errors) == (2, [])
+    rows = {r["perception"]: r for r in read_jsonl(tmp_path / "out" / "trials.jsonl")}
+    late = rows['{"latency_s":0.3,"position_noise_m":0.2}']
+    assert late["path_length_m"] != rows[""]["path_length_m"]  # it flew differently
+    page = write_report(to_frame(list(rows.values())), tmp_path / "rep", campaign_spec={},
+                        meta={})["report.html"].read_text()
+    assert 'alt="success_vs_latency"' in page and 'alt="success_vs_wind"' not in page
+    proc = run_exe("trial", "rerun", tmp_path / "out", late["trial_id"], env=cli_env)
+    assert proc.returncode == 0 and "identical" in proc.stdout, proc.stdout + proc.stderr
+    with pytest.raises(CampaignError, match="^--transport mavlink: perception: latency"):
+        run_campaign(c, tmp_path / "wire", progress=False,
+                     transport=Transport("mavlink"))
+
+
+@pytest.mark.parametrize("text,message", [
+    ("perception = {latency_s = 2}", "perception: latency_s: must be a number 0..1 (s), got 2"),
+    ("perception = [{delay = 0.1}]", "perception[0] has no parameter 'delay'"),
+    ("perception = [{}, {frame_dropout = 1.5}]", "perception[1]: frame_dropout: must be a "
+                                                 "number 0..1"),
+])
+def test_bad_perception_axes_are_named(tmp_path, text, message):
+    path = campaign_file(tmp_path, "bad.toml", f'algorithms = ["straight"]\n{text}\n')
+    with pytest.raises(CampaignError) as exc:
+        load_campaign(path)
+    assert str(exc.value).startswith(f"{path}: {message}"), str(exc.value)
