@@ -57,13 +57,16 @@ def cmd_campaign_check(args) -> int:
                           for s in c.scenarios],
             "trials_per_combination": c.trials, "limits": c.limits.as_dict(),
             "wind": [w or {} for w in c.winds], "gains": c.modes(),
-            "params": [p or {} for p in c.param_sets], "notes": list(c.notes)}
+            "params": [p or {} for p in c.param_sets],
+            "actuators": [a or {} for a in c.actuator_sets],
+            "perception": [p or {} for p in c.perceptions], "notes": list(c.notes)}
     if args.json:
         print(json.dumps(info, indent=2))
         return 0
     axes = "".join(f" x {n} {what}" for n, what in (
         (len(c.winds), "winds"), (len(c.modes()), "gain modes"),
-        (len(c.param_sets), "parameter sets")) if n > 1)
+        (len(c.param_sets), "parameter sets"), (len(c.actuator_sets), "actuator settings"),
+        (len(c.perceptions), "perception settings")) if n > 1)
     print(f"campaign {c.name!r}: {len(specs)} trials = {len(c.algorithms)} algorithms x "
           f"{len(c.platforms)} platforms x {len(c.scenarios)} scenario families x "
           f"{c.trials} trials{axes}")
@@ -76,10 +79,13 @@ def cmd_campaign_check(args) -> int:
             ", ".join(f"{k} {v}" for k, v in w.items()) if w else "calm" for w in c.winds))
     if len(c.modes()) > 1:
         print(f"  gains:      {', '.join(c.modes())}")
-    if c.param_sets != [None]:
-        print("  params:     " + "; ".join(
-            ", ".join(f"{k} {v:g}" for k, v in p.items()) if p else "defaults"
-            for p in c.param_sets))
+    for label, values, none in (("params", c.param_sets, "defaults"),
+                                ("actuators", c.actuator_sets, "as built"),
+                                ("perception", c.perceptions, "ideal")):
+        if values != [None]:
+            print(f"  {label + ':':11s} " + "; ".join(
+                ", ".join(f"{k} {v:g}" if isinstance(v, float) else f"{k} {v}"
+                          for k, v in p.items()) if p else none for p in values))
     lim = c.limits
     print(f"  limits: {lim.max_speed_m_s:g} m/s, {lim.timeout_s:g} s, goal sphere "
           f"{lim.goal_radius_m:g} m held {lim.hold_s:g} s")

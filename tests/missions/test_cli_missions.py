@@ -77,7 +77,7 @@ def test_check_prints_the_matrix(capsys, campaign, yard):
         "trials_per_combination": 2,
         "limits": {"max_speed_m_s": 4.0, "timeout_s": 90.0, "goal_radius_m": 2.0,
                    "hold_s": 3.0}, "wind": [{}], "gains": ["bandwidth"], "params": [{}],
-        "notes": []}
+        "actuators": [{}], "perception": [{}], "notes": []}
 
 
 def test_check_a_preset(capsys):
