@@ -277,6 +277,10 @@ def _fig_success_vs_axis(t: _Tables, axis: str):
     turbulence), pooled over everything else; Wilson intervals."""
     x = axis_values(t.df)[axis]
     df = t.df.assign(_x=x, _kind=t.df["turbulence"].astype(str) if axis == "wind" else "")
+    # one line per turbulence intensity only where one wind speed was flown with several
+    # (calm air has none: a calm point and turbulent winds are one line otherwise)
+    if df.groupby(["algorithm", "_x"], observed=True)["_kind"].nunique().max() <= 1:
+        df = df.assign(_kind="")
     g = (df.groupby(["algorithm", "_kind", "_x"], observed=True)["success"]
          .agg(["sum", "count"]).reset_index())
     kinds = sorted(g["_kind"].unique())
@@ -299,8 +303,9 @@ def _fig_success_vs_axis(t: _Tables, axis: str):
     ax.set_ylabel("success rate")
     ax.set_ylim(-0.02, 1.05)
     ax.grid(alpha=0.3)
-    fig.legend(loc="outside upper center", ncols=min(len(t.algorithms), 5), frameon=False,
-               fontsize=7)
+    handles, labels = ax.get_legend_handles_labels()
+    fig.legend(handles, labels, loc="outside upper center",
+               ncols=min(len(labels), 5 if len(kinds) == 1 else 3), frameon=False, fontsize=7)
     return fig
 
 
