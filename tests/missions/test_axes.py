@@ -83,23 +83,6 @@ def test_every_trial_flies_in_every_wind_with_one_seed(yard, tmp_path, cli_env):
     assert "success_vs_wind" not in paths["report.html"].read_text()
 
 
-@pytest.mark.parametrize("wind,message", [
-    ("[{speed_m_s = -3}]", "wind[0]: speed_m_s: must be a number 0..40 (m/s), got -3"),
-    ("[{}, {speed = 3}]", "wind[1] has no parameter 'speed'; did you mean 'speed_m_s'?"),
-    ('{turbulence = "strong"}', "wind: turbulence: must be 'none' or 'light' or 'moderate' "
-                                "or 'severe' or 'standard', got 'strong'"),
-    ("5", "wind: must be a table of wind settings or a non-empty list of them, got 5"),
-    ("[]", "wind: must be a table of wind settings or a non-empty list of them"),
-    ("[{speed_m_s = 3}, {speed_m_s = 3.0}]", "wind[1]: the same wind settings twice"),
-    ("[{gust_duration_s = 0}]", "wind[0]: gust_duration_s: must be a number 0.05..120 (s)"),
-])
-def test_bad_winds_are_named_by_file_and_entry(tmp_path, wind, message):
-    path = campaign_file(tmp_path, "bad.toml", f'algorithms = ["straight"]\nwind = {wind}\n')
-    with pytest.raises(CampaignError) as exc:
-        load_campaign(path)
-    assert str(exc.value).startswith(f"{path}: {message}")
-
-
 # --- the controller axes: gain modes and PX4 parameters -------------------------------------------
 GAINS = """\
 name = "gains"
@@ -134,25 +117,6 @@ def test_gain_modes_and_px4_parameters_are_axes(yard, tmp_path):
     assert len(set(paths.values())) == 4, paths
 
 
-@pytest.mark.parametrize("text,message", [
-    ('params = {MPC_XY_Q = 1}', "params: unknown parameter 'MPC_XY_Q'; did you mean 'MPC_XY_P'"),
-    ('params = {MPC_XY_P = 9}', "params: MPC_XY_P: 9 1/s is outside [0, 2] 1/s"),
-    ('params = [{}, {MPC_XY_VEL_MAX = 2}]', "params[1]: MPC_XY_VEL_MAX is set by the trial "
-                                            "protocol: use limits.max_speed_m_s instead"),
-    ('params = [{FT_GAIN_MODE = 1}]', "params[0]: FT_GAIN_MODE is set by the trial protocol: "
-                                      "use gains instead"),
-    ('params = [{MPC_XY_P = 1}, {MPC_XY_P = 1.0}]', "params[1]: the same PX4 parameters twice"),
-    ('gains = ["px4", "px4"]', "gains: must be one of 'bandwidth', 'px4'"),
-    ('gains = ["px4", "PX4"]', "gains: must be one of 'bandwidth', 'px4'"),
-    ('gains = []', "gains: must be one of"),
-])
-def test_bad_controller_axes_are_named(tmp_path, text, message):
-    path = campaign_file(tmp_path, "bad.toml", f'algorithms = ["straight"]\n{text}\n')
-    with pytest.raises(CampaignError) as exc:
-        load_campaign(path)
-    assert str(exc.value).startswith(f"{path}: {message}"), str(exc.value)
-
-
 # --- the actuator axis --------------------------------------------------------------------------
 ACTUATORS = """\
 name = "actuators"
@@ -177,21 +141,6 @@ def test_actuators_are_an_axis_and_a_failed_motor_ends_the_flight(yard, tmp_path
     assert nominal["reason"] != failed["reason"] or \
         failed["saturation_fraction"] > nominal["saturation_fraction"]
     assert failed["saturation_fraction"] > 0.0
-
-
-@pytest.mark.parametrize("text,message", [
-    ("actuators = {fail_motor = 7}", "actuators: fail_motor: 7 must be within 0..4 (the "
-                                     "fewest motors of the campaign's platforms)"),
-    ("actuators = [{}, {efficiency = 0}]", "actuators[1]: efficiency: must be a number "
-                                           "0.05..1"),
-    ("actuators = [{lag = 1}]", "actuators[0] has no parameter 'lag'; did you mean 'lag_s'?"),
-])
-def test_bad_actuator_axes_are_named(tmp_path, text, message):
-    path = campaign_file(tmp_path, "bad.toml",
-                         f'algorithms = ["straight"]\nplatforms = ["1.00kg-SunnySky"]\n{text}\n')
-    with pytest.raises(CampaignError) as exc:
-        load_campaign(path)
-    assert str(exc.value).startswith(f"{path}: {message}"), str(exc.value)
 
 
 def test_the_gains_preset_flies_both_gain_modes_across_the_catalog():
@@ -273,14 +222,39 @@ def test_perception_is_an_axis_that_reruns_and_is_refused_over_mavlink(yard, tmp
                      transport=Transport("mavlink"))
 
 
+# --- bad axis values ----------------------------------------------------------------------------
 @pytest.mark.parametrize("text,message", [
+    ("wind = [{speed_m_s = -3}]", "wind[0]: speed_m_s: must be a number 0..40 (m/s), got -3"),
+    ("wind = [{}, {speed = 3}]", "wind[1] has no parameter 'speed'; did you mean 'speed_m_s'?"),
+    ('wind = {turbulence = "strong"}', "wind: turbulence: must be 'none' or 'light' or 'moderate' "
+                                "or 'severe' or 'standard', got 'strong'"),
+    ("wind = 5", "wind: must be a table of wind settings or a non-empty list of them, got 5"),
+    ("wind = []", "wind: must be a table of wind settings or a non-empty list of them"),
+    ("wind = [{speed_m_s = 3}, {speed_m_s = 3.0}]", "wind[1]: the same wind settings twice"),
+    ("wind = [{gust_duration_s = 0}]", "wind[0]: gust_duration_s: must be a number 0.05..120 (s)"),
+    ('params = {MPC_XY_Q = 1}', "params: unknown parameter 'MPC_XY_Q'; did you mean 'MPC_XY_P'"),
+    ('params = {MPC_XY_P = 9}', "params: MPC_XY_P: 9 1/s is outside [0, 2] 1/s"),
+    ('params = [{}, {MPC_XY_VEL_MAX = 2}]', "params[1]: MPC_XY_VEL_MAX is set by the trial "
+                                            "protocol: use limits.max_speed_m_s instead"),
+    ('params = [{FT_GAIN_MODE = 1}]', "params[0]: FT_GAIN_MODE is set by the trial protocol: "
+                                      "use gains instead"),
+    ('params = [{MPC_XY_P = 1}, {MPC_XY_P = 1.0}]', "params[1]: the same PX4 parameters twice"),
+    ('gains = ["px4", "px4"]', "gains: must be one of 'bandwidth', 'px4'"),
+    ('gains = ["px4", "PX4"]', "gains: must be one of 'bandwidth', 'px4'"),
+    ('gains = []', "gains: must be one of"),
+    ("actuators = {fail_motor = 7}", "actuators: fail_motor: 7 must be within 0..4 (the "
+                                     "fewest motors of the campaign's platforms)"),
+    ("actuators = [{}, {efficiency = 0}]", "actuators[1]: efficiency: must be a number "
+                                           "0.05..1"),
+    ("actuators = [{lag = 1}]", "actuators[0] has no parameter 'lag'; did you mean 'lag_s'?"),
     ("perception = {latency_s = 2}", "perception: latency_s: must be a number 0..1 (s), got 2"),
     ("perception = [{delay = 0.1}]", "perception[0] has no parameter 'delay'"),
     ("perception = [{}, {frame_dropout = 1.5}]", "perception[1]: frame_dropout: must be a "
                                                  "number 0..1"),
 ])
-def test_bad_perception_axes_are_named(tmp_path, text, message):
-    path = campaign_file(tmp_path, "bad.toml", f'algorithms = ["straight"]\n{text}\n')
+def test_bad_axis_values_are_named_by_file_entry_key_and_range(tmp_path, text, message):
+    body = f'algorithms = ["straight"]\nplatforms = ["1.00kg-SunnySky"]\n{text}\n'
+    path = campaign_file(tmp_path, "bad.toml", body)
     with pytest.raises(CampaignError) as exc:
         load_campaign(path)
     assert str(exc.value).startswith(f"{path}: {message}"), str(exc.value)
