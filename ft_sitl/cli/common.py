@@ -11,7 +11,7 @@ from pathlib import Path
 from ft_sitl.physics.catalog import PlatformRegistry
 
 __all__ = ["EXIT_BAD_INPUT", "CliError", "check_out_dir", "fmt_point", "option_value",
-           "platform_registry", "wind_option"]
+           "platform_registry", "wind_option", "estimator_option", "settings_option"]
 
 EXIT_BAD_INPUT = 2
 
@@ -57,28 +57,47 @@ def print_schema_rows(rows: list[dict[str, str]]) -> None:
 
 
 def wind_option(text: str | None) -> dict | None:
-    """``--wind KEY=VALUE[,KEY=VALUE...]`` as wind settings (ft_sitl.physics.wind; numbers
-    where they parse as numbers), checked: a CliError names the option, the key and the
-    allowed range. None when not given."""
+    """``--wind KEY=VALUE[,KEY=VALUE...]`` as wind settings (ft_sitl.physics.wind),
+    checked (:func:`settings_option`). None when not given."""
     if text is None:
         return None
-    # (the wind model only for commands given --wind)
-    from ft_sitl.physics.wind import Wind
-    from ft_sitl.schema import SchemaError
+    from ft_sitl.physics.wind import Wind  # (the model only for commands given --wind)
+    return settings_option("--wind", text, Wind,
+                           "speed_m_s=6,from_deg=270,turbulence=moderate")
+
+
+def estimator_option(text: str | None) -> dict | None:
+    """``--estimator KEY=VALUE[,...]`` as estimator settings (ft_sitl.autopilot.estimator),
+    checked (:func:`settings_option`). None when not given."""
+    if text is None:
+        return None
+    from ft_sitl.autopilot.estimator import Estimator  # (likewise: the model when given)
+    return settings_option("--estimator", text, Estimator,
+                           "position_noise_m=0.1,position_bias_m=0.5:0:0")
+
+
+def settings_option(option: str, text: str, model, example: str) -> dict:
+    """``KEY=VALUE[,KEY=VALUE...]`` as a model's settings: numbers where they parse as
+    numbers, ``A:B:C`` a vector of numbers, else text; checked by ``model(values,
+    option)``: a CliError names the option, the key and the allowed range."""
+    from ft_sitl.schema import SchemaError  # (as the models: only when an option is given)
 
     values: dict = {}
     for item in (s.strip() for s in text.split(",")):
         key, eq, raw = item.partition("=")
         if not eq or not key.strip() or not raw.strip():
-            raise CliError(f"--wind: {item!r} is not KEY=VALUE (e.g. --wind "
-                           f"speed_m_s=6,from_deg=270,turbulence=moderate)")
+            raise CliError(f"{option}: {item!r} is not KEY=VALUE (e.g. {option} {example})")
+        value: object = raw.strip()
         try:
-            value: object = float(raw)
+            if ":" in raw:
+                value = [float(x) for x in raw.split(":")]
+            else:
+                value = float(raw)
         except ValueError:
-            value = raw.strip()
+            pass
         values[key.strip()] = value
     try:
-        Wind(values, "--wind")
+        model(values, option)
     except SchemaError as exc:
         raise CliError(str(exc)) from None
     return values

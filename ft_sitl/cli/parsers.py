@@ -109,7 +109,13 @@ def build_parser() -> argparse.ArgumentParser:
                          "turbulence none|light|moderate|severe|standard, gust_m_s, ...; "
                          "docs/platforms.md, Wind)")
     sitl.add_argument("--wind-seed", type=int, default=0, metavar="N",
-                      help="turbulence seed (vehicle i uses N + i; default 0)")
+                      help="turbulence and estimator-noise seed (vehicle i uses N + i; "
+                           "default 0)")
+    sitl.add_argument("--estimator", metavar="SETTINGS",
+                      help="the flight controller flies on (and reports) an imperfect "
+                           "estimate: KEY=VALUE,... (position_noise_m, position_bias_m=E:N:U, "
+                           "position_latency_s, velocity_*, attitude_*_deg, rate_*_deg_s, "
+                           "noise_correlation_s; docs/control.md, Estimator)")
     sitl.set_defaults(handler="sitl:cmd_sitl")
 
     par = sub.add_parser("params", help="flight-controller parameters")

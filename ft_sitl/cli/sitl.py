@@ -12,7 +12,13 @@ import sys
 from ft_sitl import __version__
 from ft_sitl.bus.broker import EmbeddedBroker
 from ft_sitl.bus.options import TlsOptions, parse_broker_url
-from ft_sitl.cli.common import CliError, option_value, platform_registry, wind_option
+from ft_sitl.cli.common import (
+    CliError,
+    estimator_option,
+    option_value,
+    platform_registry,
+    wind_option,
+)
 from ft_sitl.frames import PX4_SITL_HOME, GeoReference, enu_to_ned, yaw_enu_to_ned
 from ft_sitl.mavlink.server import SitlServer
 from ft_sitl.scenarios.io import scenario_from_spec
@@ -97,8 +103,10 @@ def cmd_sitl(args) -> int:
     wind = wind_option(args.wind)
     if args.wind_seed < 0:
         raise CliError(f"--wind-seed: {args.wind_seed} must be >= 0")
+    estimator = estimator_option(args.estimator)
     for i in range(args.instances):
         fleet.sim.set_wind(i, wind, seed=args.wind_seed + i)
+        fleet.sim.set_estimator(i, estimator, seed=args.wind_seed + i)
     try:
         server = SitlServer(fleet, geo, bind=args.bind, speed_factor=args.speed_factor,
                             tlog=args.tlog, signing_key=args.signing_key,
@@ -126,6 +134,9 @@ def cmd_sitl(args) -> int:
         if wind is not None:
             print("wind: " + ", ".join(f"{k} {v:g}" if isinstance(v, float) else f"{k} {v}"
                                        for k, v in wind.items()), flush=True)
+        if estimator is not None:
+            print("estimator: " + ", ".join(f"{k} {v}" for k, v in estimator.items()),
+                  flush=True)
         for u in urls:
             print(f"  vehicle sysid {u['sysid']}: MAVSDK {u['mavsdk']}   pymavlink "
                   f"{u['pymavlink']}   GCS {u['gcs']}", flush=True)

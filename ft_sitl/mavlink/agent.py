@@ -346,7 +346,7 @@ class VehicleAgent:
         snap = self._snap
         if snap is None or snap.time_us != self.fleet.time_us:
             s = self._state()
-            x = self.sim.x[self.i].copy()
+            x = self.sim.estimated(self.i).copy()  # PX4 reports its estimate
             snap = _Snapshot(
                 time_us=self.fleet.time_us, state=s, x=x,
                 q_ned=frames.q_enu_flu_to_ned_frd(x[d.X_QUAT:d.X_QUAT + 4]),

@@ -64,6 +64,7 @@ from ft_sitl.missions.spec import (
     TrialSpec,
     TrialSpecError,
     actuator_settings,
+    estimator_settings,
     perception_settings,
     px4_params,
     wind_settings,
@@ -79,7 +80,8 @@ from ft_sitl.scenarios.scenario import ScenarioError
 PRESETS = ("quick", "paper", "gains")
 TOP_KEYS = ("name", "trials", "seed", "scenario_seed", "platforms", "platform_files",
             "scenarios", "indices", "physics_hz", "protocol", "gains", "algorithms", "limits",
-            "weights", "description", "wind", "params", "actuators", "perception")
+            "weights", "description", "wind", "params", "actuators", "perception",
+            "estimator")
 LIMIT_KEYS = ("max_speed_m_s", "timeout_s", "goal_radius_m", "hold_s", "max_acc_m_s2")
 WEIGHT_KEYS = ("scenarios", "platforms", "beta")
 
@@ -132,6 +134,8 @@ class Campaign:
     actuator_sets: list = field(default_factory=lambda: [None])
     #: the perception axis: every trial flies with each (None: ideal perception)
     perceptions: list = field(default_factory=lambda: [None])
+    #: the estimator axis: every trial flies with each (None: the truth as estimate)
+    estimators: list = field(default_factory=lambda: [None])
 
     def spec_dict(self) -> dict:
         """The campaign as data: what resuming compares, what reports print."""
@@ -159,6 +163,8 @@ class Campaign:
                if self.actuator_sets != [None] else {}),
             **({"perception": [p or {} for p in self.perceptions]}
                if self.perceptions != [None] else {}),
+            **({"estimator": [e or {} for e in self.estimators]}
+               if self.estimators != [None] else {}),
         }
 
     def modes(self) -> list[str]:
@@ -185,10 +191,10 @@ class Campaign:
                             trial=t, seed=seed, limits=self.limits, campaign=self.name,
                             physics_hz=self.physics_hz, protocol=self.protocol,
                             gains=g, scenario_version=sc.version, wind=w, params=ps,
-                            actuators=ac, perception=pe)
+                            actuators=ac, perception=pe, estimator=es)
                             for g in self.modes() for ps in self.param_sets
                             for ac in self.actuator_sets for pe in self.perceptions
-                            for w in self.winds)
+                            for es in self.estimators for w in self.winds)
         out.sort(key=lambda s: (s.scenario_file or "", s.family, s.scenario_index))
         return out
 
@@ -248,9 +254,11 @@ def parse_campaign(doc: dict, path: Path | None = None) -> Campaign:
     actuator_sets = _table_axis(t, "actuators", "actuator settings", actuator_settings)
     _check_motors(t, actuator_sets, platforms)
     perceptions = _table_axis(t, "perception", "perception settings", perception_settings)
+    estimators = _table_axis(t, "estimator", "estimator settings", estimator_settings)
     notes: list[str] = []
     return Campaign(winds=winds, gain_modes=gain_modes, param_sets=param_sets,
                     actuator_sets=actuator_sets, perceptions=perceptions,
+                    estimators=estimators,
         name=name, algorithms=parse_algorithms(where, doc["algorithms"], notes),
         platforms=platforms, scenarios=scenarios, trials=trials, seed=seed,
         scenario_seed=scenario_seed, limits=limits, weights=weights, physics_hz=physics_hz,

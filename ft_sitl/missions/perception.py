@@ -10,18 +10,26 @@ in-process driver hands the navigator during navigation, not the vehicle:
   ``latency_s`` of navigation hand over the state at its start);
 - **state noise:** Gaussian noise on the position (``position_noise_m``, each axis) and
   the velocity (``velocity_noise_m_s``) the navigator is told;
-- **dropped frames:** each depth frame is lost with probability ``frame_dropout``.
+- **dropped frames:** each depth frame is lost with probability ``frame_dropout``;
+- **depth-image noise:** the navigator's depth camera gets the stereo noise model of
+  :mod:`ft_sitl.scenarios.camera` (Gaussian on z-depth, ``sigma = depth_noise_k * z**2``;
+  ``stereo_noise_k`` gives k for a rig, ~0.004 1/m for a D435 at 640 px) and a per-pixel
+  dropout ``depth_dropout``, in place of the camera's own settings. Unlike the rest, this
+  is the camera's: it holds for every frame, the approach's too (protocol 3 on).
 
 The noise and dropouts draw from the trial's own stream (seeded from its seed and
-repetition), so a trial reruns bit for bit. The approach phase is not affected (the
-navigator observes the hover as before), and neither is the flight controller, which
-flies on the true state. Over MAVLink the navigator runs in its own process with the
+repetition), so a trial reruns bit for bit. Apart from the depth-image noise, the
+approach phase is not affected (the navigator observes the hover as before), and the
+flight controller never is: its own estimate is the trial's ``estimator``
+(:mod:`ft_sitl.autopilot.estimator`), which is also what the navigator's state starts
+from before these settings act on it. Over MAVLink the navigator runs in its own process with the
 transport's own timing; perception settings are refused there.
 """
 
 from __future__ import annotations
 
 from collections import deque
+from dataclasses import replace
 
 import numpy as np
 
@@ -35,6 +43,10 @@ SCHEMA = Schema((
     Param("velocity_noise_m_s", 0.0, "m/s", (0.0, 5.0),
           doc="velocity noise, standard deviation per axis"),
     Param("frame_dropout", 0.0, "-", (0.0, 1.0), doc="probability a depth frame is lost"),
+    Param("depth_noise_k", 0.0, "1/m", (0.0, 0.1),
+          doc="depth-image noise: standard deviation k z^2 at depth z"),
+    Param("depth_dropout", 0.0, "-", (0.0, 0.99),
+          doc="probability a depth pixel has no value"),
 ))
 
 
@@ -48,6 +60,14 @@ class Perception:
     @property
     def ideal(self) -> bool:
         return all(v == 0.0 for v in self.values.values())
+
+    def camera_config(self, cfg):
+        """The navigator's camera configuration with this depth-image noise (``cfg``
+        itself when neither is set)."""
+        v = self.values
+        if v["depth_noise_k"] == 0.0 and v["depth_dropout"] == 0.0:
+            return cfg
+        return replace(cfg, noise_k=v["depth_noise_k"], dropout=v["depth_dropout"])
 
     def start(self, rng: np.random.Generator) -> None:
         """A new navigation: an empty pipeline, noise from ``rng``."""

@@ -51,6 +51,7 @@ from ft_sitl.missions.spec import (
     PROTOCOLS,
     TrialSpecError,
     actuator_seed,
+    estimator_seed,
     vehicle_half_span_m,
     wind_seed,
 )
@@ -111,6 +112,8 @@ def identity_row(spec, platform, scenario) -> dict:
         if spec.actuators else "",
         "perception": json.dumps(spec.perception, sort_keys=True, separators=(",", ":"))
         if spec.perception else "",
+        "estimator": json.dumps(spec.estimator, sort_keys=True, separators=(",", ":"))
+        if spec.estimator else "",
     }
 
 
@@ -234,13 +237,16 @@ class ApproachJudge:
             if not fleet.commanders[0].armed:
                 return False
             self.start(now)
+        # stable where the flight controller believes the start is (its estimate), upright
+        # as the vehicle truly is
         s = fleet.state(0)
         if not s.on_ground:
             if not np.all(np.isfinite(fleet.sim.x[0])):
                 raise TrialFailure(Outcome.LOSS_OF_CONTROL, "non-finite state")
-            if s.tilt > MAX_TILT_RAD:
+            tilt = fleet.true_state(0).tilt if fleet.sim.estimating(0) else s.tilt
+            if tilt > MAX_TILT_RAD:
                 raise TrialFailure(Outcome.LOSS_OF_CONTROL,
-                                   f"tilt {math.degrees(s.tilt):.0f} deg")
+                                   f"tilt {math.degrees(tilt):.0f} deg")
         err = float(np.linalg.norm(s.position - self.sc.start))
         if err < STABLE_POS_M and float(np.linalg.norm(s.velocity)) < STABLE_SPEED_M_S:
             # stable since the previous check: the interval up to this one counts
@@ -271,7 +277,7 @@ class NavigationJudge:
         self.traj = traj
         self.t_nav0_us = fleet.time_us
         self.t_sample_us = fleet.time_us
-        self._state = fleet.state(0)
+        self._state = fleet.true_state(0)
         self._state_us = fleet.time_us
         self.prev = self._state.position.copy()
         self.entered_us = None
@@ -287,11 +293,11 @@ class NavigationJudge:
         simulation has not moved since (it is used read-only here), else a fresh one."""
         if time_us == self._state_us:
             return self._state
-        return self.fleet.state(0)
+        return self.fleet.true_state(0)
 
     def after_step(self) -> bool:
         fleet, spec, m = self.fleet, self.spec, self.m
-        s = fleet.state(0)
+        s = fleet.true_state(0)
         self._state, self._state_us = s, fleet.time_us
         m.sample(self.guard, self.prev, s, (fleet.time_us - self.t_sample_us) * 1e-6)
         self.t_sample_us = fleet.time_us
@@ -492,4 +498,6 @@ def trial_vehicle(spec, scenario, platform, resources: TrialResources = RESOURCE
             fleet.sim.set_actuators(0, spec.actuators, seed=actuator_seed(spec))
         except SchemaError as exc:
             raise TrialSpecError(f"actuators: {exc}") from None
+    if spec.estimator is not None:  # the flight controller's estimate, from the start
+        fleet.sim.set_estimator(0, spec.estimator, seed=estimator_seed(spec))
     return guard, fleet

@@ -12,6 +12,8 @@ import hashlib
 import json
 from dataclasses import dataclass, field, replace
 
+from ft_sitl.autopilot.estimator import SCHEMA as ESTIMATOR_SCHEMA
+from ft_sitl.autopilot.estimator import Estimator
 from ft_sitl.autopilot.params import DEFAULT_GAINS, GAIN_MODES, ParamError, ParamSet
 from ft_sitl.missions.perception import SCHEMA as PERCEPTION_SCHEMA
 from ft_sitl.missions.perception import Perception
@@ -157,6 +159,9 @@ class TrialSpec:
     #: what the navigator perceives, made imperfect (missions.perception settings: latency,
     #: state noise, dropped frames; None: ideal), the settings that differ from the defaults
     perception: dict | None = None
+    #: the flight controller's estimate of the state, made imperfect (autopilot.estimator
+    #: settings: noise, bias, latency per group; None: the truth), the non-default settings
+    estimator: dict | None = None
 
     def __post_init__(self):
         for name in ("algorithm", "platform", "family"):
@@ -178,6 +183,7 @@ class TrialSpec:
         object.__setattr__(self, "params", px4_params(self.params))
         object.__setattr__(self, "actuators", actuator_settings(self.actuators))
         object.__setattr__(self, "perception", perception_settings(self.perception))
+        object.__setattr__(self, "estimator", estimator_settings(self.estimator))
         if self.scenario_file is None:
             try:
                 fam = describe_family(self.family)
@@ -224,6 +230,8 @@ class TrialSpec:
             d["actuators"] = self.actuators
         if self.perception is not None:  # (likewise: ideal perception)
             d["perception"] = self.perception
+        if self.estimator is not None:  # (likewise: the truth as estimate)
+            d["estimator"] = self.estimator
         return d
 
     @classmethod
@@ -269,9 +277,17 @@ def _non_default(values, owner: str, schema, model, what: str) -> dict | None:
     except SchemaError as exc:
         raise TrialSpecError(str(exc)) from None
     defaults = schema.defaults()
-    out = {k: (float(v) if isinstance(v, int) and not isinstance(v, bool)
-               and schema[k].kind == "float" else v)
-           for k, v in resolved.items() if v != defaults[k]}
+    out = {}
+    for k, v in resolved.items():
+        kind = schema[k].kind
+        if kind == "float" and isinstance(v, int) and not isinstance(v, bool):
+            v = float(v)
+        elif kind == "vector":  # (a list of floats, as JSON gives it back)
+            v = [float(x) for x in v]
+            if v == [float(x) for x in defaults[k]]:
+                continue
+        if v != defaults[k]:
+            out[k] = v
     return out or None
 
 
@@ -285,6 +301,12 @@ def perception_settings(values, owner: str = "perception") -> dict | None:
     """A trial's perception as its canonical settings (those that differ from the
     defaults); None for ideal perception. TrialSpecError naming ``owner`` and the key."""
     return _non_default(values, owner, PERCEPTION_SCHEMA, Perception, "perception settings")
+
+
+def estimator_settings(values, owner: str = "estimator") -> dict | None:
+    """A trial's flight-controller estimator as its canonical settings (those that differ
+    from the defaults); None for the truth. TrialSpecError naming ``owner`` and the key."""
+    return _non_default(values, owner, ESTIMATOR_SCHEMA, Estimator, "estimator settings")
 
 
 def wind_settings(values, owner: str = "wind") -> dict | None:
@@ -330,6 +352,11 @@ def wind_seed(spec: TrialSpec) -> int:
 def actuator_seed(spec: TrialSpec) -> int:
     """The seed of a trial's actuator command noise (stream 3)."""
     return _stream_seed(spec, 3)
+
+
+def estimator_seed(spec: TrialSpec) -> int:
+    """The seed of a trial's estimator noise (stream 5)."""
+    return _stream_seed(spec, 5)
 
 
 def perception_rng(spec: TrialSpec):

@@ -119,6 +119,8 @@ class _Eyes:
 
     def __init__(self, nav, sc, spec: TrialSpec):
         cfg = getattr(nav, "camera", None)
+        if cfg is not None and spec.perception is not None:
+            cfg = Perception(spec.perception).camera_config(cfg)
         self.camera = RESOURCES.camera(cfg, sc) if cfg is not None else None
         self.period_us = round(1e6 / cfg.rate_hz) if cfg is not None else 0
         fuse_hz = PROTOCOLS[spec.protocol].map_fusion_hz
@@ -178,10 +180,12 @@ class _Eyes:
 
 
 def _observation(fleet, t_us: int, s, depth) -> Observation:
-    """What the navigator is told at ``t_us`` (its clock) with state ``s``."""
+    """What the navigator is told at ``t_us`` (its clock) with state ``s``: the flight
+    controller's estimate (the truth without an estimator), as PX4 publishes it."""
+    x = fleet.sim.estimated(0)
     return Observation(time_s=t_us * 1e-6, position=s.position, velocity=s.velocity,
-                       yaw=s.yaw, attitude=fleet.sim.attitude(0),
-                       angular_velocity=fleet.sim.x[0, d.X_OMEGA:d.X_OMEGA + 3].copy(),
+                       yaw=s.yaw, attitude=x[d.X_QUAT:d.X_QUAT + 4].copy(),
+                       angular_velocity=x[d.X_OMEGA:d.X_OMEGA + 3].copy(),
                        depth=depth)
 
 
@@ -239,7 +243,8 @@ def _navigate(nav, fleet, sc, platform, spec: TrialSpec, ref: TrialReferee,
         now = fleet.time_us
         t_nav_us = now - t_nav0_us
         if now >= next_nav_us:
-            s = judge.state_at(now)
+            # (the judge's state is the truth: with an estimator, the estimate instead)
+            s = fleet.state(0) if fleet.sim.estimating(0) else judge.state_at(now)
             depth = eyes.due(fleet, t_nav_us)
             obs = _observation(fleet, t_nav_us, s, depth)
             if spec.perception is not None:

@@ -99,7 +99,16 @@ class Fleet:
         return self.sim.time_us
 
     def state(self, i: int) -> VehicleState:
-        x = self.sim.x[i]
+        """Vehicle i as its flight controller sees it: its estimate (the truth without an
+        estimator, :meth:`~ft_sitl.sim.lockstep.Simulation.set_estimator`), what the
+        commander and the MAVLink telemetry act on and report, as PX4's do with EKF2's."""
+        return self._state(self.sim.estimated(i), i)
+
+    def true_state(self, i: int) -> VehicleState:
+        """Vehicle i as it is (the plant's state): what judges and referees use."""
+        return self._state(self.sim.x[i], i)
+
+    def _state(self, x, i: int) -> VehicleState:
         # yaw and tilt as qto_euler()[2] and tilt_angle() compute them (the same operations,
         # bit for bit), in plain floats: two compiled calls cost more than the arithmetic
         w, qx, qy, qz = x[d.X_QUAT : d.X_QUAT + 4].tolist()

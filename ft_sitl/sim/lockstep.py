@@ -15,6 +15,15 @@ import numpy as np
 from numba import njit
 
 from ft_sitl.autopilot import cascade as c
+from ft_sitl.autopilot.estimator import (
+    E_N,
+    E_ON,
+    N_EST,
+    N_HIST,
+    Estimator,
+    estimate_step_one,
+    history_length,
+)
 from ft_sitl.autopilot.gains import build_gains, mixer
 from ft_sitl.autopilot.params import ParamSet
 from ft_sitl.autopilot.setpoints import Setpoint
@@ -52,13 +61,15 @@ from ft_sitl.sim.guard import (
 
 @njit(cache=True)
 def run_steps(n_steps, dt, x, sp, gn, a, cs, prm, alloc, env, status, w_cmd, rec, rec_every,
-              k_done, gd, grid, meta, wind, act, k0):
+              k_done, gd, grid, meta, wind, act, est, hist, xe, k0):
     """Advance every vehicle to step n_steps from step k_done[i]; record the state every
     rec_every steps. A vehicle whose guard row trips (see guard_step) stops after that step
     with its G_TRIP set, for the caller to resolve and resume. ``wind``: each vehicle's
     wind row (ft_sitl.physics.wind), advanced before the plant; ``act``: its actuator row
     (ft_sitl.physics.actuators: command noise, a failed motor), applied to the controller's
-    commands; ``k0``: the simulation's step count when this call started (their clock)."""
+    commands; ``est``: its estimator row (ft_sitl.autopilot.estimator), ``hist`` its ring
+    of past states and ``xe`` its estimate, which the controller then flies on; ``k0``:
+    the simulation's step count when this call started (their clock)."""
     for i in range(x.shape[0]):
         # per-vehicle rows sliced once, not every step
         xi, spi, gni, ai, csi, wi = x[i], sp[i], gn[i], a[i], cs[i], w_cmd[i]
@@ -67,13 +78,21 @@ def run_steps(n_steps, dt, x, sp, gn, a, cs, prm, alloc, env, status, w_cmd, rec
         windy = wdi[W_ON] != 0.0
         adi = act[i]
         imperfect = adi[A_ON] != 0.0
+        ei = est[i]
+        estimating = ei[E_ON] != 0.0
+        hi = hist[i] if estimating else hist[0]
+        xei = xe[i]
         guarded = gi[G_ON] > 0.0 or gi[G_BOUNDS] > 0.0
         bx, by, bz, rr = gi[G_BX], gi[G_BY], gi[G_BZ], gi[G_RR]
         body = gi[G_BMODE] > 0.0
         k = k_done[i]
         while k < n_steps:
             px, py, pz = xi[0], xi[1], xi[2]
-            c.controller_step_one(xi, spi, gni, ai, csi, dt, wi)
+            if estimating:
+                estimate_step_one(ei, hi, xi, xei, k0 + k)
+                c.controller_step_one(xei, spi, gni, ai, csi, dt, wi)
+            else:
+                c.controller_step_one(xi, spi, gni, ai, csi, dt, wi)
             if imperfect:
                 actuator_step_one(adi, wi, k0 + k)
             if windy:
@@ -163,6 +182,10 @@ class Simulation:
         self._k_done = np.zeros(n, dtype=np.int64)
         self.wind = np.zeros((n, N_WIND))  # no wind: the kernel skips the stage
         self.act = np.zeros((n, N_ACT))  # nominal actuators: likewise
+        self.est = np.zeros((n, N_EST))  # the truth as estimate: likewise
+        # the estimates and the rings of past states, allocated by the first set_estimator
+        self.xe = np.zeros((n, self.plant.x.shape[1]))
+        self.est_hist = np.zeros((1, 1, N_HIST))
         self._nominal = (self.plant.prm.copy(), self.plant.alloc.copy())
         self._no_rec = np.empty((0, n, self.x.shape[1]))
 
@@ -208,6 +231,8 @@ class Simulation:
             self.plant.status[i, d.S_CONTACT] = 1.0
         if self.guard is not None:
             self.guard.reset(i)
+        if self.est[i, E_ON]:  # the estimator forgets, too
+            self._reset_estimate(i)
 
     def start_hovering(self, i: int, position, yaw: float = 0.0) -> None:
         """Put vehicle i in the air at hover (rotors at hover speed) holding position."""
@@ -243,6 +268,37 @@ class Simulation:
         self.act[i] = actuators.row(self.dt, self.platforms[i].rotor_speed_max_rad_s, seed,
                                     self.steps)
 
+    def set_estimator(self, i: int, estimator: Estimator | dict | None,
+                      seed: int = 0) -> None:
+        """Fly vehicle i's controller on an imperfect estimate of its state (an
+        :class:`~ft_sitl.autopilot.estimator.Estimator`, its settings as a dict, or None for
+        the truth) from now on; ``seed`` seeds the noise. The estimate starts from the
+        vehicle holding its present state for the longest latency."""
+        if estimator is None:
+            estimator = Estimator()
+        elif not isinstance(estimator, Estimator):
+            estimator = Estimator(estimator)
+        self.est[i] = estimator.row(self.dt, seed)
+        if not self.est[i, E_ON]:
+            return
+        if self.est_hist.shape[1] == 1:  # the first estimating vehicle: the rings
+            self.est_hist = np.zeros((self.n, history_length(self.dt), N_HIST))
+        self._reset_estimate(i)
+
+    def _reset_estimate(self, i: int) -> None:
+        self.est_hist[i, :, :] = self.plant.x[i, :N_HIST]
+        self.est[i, E_N:E_N + 12] = 0.0
+        self.xe[i] = self.plant.x[i]
+
+    def estimating(self, i: int = 0) -> bool:
+        """True when vehicle i's controller flies on an imperfect estimate."""
+        return bool(self.est[i, E_ON])
+
+    def estimated(self, i: int = 0) -> np.ndarray:
+        """Vehicle i's state as its flight controller last estimated it (a view: the
+        true state itself without an estimator)."""
+        return self.xe[i] if self.est[i, E_ON] else self.plant.x[i]
+
     def wind_velocity(self, i: int = 0) -> np.ndarray:
         """The air's velocity at vehicle i in the last physics step (ENU, m/s)."""
         return self.plant.env[i, d.E_WIND_X:d.E_WIND_Z + 1].copy()
@@ -265,7 +321,7 @@ class Simulation:
                 n_steps, self.dt, self.plant.x, self.sp, self.gains, self.mix, self.ctrl,
                 self.plant.prm, self.plant.alloc, self.plant.env, self.plant.status,
                 self.w_cmd, rec, record_every, k_done, self._gd, self._grid, self._meta,
-                self.wind, self.act, self.steps,
+                self.wind, self.act, self.est, self.est_hist, self.xe, self.steps,
             )
             trip = self._gd[:, G_TRIP]
             if not trip.any():

@@ -14,7 +14,7 @@ PLATFORM = "0.98kg-EGO Planner DIY"
 
 @contextmanager
 def running_sitl(instances: int = 1, speed_factor: float = 1.0, params=None, scenario=None,
-                 **kwargs):
+                 estimator=None, **kwargs):
     p = get_platform(PLATFORM)
     if scenario is None:
         spawn, yaw = [[0.0, 2.0 * i, 0.0] for i in range(instances)], None
@@ -23,6 +23,8 @@ def running_sitl(instances: int = 1, speed_factor: float = 1.0, params=None, sce
         yaw = [scenario.start_yaw] * instances
     fleet = Fleet([p] * instances, params=params, spawn=spawn, spawn_yaw=yaw,
                   scenario=scenario)
+    for i in range(instances):  # (None: the truth, as without)
+        fleet.sim.set_estimator(i, estimator, seed=i)
     server = SitlServer(fleet, frames.GeoReference(*frames.PX4_SITL_HOME),
                         speed_factor=speed_factor, **kwargs)
     loop = asyncio.new_event_loop()

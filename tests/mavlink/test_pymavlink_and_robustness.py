@@ -64,6 +64,19 @@ def test_pymavlink_set_mode_arm_takeoff_land():
         assert ack_of(c, 31999).result == mav.MAV_RESULT_UNSUPPORTED
 
 
+def test_telemetry_reports_the_flight_controllers_estimate():
+    # PX4 reports EKF2's estimate: with a biased estimator, so does ft-sitl; the truth
+    # (on the spawn point, facing east) stays the plant's
+    with running_sitl(estimator={"position_bias_m": [0.5, -0.3, 0.2],
+                                 "attitude_bias_deg": [0.0, 0.0, 10.0]}) as server:
+        c = client()
+        lp = wait_msg(c, "LOCAL_POSITION_NED")
+        assert (lp.x, lp.y, lp.z) == pytest.approx((-0.3, 0.5, -0.2), abs=1e-4)  # NED
+        att = wait_msg(c, "ATTITUDE")
+        assert math.degrees(att.yaw) == pytest.approx(90.0 - 10.0, abs=0.01)
+        assert np.allclose(server.fleet.true_state(0).position, [0.0, 0.0, 0.0], atol=1e-3)
+
+
 def test_commands_to_other_systems_are_ignored_and_acks_name_the_sender():
     with running_sitl():
         c = client()

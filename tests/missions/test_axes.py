@@ -1,4 +1,5 @@
-"""Campaign axes: wind, controller-gain modes and PX4 parameters. Every trial of the matrix
+"""Campaign axes: wind, controller-gain modes, PX4 parameters, actuators, perception and
+the flight controller's estimator. Every trial of the matrix
 flies in each value of each axis, with the same seed; rows carry the values; trials at the
 defaults keep their ids; a turbulent trial reruns bit for bit; the report plots success
 against the wind; bad values are named by file, axis entry, key and range."""
@@ -222,6 +223,41 @@ def test_perception_is_an_axis_that_reruns_and_is_refused_over_mavlink(yard, tmp
                      transport=Transport("mavlink"))
 
 
+# --- the estimator axis ------------------------------------------------------------------------
+ESTIMATING = """\
+name = "estimating"
+algorithms = ["straight"]
+platforms = ["1.00kg-SunnySky"]
+scenarios = [{file = "yard.yaml"}]
+trials = 1
+[[estimator]]
+[[estimator]]
+position_bias_m = [0, 0.6, 0]
+velocity_latency_s = 0.05
+position_noise_m = 0.05
+noise_correlation_s = 0.5
+[limits]
+timeout_s = 6.0
+"""
+
+
+def test_the_estimator_is_an_axis_the_flight_judged_on_the_truth_and_reruns(yard, tmp_path,
+                                                                            cli_env):
+    c = load_campaign(campaign_file(yard.parent, "estimating.toml", ESTIMATING))
+    specs = c.trial_specs()
+    assert specs[0].estimator is None and "estimator" not in specs[0].to_dict()
+    assert specs[1].estimator == {"position_bias_m": [0.0, 0.6, 0.0], "position_noise_m": 0.05,
+                                  "velocity_latency_s": 0.05, "noise_correlation_s": 0.5}
+    summary = run_campaign(c, tmp_path / "out", progress=False)
+    assert (summary.ran, summary.errors) == (2, [])
+    rows = {r["estimator"]: r for r in read_jsonl(tmp_path / "out" / "trials.jsonl")}
+    biased = rows[json.dumps(specs[1].estimator, sort_keys=True, separators=(",", ":"))]
+    assert biased["path_length_m"] != rows[""]["path_length_m"]  # it flew differently
+    assert to_frame(list(rows.values()))["estimator"].tolist().count("") == 1
+    proc = run_exe("trial", "rerun", tmp_path / "out", biased["trial_id"], env=cli_env)
+    assert proc.returncode == 0 and "identical" in proc.stdout, proc.stdout + proc.stderr
+
+
 # --- bad axis values ----------------------------------------------------------------------------
 @pytest.mark.parametrize("text,message", [
     ("wind = [{speed_m_s = -3}]", "wind[0]: speed_m_s: must be a number 0..40 (m/s), got -3"),
@@ -251,6 +287,11 @@ def test_perception_is_an_axis_that_reruns_and_is_refused_over_mavlink(yard, tmp
     ("perception = [{delay = 0.1}]", "perception[0] has no parameter 'delay'"),
     ("perception = [{}, {frame_dropout = 1.5}]", "perception[1]: frame_dropout: must be a "
                                                  "number 0..1"),
+    ("estimator = {position_latency_s = 1.5}", "estimator: position_latency_s: must be a number "
+                                               "0..1 (s), got 1.5"),
+    ("estimator = [{}, {position_bias_m = 0.5}]", "estimator[1]: position_bias_m: must be 3 "
+                                                  "numbers, each -100..100 (m), got 0.5"),
+    ("estimator = [{noise = 0.1}]", "estimator[0] has no parameter 'noise'"),
 ])
 def test_bad_axis_values_are_named_by_file_entry_key_and_range(tmp_path, text, message):
     body = f'algorithms = ["straight"]\nplatforms = ["1.00kg-SunnySky"]\n{text}\n'
@@ -258,3 +299,33 @@ def test_bad_axis_values_are_named_by_file_entry_key_and_range(tmp_path, text, m
     with pytest.raises(CampaignError) as exc:
         load_campaign(path)
     assert str(exc.value).startswith(f"{path}: {message}"), str(exc.value)
+
+
+def test_depth_image_noise_replaces_the_navigators_camera_noise(yard):
+    from ft_sitl.missions.protocol import trial_vehicle
+    from ft_sitl.missions.trial import _Eyes, load_scenario_for, platform_for
+    from ft_sitl.navigation.registry import create
+
+    nav = create("ego", {})
+    assert Perception({"latency_s": 0.1}).camera_config(nav.camera) is nav.camera
+    clean = TrialSpec(algorithm="ego", platform="1.00kg-SunnySky", family="yard",
+                      scenario_file=str(yard))
+    noisy = TrialSpec(**{**clean.__dict__, "perception": {"depth_noise_k": 0.004,
+                                                          "depth_dropout": 0.1}})
+    sc = load_scenario_for(clean)
+    _, fleet = trial_vehicle(clean, sc, platform_for(clean))
+    fleet.sim.start_hovering(0, sc.start, sc.start_yaw)
+    frames = []
+    for spec in (clean, noisy):
+        eyes = _Eyes(nav, sc, spec)
+        frames.append(eyes.frame(fleet, 0))
+    cfg = eyes.camera.config
+    assert (cfg.noise_k, cfg.dropout) == (0.004, 0.1)
+    assert (cfg.width, cfg.rate_hz) == (nav.camera.width, nav.camera.rate_hz)
+    seen = frames[0].valid
+    assert seen.mean() > 0.05  # the yard is in view
+    both = seen & frames[1].valid
+    assert both.sum() / seen.sum() == pytest.approx(0.9, abs=0.02)  # a tenth dropped
+    err = frames[1].depth[both] - frames[0].depth[both]
+    z = frames[0].depth[both]
+    assert np.std(err / (0.004 * z * z)) == pytest.approx(1.0, abs=0.05)  # sigma = k z^2

@@ -1,13 +1,15 @@
-"""Benchmark: what the wind stage costs the lockstep kernel.
+"""Benchmark: what the wind and estimator stages cost the lockstep kernel.
 
 Batches of 1 and 64 hovering vehicles (1.00kg-SunnySky) step 10 s of simulated time in
 calm air, in a mean wind (written once: the stage is off), in the same mean wind with the
-stage running every step (a gust an hour away), and in a mean wind with Dryden turbulence
-(moderate) and a gust; the cases are timed in turn, ``--repeats`` times, and the medians
-compared (ratios measured in one run: this machine is shared). Timings are never asserted.
+stage running every step (a gust an hour away), in a mean wind with Dryden turbulence
+(moderate) and a gust, and in calm air with the flight controller on an imperfect estimate
+(noise on every group; the same with 50 ms of latency on every group); the cases are timed
+in turn, ``--repeats`` times, and the medians compared (ratios measured in one run: this
+machine is shared). Timings are never asserted.
 
-    .venv/bin/python bench/bench_wind.py          # ~1 min
-    .venv/bin/python bench/bench_wind.py --json
+    .venv/bin/python bench/bench_stages.py          # ~2 min
+    .venv/bin/python bench/bench_stages.py --json
 """
 
 from __future__ import annotations
@@ -26,22 +28,31 @@ from benchutil import machine_info  # noqa: E402
 from ft_sitl.physics.catalog import catalog  # noqa: E402
 from ft_sitl.sim.lockstep import Simulation  # noqa: E402
 
+NOISY = {"position_noise_m": 0.05, "velocity_noise_m_s": 0.05, "attitude_noise_deg": 0.5,
+         "rate_noise_deg_s": 1.0, "noise_correlation_s": 0.2}
+LATE = {f"{g}_latency_s": 0.05 for g in ("position", "velocity", "attitude", "rate")}
+#: case -> (wind settings, estimator settings)
 CASES = {
-    "calm": None,
-    "mean wind": {"speed_m_s": 6.0},
+    "calm": (None, None),
+    "mean wind": ({"speed_m_s": 6.0}, None),
     # the stage running every step with nothing to add (a gust an hour away)
-    "mean wind, stage on": {"speed_m_s": 6.0, "gust_m_s": 1.0, "gust_start_s": 3600.0},
-    "turbulence + gust": {"speed_m_s": 6.0, "turbulence": "moderate", "gust_m_s": 3.0,
-                          "gust_start_s": 2.0},
+    "mean wind, stage on": ({"speed_m_s": 6.0, "gust_m_s": 1.0, "gust_start_s": 3600.0},
+                            None),
+    "turbulence + gust": ({"speed_m_s": 6.0, "turbulence": "moderate", "gust_m_s": 3.0,
+                           "gust_start_s": 2.0}, None),
+    "estimator: noise": (None, NOISY),
+    "estimator: noise + latency": (None, {**NOISY, **LATE}),
 }
 
 
-def one(n: int, wind, seconds: float) -> float:
+def one(n: int, case, seconds: float) -> float:
+    wind, estimator = case
     p = catalog()["1.00kg-SunnySky"]
     sim = Simulation([p] * n)
     for i in range(n):
         sim.start_hovering(i, [3.0 * i, 0.0, 2.0])
         sim.set_wind(i, wind, seed=i)
+        sim.set_estimator(i, estimator, seed=i)
     sim.run(0.01)  # compiled already; warm the caches
     t0 = time.perf_counter()
     sim.run(seconds)
@@ -69,7 +80,7 @@ def main(argv=None) -> int:
         return 0
     for n, b in out["batches"].items():
         for k, v in b["vehicle_s_per_wall_s"].items():
-            print(f"batch {n:3d} {k:20s} {v:8.1f} vehicle-s per wall-s  "
+            print(f"batch {n:3d} {k:27s} {v:8.1f} vehicle-s per wall-s  "
                   f"({100 * b['cost_vs_calm'][k]:+.1f} % time vs calm, "
                   f"{100 * b['cost_vs_mean_wind'][k]:+.1f} % vs the mean wind)")
     return 0
