@@ -381,7 +381,7 @@ def run_ardupilot_bridge(platform_name, scenario_spec=None, port: int = DEFAULT_
                          seed: int = 0, physics_hz: int = DEFAULT_PHYSICS_HZ,
                          accel_noise_m_s2: float = 0.0, platform_files=(),
                          params_path=None, echo=print, on_start=None,
-                         wind: dict | None = None) -> dict:
+                         wind: dict | None = None, actuators: dict | None = None) -> dict:
     """Serve one ArduPilot SITL until Ctrl-C; returns a summary (counters, time, crash).
 
     platform_name: a catalog or user-file name (``platform_files``), or a Platform.
@@ -392,7 +392,9 @@ def run_ardupilot_bridge(platform_name, scenario_spec=None, port: int = DEFAULT_
     on_start: called with the open :class:`ArduPilotBridge` before serving (e.g. to keep a
     handle for ``stop()`` from a signal handler or another thread).
     wind: wind settings (ft_sitl.physics.wind) the vehicle flies in, turbulence seeded by
-    ``seed``; None: calm air.
+    ``seed``; None: calm air. actuators: imperfect actuators (ft_sitl.physics.actuators:
+    ArduPilot's motor outputs are degraded, lagged, noisy or cut as in a campaign); None:
+    as built. A bad setting raises ValueError (SchemaError).
     """
 
     platform = (platform_name if isinstance(platform_name, Platform)
@@ -403,6 +405,7 @@ def run_ardupilot_bridge(platform_name, scenario_spec=None, port: int = DEFAULT_
                              speed_factor=speed_factor, seed=seed, physics_hz=physics_hz,
                              accel_noise_m_s2=accel_noise_m_s2)
     bridge.vehicle.sim.set_wind(0, wind, seed=seed)
+    bridge.vehicle.sim.set_actuators(0, actuators, seed=seed)
     if params_path is not None:
 
         Path(params_path).write_text(ardupilot_params(platform), encoding="utf-8")

@@ -671,7 +671,8 @@ def run_px4_bridge(platform_name: str, scenario=None, *, instance: int = 0,
                    seed: int = 0, host: str = "127.0.0.1", platform_files=(),
                    duration_s: float | None = None, status_every_s: float = 10.0,
                    echo: Callable[[str], None] = print,
-                   wind: dict | None = None) -> Px4BridgeStats:
+                   wind: dict | None = None,
+                   actuators: dict | None = None) -> Px4BridgeStats:
     """Serve PX4 SITL instance ``instance`` until Ctrl-C (or ``duration_s`` of wall time).
 
     ``platform_name``: a catalog platform, or one from ``platform_files``; ``scenario``:
@@ -679,7 +680,8 @@ def run_px4_bridge(platform_name: str, scenario=None, *, instance: int = 0,
     line every ``status_every_s`` and the final counters through ``echo``; returns them.
     Raises ValueError for a bad platform/scenario/option, BridgeError if it cannot listen.
     ``wind``: wind settings (ft_sitl.physics.wind) the vehicle flies in, turbulence seeded
-    by ``seed``; None: calm air.
+    by ``seed``; None: calm air. ``actuators``: imperfect actuators
+    (ft_sitl.physics.actuators) between PX4's motor outputs and the rotors; None: as built.
     """
 
     platform = PlatformRegistry(platform_files).get(platform_name)
@@ -687,6 +689,7 @@ def run_px4_bridge(platform_name: str, scenario=None, *, instance: int = 0,
                        speed_factor=speed_factor, ground_truth=ground_truth, seed=seed,
                        host=host)
     bridge.vehicle.sim.set_wind(0, wind, seed=seed)
+    bridge.vehicle.sim.set_actuators(0, actuators, seed=seed)
     bridge.start()
     sc = bridge.scenario
     echo(f"PX4 bridge: {platform.name} ({platform.layout}, PX4 motor i -> our rotor "

@@ -10,7 +10,7 @@ from ft_sitl.bridge.ardupilot import run_ardupilot_bridge
 from ft_sitl.bridge.ardupilot_frames import FrameMatchError
 from ft_sitl.bridge.ardupilot_params import ardupilot_params
 from ft_sitl.bridge.px4 import BridgeError, run_px4_bridge
-from ft_sitl.cli.common import CliError, platform_registry, wind_option
+from ft_sitl.cli.common import CliError, actuators_option, platform_registry, wind_option
 
 
 def _speed(v):
@@ -42,7 +42,8 @@ def cmd_bridge_ardupilot(args) -> int:
     try:
         out = run_ardupilot_bridge(platform, args.scenario, args.port, _speed(args.speed_factor),
                                    host=args.bind, params_path=args.write_params,
-                                   on_start=_stop_on_signals, wind=wind_option(args.wind))
+                                   on_start=_stop_on_signals, wind=wind_option(args.wind),
+                                   actuators=actuators_option(args.actuators))
     except (FrameMatchError, ValueError) as exc:
         raise CliError(str(exc)) from None
     except OSError as exc:
@@ -60,7 +61,8 @@ def cmd_bridge_px4(args) -> int:
         run_px4_bridge(args.platform, args.scenario, instance=args.instance,
                        speed_factor=_speed(args.speed_factor), ground_truth=args.ground_truth,
                        host=args.bind, platform_files=args.platform_file or (),
-                       duration_s=args.duration, wind=wind_option(args.wind))
+                       duration_s=args.duration, wind=wind_option(args.wind),
+                       actuators=actuators_option(args.actuators))
     except (ValueError, BridgeError) as exc:
         raise CliError(str(exc)) from None
     return 0

@@ -11,7 +11,8 @@ from pathlib import Path
 from ft_sitl.physics.catalog import PlatformRegistry
 
 __all__ = ["EXIT_BAD_INPUT", "CliError", "check_out_dir", "fmt_point", "option_value",
-           "platform_registry", "wind_option", "estimator_option", "settings_option"]
+           "platform_registry", "wind_option", "estimator_option", "settings_option",
+           "actuators_option"]
 
 EXIT_BAD_INPUT = 2
 
@@ -76,9 +77,20 @@ def estimator_option(text: str | None) -> dict | None:
                            "position_noise_m=0.1,position_bias_m=0.5:0:0")
 
 
+def actuators_option(text: str | None) -> dict | None:
+    """``--actuators KEY=VALUE[,...]`` as actuator settings (ft_sitl.physics.actuators),
+    checked (:func:`settings_option`; the motor numbers against the platform where it is
+    applied). None when not given."""
+    if text is None:
+        return None
+    from ft_sitl.physics.actuators import Actuators  # (likewise: the model when given)
+    return settings_option("--actuators", text, Actuators,
+                           "efficiency=0.9,fail_motor=2,fail_at_s=30")
+
+
 def settings_option(option: str, text: str, model, example: str) -> dict:
     """``KEY=VALUE[,KEY=VALUE...]`` as a model's settings: numbers where they parse as
-    numbers, ``A:B:C`` a vector of numbers, else text; checked by ``model(values,
+    numbers (integers where written as integers), ``A:B:C`` a vector of numbers, else text; checked by ``model(values,
     option)``: a CliError names the option, the key and the allowed range."""
     from ft_sitl.schema import SchemaError  # (as the models: only when an option is given)
 
@@ -93,6 +105,7 @@ def settings_option(option: str, text: str, model, example: str) -> dict:
                 value = [float(x) for x in raw.split(":")]
             else:
                 value = float(raw)
+                value = int(raw)  # (an integer where it is written as one: motor numbers)
         except ValueError:
             pass
         values[key.strip()] = value

@@ -15,6 +15,10 @@ from ft_sitl import __version__
 from ft_sitl.bridge import ARDUPILOT_DEFAULT_PORT
 from ft_sitl.scenarios.render import DEFAULT_DPI  # numpy only: cheap at start-up
 
+ACTUATORS_HELP = ("imperfect actuators as KEY=VALUE,... (efficiency, degraded_motor, "
+                  "degraded_efficiency, lag_s, noise, fail_motor, fail_at_s; "
+                  "docs/platforms.md, Actuator imperfection)")
+
 
 def build_parser() -> argparse.ArgumentParser:
     ap = argparse.ArgumentParser(
@@ -116,6 +120,8 @@ def build_parser() -> argparse.ArgumentParser:
                            "estimate: KEY=VALUE,... (position_noise_m, position_bias_m=E:N:U, "
                            "position_latency_s, velocity_*, attitude_*_deg, rate_*_deg_s, "
                            "noise_correlation_s; docs/control.md, Estimator)")
+    sitl.add_argument("--actuators", metavar="SETTINGS",
+                      help=ACTUATORS_HELP)
     sitl.set_defaults(handler="sitl:cmd_sitl")
 
     par = sub.add_parser("params", help="flight-controller parameters")
@@ -273,6 +279,7 @@ def _bridge_options(p) -> None:
                    help="wind as KEY=VALUE,... (speed_m_s, from_deg, vertical_m_s, "
                       "turbulence none|light|moderate|severe|standard, gust_m_s, ...; "
                       "docs/platforms.md, Wind)")
+    p.add_argument("--actuators", metavar="SETTINGS", help=ACTUATORS_HELP)
 
 
 def _add_bridge(sub) -> None:

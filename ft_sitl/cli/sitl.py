@@ -14,6 +14,7 @@ from ft_sitl.bus.broker import EmbeddedBroker
 from ft_sitl.bus.options import TlsOptions, parse_broker_url
 from ft_sitl.cli.common import (
     CliError,
+    actuators_option,
     estimator_option,
     option_value,
     platform_registry,
@@ -21,7 +22,9 @@ from ft_sitl.cli.common import (
 )
 from ft_sitl.frames import PX4_SITL_HOME, GeoReference, enu_to_ned, yaw_enu_to_ned
 from ft_sitl.mavlink.server import SitlServer
+from ft_sitl.physics.actuators import Actuators
 from ft_sitl.scenarios.io import scenario_from_spec
+from ft_sitl.schema import SchemaError
 from ft_sitl.sim.fleet import Fleet
 from ft_sitl.sim.spawn import SpawnError, spawn_points
 from ft_sitl.wire.sitl_bus import fleet_buses
@@ -104,9 +107,15 @@ def cmd_sitl(args) -> int:
     if args.wind_seed < 0:
         raise CliError(f"--wind-seed: {args.wind_seed} must be >= 0")
     estimator = estimator_option(args.estimator)
+    actuators = actuators_option(args.actuators)
     for i in range(args.instances):
         fleet.sim.set_wind(i, wind, seed=args.wind_seed + i)
         fleet.sim.set_estimator(i, estimator, seed=args.wind_seed + i)
+        try:  # (the motor numbers against the platform's motors)
+            fleet.sim.set_actuators(i, Actuators(actuators, "--actuators", p.n_rotors),
+                                    seed=args.wind_seed + i)
+        except SchemaError as exc:
+            raise CliError(str(exc)) from None
     try:
         server = SitlServer(fleet, geo, bind=args.bind, speed_factor=args.speed_factor,
                             tlog=args.tlog, signing_key=args.signing_key,
@@ -134,6 +143,9 @@ def cmd_sitl(args) -> int:
         if wind is not None:
             print("wind: " + ", ".join(f"{k} {v:g}" if isinstance(v, float) else f"{k} {v}"
                                        for k, v in wind.items()), flush=True)
+        if actuators is not None:
+            print("actuators: " + ", ".join(f"{k} {v:g}" for k, v in actuators.items()),
+                  flush=True)
         if estimator is not None:
             print("estimator: " + ", ".join(f"{k} {v}" for k, v in estimator.items()),
                   flush=True)

@@ -355,6 +355,23 @@ def test_hover_pwm_from_the_param_file_holds_altitude(name):
     np.testing.assert_allclose(st1.quaternion, q_heading(0.0), atol=1e-9)  # level, no turn
 
 
+def test_a_failed_motor_behind_ardupilots_outputs_tumbles_the_vehicle(platform):
+    # ft-sitl bridge ardupilot --actuators: the imperfection sits between the autopilot's
+    # motor outputs and the rotors (ft_sitl.physics.actuators)
+    pwm = hover_pwm(read_param_file(ardupilot_params(platform)))
+    rates = []
+    for act in (None, {"fail_motor": 1, "fail_at_s": 0.5}):
+        with serving(platform) as (bridge, peer):
+            bridge.vehicle.sim.set_actuators(0, act)
+            count, st0 = peer.fly(0, 600, [pwm + 60] * 4)  # 0.5 s: off the ground
+            assert st0.position[2] < -0.05
+            _, st = peer.fly(count, 180, [pwm + 60] * 4)  # 0.15 s more
+            rates.append(np.abs(st.gyro).max())
+            w = bridge.vehicle.sim.rotor_speeds(0)
+        assert (w[0] < 0.1 * w.max()) == (act is not None)  # the failed motor spun down
+    assert rates[0] < 0.05 and rates[1] > 1.0  # rad/s: level, then tumbling
+
+
 def test_in_a_scenario_position_is_from_the_spawn_and_a_crash_lasts_until_restart(platform):
     from ft_sitl.scenarios.families import build_scenario
 

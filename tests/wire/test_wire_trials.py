@@ -159,37 +159,51 @@ def test_navigate_cli_against_sitl_cli_through_mosquitto(tmp_path):
 
 def test_sitl_wind_reaches_the_vehicle_and_the_bus(tmp_path):
     """`ft-sitl sitl --wind`: the hovering-on-the-ground vehicle's telemetry carries the
-    wind (a steady 6 m/s from the west blows east: +x in ENU), turbulent when asked."""
+    wind (a steady 6 m/s from the west blows east: +x in ENU), turbulent when asked.
+    `--estimator` and `--actuators` are taken too; the bus publishes the truth, not the
+    flight controller's biased estimate. Bad settings of each are one error line."""
     broker = Mosquitto(tmp_path / "mq").start()
     inst = 16
     sitl = subprocess.Popen([FT_SITL, "sitl", "--instance", str(inst), "--speed-factor", "2",
                              "--mqtt", broker.url, "--duration", "60", "--wind",
-                             "speed_m_s=6,from_deg=270,turbulence=light", "--wind-seed", "3"],
+                             "speed_m_s=6,from_deg=270,turbulence=light", "--wind-seed", "3",
+                             "--estimator", "position_bias_m=0:0:0.5",
+                             "--actuators", "efficiency=0.9"],
                             stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
 
     async def winds():
-        out = []
+        out, heights = [], []
         async with BusClient(broker.url, str(inst), kinds=("telemetry",)) as client:
             async with asyncio.timeout(40):
                 while len(out) < 100:
                     msg = await client.receive()
                     out.append(msg.data.wind_world_m_s)
-        return np.array(out)
+                    heights.append(msg.data.p_world_m[2])
+        return np.array(out), np.array(heights)
 
     try:
-        w = asyncio.run(winds())
+        w, z = asyncio.run(winds())
     finally:
         sitl.terminate()
         out, err = sitl.communicate(timeout=30)
         broker.kill()
     assert "wind: speed_m_s 6, from_deg 270, turbulence light" in out, out + err
+    assert "estimator: position_bias_m [0.0, 0.0, 0.5]" in out
+    assert "actuators: efficiency 0.9" in out
     assert 3.0 < w[:, 0].mean() < 9.0 and abs(w[:, 1].mean()) < 3.0
     assert w[:, 0].std() > 0.05  # turbulent, not a constant
-    bad = subprocess.run([FT_SITL, "sitl", "--wind", "speed_m_s=-1"], capture_output=True,
-                         text=True, timeout=60)
-    assert bad.returncode == 2
-    assert bad.stderr.strip() == "ft-sitl: error: --wind: speed_m_s: must be a number 0..40 " \
-                                 "(m/s), got -1.0"
+    assert np.abs(z).max() < 0.05  # on the ground: the truth (the estimate says 0.5 m)
+    for option, value, message in (
+            ("--wind", "speed_m_s=-1", "--wind: speed_m_s: must be a number 0..40 (m/s), "
+                                       "got -1"),
+            ("--estimator", "position_bias_m=1:2", "--estimator: position_bias_m: must be 3 "
+                                                   "numbers, each -100..100 (m), got [1.0, 2.0]"),
+            ("--actuators", "fail_motor=7", "--actuators: fail_motor: 7 must be within 0..4 "
+                                            "(the platform's motors)")):
+        bad = subprocess.run([FT_SITL, "sitl", option, value], capture_output=True,
+                             text=True, timeout=60)
+        assert bad.returncode == 2
+        assert bad.stderr.strip() == f"ft-sitl: error: {message}"
 
 
 def test_broker_killed_mid_flight_the_vehicle_flies_on_and_the_bus_reconnects(tmp_path):
