@@ -90,8 +90,9 @@ def actuators_option(text: str | None) -> dict | None:
 
 def settings_option(option: str, text: str, model, example: str) -> dict:
     """``KEY=VALUE[,KEY=VALUE...]`` as a model's settings: numbers where they parse as
-    numbers (integers where written as integers), ``A:B:C`` a vector of numbers, else text; checked by ``model(values,
-    option)``: a CliError names the option, the key and the allowed range."""
+    numbers (integers where written as integers), ``A:B:C`` a vector of numbers, else
+    text; checked by ``model(values, option)``: a CliError names the option, the key and
+    the allowed range."""
     from ft_sitl.schema import SchemaError  # (as the models: only when an option is given)
 
     values: dict = {}
