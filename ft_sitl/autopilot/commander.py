@@ -22,6 +22,7 @@ import numpy as np
 
 from ft_sitl import G
 from ft_sitl.autopilot import cascade as c
+from ft_sitl.autopilot.geofence import Fence, nearest_safe_point
 from ft_sitl.autopilot.params import ParamSet
 from ft_sitl.autopilot.setpoints import Setpoint
 from ft_sitl.physics.platform import Platform
@@ -94,6 +95,9 @@ class Severity(IntEnum):
 
 
 # MAV_CMD ids of the mission items the navigator executes
+#: GF_ACTION's values (PX4's geofence_result constants), by name
+GF_ACTIONS = {0: "none", 1: "warning", 2: "hold", 3: "return", 4: "terminate", 5: "land"}
+
 CMD_NAV_WAYPOINT = 16
 CMD_NAV_RETURN_TO_LAUNCH = 20
 CMD_NAV_LAND = 21
@@ -192,6 +196,11 @@ class Commander:
     battery: Battery | None = None
     terminated: bool = False
     crashed: bool = False
+    #: the geofence (MAV_MISSION_TYPE_FENCE) and rally points (local ENU), see geofence.py
+    fence: Fence = field(default_factory=Fence)
+    rally: list = field(default_factory=list)
+    #: every breach: (time_us, reason, action taken)
+    fence_events: list = field(default_factory=list)
 
     def __post_init__(self):
         self._nav = _Nav()
@@ -209,6 +218,9 @@ class Commander:
             self.battery = Battery.for_platform(self.platform, self.params["FT_BAT_ENDURANCE"])
         self.mission_state = MissionState.NO_MISSION
         self._bat_warned = 0
+        self._fence_breached = False
+        self._rtl_dest = self.home.copy()
+        self._mission_takeoff: np.ndarray | None = None
 
     # --- helpers -------------------------------------------------------------------
     @property
@@ -366,11 +378,17 @@ class Commander:
 
     def _start_rtl(self) -> None:
         p = self._pos()
+        # PX4: the nearest safe point, home or a rally point
+        self._rtl_dest = nearest_safe_point(p, self.home, self.rally)
         climb = max(p[2], self.home[2] + self.params["RTL_RETURN_ALT"])
         self._nav = _Nav(target=np.array([p[0], p[1], climb]), yaw=self._yaw(),
                          phase="rtl_climb", t_phase_us=self.time_us)
-        self.text(Severity.INFO, "RTL: start return at "
+        where = "home" if self._rtl_to_home() else "rally point"
+        self.text(Severity.INFO, f"RTL: start return to {where} at "
                   f"{climb - self.home[2]:.0f} m above home")
+
+    def _rtl_to_home(self) -> bool:
+        return bool(np.allclose(self._rtl_dest[:2], self.home[:2]))
 
     def hold(self) -> Result:
         return self.set_mode(MAIN_AUTO, SUB_LOITER)
@@ -408,6 +426,7 @@ class Commander:
     # --- mission -------------------------------------------------------------------
     def set_mission(self, items: list[MissionItem]) -> None:
         self.mission = list(items)
+        self._mission_takeoff = None
         self.mission_seq = 0
         self.mission_state = MissionState.NOT_STARTED if items else MissionState.NO_MISSION
         self._item_started = False
@@ -433,6 +452,7 @@ class Commander:
         self.battery.draw(mech_energy_j)
         self._update_landed(state)
         self._battery_failsafe()
+        self._geofence_check(state)
         if not self.armed:
             return self._emit(Setpoint.off())
         if self._auto_disarm():
@@ -500,6 +520,53 @@ class Commander:
         elif rem < self.params["BAT_LOW_THR"] and self._bat_warned < 1:
             self._bat_warned = 1
             self.text(Severity.WARNING, "Battery low")
+
+    # --- geofence ------------------------------------------------------------------------
+    def set_fence(self, fence: Fence) -> None:
+        self.fence = fence
+        self._fence_breached = False
+
+    def set_rally(self, points) -> None:
+        self.rally = [np.asarray(p, dtype=float).copy() for p in points]
+
+    @property
+    def geofence_active(self) -> bool:
+        """A fence is uploaded, or a maximum distance or height from home is set."""
+        return (not self.fence.empty or self.params["GF_MAX_HOR_DIST"] > 0
+                or self.params["GF_MAX_VER_DIST"] > 0)
+
+    @property
+    def fence_breached(self) -> bool:
+        return self._fence_breached
+
+    def _geofence_check(self, s: VehicleState) -> None:
+        """PX4's geofence: in the air, a breach (entering it, not staying in it) takes
+        GF_ACTION once; back inside, the next breach acts again."""
+        if not self.armed or s.on_ground or self.terminated:
+            return
+        reason = self.fence.breach(s.position, self.home, self.params["GF_MAX_HOR_DIST"],
+                                   self.params["GF_MAX_VER_DIST"])
+        if reason is None:
+            self._fence_breached = False
+            return
+        if self._fence_breached:
+            return
+        self._fence_breached = True
+        action = int(self.params["GF_ACTION"])
+        name = GF_ACTIONS.get(action, "none")
+        self.fence_events.append((self.time_us, reason, name))
+        if action == 0:
+            return
+        self.text(Severity.CRITICAL, f"Geofence breached: {reason}")
+        if action == 2:
+            self._set_mode(MAIN_AUTO, SUB_LOITER)
+            self._hold_here()
+        elif action == 3:
+            self.return_to_launch()
+        elif action == 4:
+            self.terminate()
+        elif action == 5:
+            self.land()
 
     def _on_ground_idle(self) -> Setpoint:
         return Setpoint.idle()
@@ -598,16 +665,17 @@ class Commander:
         if nav.phase == "rtl_climb":
             if s.position[2] >= nav.target[2] - 0.3:
                 nav.phase = "rtl_return"
-                nav.target = np.array([self.home[0], self.home[1], nav.target[2]])
+                nav.target = np.array([self._rtl_dest[0], self._rtl_dest[1], nav.target[2]])
             else:
                 return Setpoint.position(nav.target, yaw=nav.yaw)
         if nav.phase == "rtl_return":
             if np.linalg.norm(nav.target[:2] - s.position[:2]) < 0.5:
                 nav.phase = "rtl_land"
-                self.text(Severity.INFO, "RTL: land at home")
+                self.text(Severity.INFO, "RTL: land at " + (
+                    "home" if self._rtl_to_home() else "rally point"))
             else:
                 return self._fly_to(s, nav.target, nav.yaw)
-        return self._land_setpoint(s, self.home)
+        return self._land_setpoint(s, self._rtl_dest)
 
     def _mission_setpoint(self, s: VehicleState) -> Setpoint:
         if self.mission_state == MissionState.COMPLETE or self.mission_seq >= len(self.mission):
@@ -623,6 +691,15 @@ class Commander:
         item = self.mission[self.mission_seq]
         if not self._item_started:
             self._start_item(item, s)
+        if self._mission_takeoff is not None:  # started on the ground: climb first (PX4)
+            tko = self._mission_takeoff
+            if s.position[2] >= tko[2] - 0.2 and not s.on_ground:
+                self._mission_takeoff = None
+            else:
+                return Setpoint.trajectory(position=[tko[0], tko[1], math.nan],
+                                           velocity=[math.nan, math.nan,
+                                                     self.params["MPC_TKO_SPEED"]],
+                                           yaw=self._nav.yaw)
         nav = self._nav
         done = False
         sp: Setpoint
@@ -678,6 +755,7 @@ class Commander:
     def _start_item(self, item: MissionItem, s: VehicleState) -> None:
         self._item_started = True
         self._item_hold_until = None
+        self._mission_takeoff = None
         p = s.position.copy()
         target = np.array([item.position[i] if math.isfinite(item.position[i]) else p[i]
                            for i in range(3)])
@@ -692,6 +770,12 @@ class Commander:
             self._start_rtl()
             return
         self._nav = _Nav(target=target, yaw=yaw, phase="mission", t_phase_us=self.time_us)
+        if item.command == CMD_NAV_WAYPOINT and self.landed_state == LandedState.ON_GROUND:
+            # PX4 takes off before a mission's first position item when it starts landed:
+            # straight up to the item's altitude, at least MIS_TAKEOFF_ALT above home
+            alt = max(target[2], self.home[2] + self.params["MIS_TAKEOFF_ALT"])
+            self._mission_takeoff = np.array([p[0], p[1], alt])
+            self.text(Severity.INFO, f"Mission: takeoff to {alt - self.home[2]:.1f} m first")
 
 
 def hover_thrust(platform: Platform) -> float:

@@ -133,6 +133,7 @@ class EventType(enum.StrEnum):
     COLLISION = "collision"
     TRIAL_START = "trial_start"
     TRIAL_END = "trial_end"
+    GEOFENCE = "geofence"
 
 
 class StatusValue(enum.StrEnum):
@@ -459,6 +460,16 @@ class CollisionFields(Struct, frozen=True):
     speed_m_s: Annotated[float, Meta(ge=0.0, description="impact speed, m/s")]
 
 
+class GeofenceFields(Struct, frozen=True):
+    """``geofence``: the vehicle breached its geofence."""
+
+    #: e.g. "outside the fence", "more than 50 m from home"
+    reason: NonEmptyStr
+    #: what the flight controller did (GF_ACTION): none, warning, hold, return,
+    #: terminate, land
+    action: NonEmptyStr
+
+
 class TrialEndFields(Struct, frozen=True):
     """``trial_end``: a trial ended."""
 
@@ -477,6 +488,7 @@ EVENT_TYPES: dict[EventType, type[Struct]] = {
     EventType.COLLISION: CollisionFields,
     EventType.TRIAL_START: NoFields,
     EventType.TRIAL_END: TrialEndFields,
+    EventType.GEOFENCE: GeofenceFields,
 }
 
 

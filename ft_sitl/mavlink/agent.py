@@ -19,6 +19,8 @@ from pymavlink.dialects.v20 import common as mav
 from ft_sitl import frames
 from ft_sitl.autopilot import commander as cm
 from ft_sitl.autopilot.commander import MissionItem, Result
+from ft_sitl.autopilot.geofence import MAX_ITEMS as MAX_FENCE_ITEMS
+from ft_sitl.autopilot.geofence import Fence, FenceError, circle, polygon
 from ft_sitl.autopilot.params import PARAMS, ParamError
 from ft_sitl.autopilot.setpoints import Setpoint, SetpointError
 from ft_sitl.physics import dynamics as d
@@ -26,6 +28,13 @@ from ft_sitl.physics.quaternion import qrotate_inv, qto_euler
 from ft_sitl.sim.fleet import Fleet
 
 COMPID = mav.MAV_COMP_ID_AUTOPILOT1
+#: the mission protocol's item lists a vehicle keeps (PX4's three)
+MISSION_TYPES = (mav.MAV_MISSION_TYPE_MISSION, mav.MAV_MISSION_TYPE_FENCE,
+                 mav.MAV_MISSION_TYPE_RALLY)
+GLOBAL_FRAMES = (mav.MAV_FRAME_GLOBAL_INT, mav.MAV_FRAME_GLOBAL_RELATIVE_ALT_INT,
+                 mav.MAV_FRAME_GLOBAL, mav.MAV_FRAME_GLOBAL_RELATIVE_ALT)
+#: the frames a mission item may use here (others: MAV_MISSION_UNSUPPORTED_FRAME, as PX4)
+SUPPORTED_FRAMES = GLOBAL_FRAMES + (mav.MAV_FRAME_LOCAL_NED, mav.MAV_FRAME_MISSION)
 FORCE_MAGIC = 21196
 
 CAPABILITIES = (
@@ -124,6 +133,7 @@ class _Transfer:
     items: list = field(default_factory=list)
     last_request_wall_us: int = 0
     retries: int = 0
+    mission_type: int = 0
 
 
 def _param_type(name: str) -> int:
@@ -166,7 +176,8 @@ class VehicleAgent:
         self._reached_sent = 0
         self._upload: _Transfer | None = None
         self._download_items: list = []
-        self._raw_mission: list = []  # MISSION_ITEM_INT messages as uploaded
+        #: MISSION_ITEM_INT messages as uploaded, per mission type (mission, fence, rally)
+        self._stored: dict[int, list] = {t: [] for t in MISSION_TYPES}
         self._last_mission_current: tuple | None = None
         self._snap: _Snapshot | None = None
         # PX4 SITL: each instance's local frame starts where it spawned
@@ -298,11 +309,16 @@ class VehicleAgent:
             bat = self.cmd.battery
             power = self._shaft_power()
             current = bat.current_a(power)
-            health = SENSORS
+            present = SENSORS
+            if self.cmd.geofence_active:  # PX4: the geofence bit while a fence is set
+                present |= mav.MAV_SYS_STATUS_GEOFENCE
+            health = present
             if self.cmd.terminated or self.cmd.battery.remaining < self.params["BAT_CRIT_THR"]:
                 health &= ~mav.MAV_SYS_STATUS_PREARM_CHECK
+            if self.cmd.fence_breached:
+                health &= ~mav.MAV_SYS_STATUS_GEOFENCE
             return mav.MAVLink_sys_status_message(
-                SENSORS, SENSORS, health, 200, int(bat.voltage(current) * 1000),
+                present, present, health, 200, int(bat.voltage(current) * 1000),
                 int(current * 100), int(round(bat.remaining * 100)), 0, 0, 0, 0, 0, 0)
         if msg_id == mav.MAVLINK_MSG_ID_VFR_HUD:
             speed = float(np.linalg.norm(s.velocity[:2]))
@@ -704,61 +720,95 @@ class VehicleAgent:
         idx = list(PARAMS).index(name)
         return [Outgoing(self._param_value(name, idx))]
 
-    # missions -----------------------------------------------------------------------
+    # missions, fences, rally points ----------------------------------------------------
     def _mission_ack(self, m, result: int, link, peer, mission_type=0) -> Outgoing:
         return Outgoing(mav.MAVLink_mission_ack_message(
             m.get_srcSystem(), m.get_srcComponent(), result, mission_type), link, peer)
 
     def _on_mission_count(self, m, link, peer, wall_us):
         mtype = getattr(m, "mission_type", 0)
-        if mtype != mav.MAV_MISSION_TYPE_MISSION:
+        if mtype not in MISSION_TYPES:
             return [self._mission_ack(m, mav.MAV_MISSION_UNSUPPORTED, link, peer, mtype)]
-        if self.cmd.armed and self.cmd.main_mode == cm.MAIN_AUTO \
-                and self.cmd.sub_mode == cm.SUB_MISSION and m.count > 0:
-            pass  # PX4 accepts a new mission while flying one; it restarts from item 0
+        # (PX4 accepts a new mission while flying one; it restarts from item 0)
         if m.count == 0:
-            self._raw_mission = []
-            self.cmd.set_mission([])
-            return [self._mission_ack(m, mav.MAV_MISSION_ACCEPTED, link, peer)]
-        if m.count > 10000:
-            return [self._mission_ack(m, mav.MAV_MISSION_NO_SPACE, link, peer)]
-        self._upload = _Transfer(m.count, link, peer, last_request_wall_us=wall_us)
+            self._apply_upload(mtype, [])
+            return [self._mission_ack(m, mav.MAV_MISSION_ACCEPTED, link, peer, mtype)]
+        limit = 10000 if mtype == mav.MAV_MISSION_TYPE_MISSION else MAX_FENCE_ITEMS
+        if m.count > limit:
+            return [self._mission_ack(m, mav.MAV_MISSION_NO_SPACE, link, peer, mtype)]
+        self._upload = _Transfer(m.count, link, peer, last_request_wall_us=wall_us,
+                                 mission_type=mtype)
         self._upload_src = (m.get_srcSystem(), m.get_srcComponent())
         return [self._request_item(0)]
 
     def _request_item(self, seq: int) -> Outgoing:
         up = self._upload
         sysid, compid = self._upload_src
-        return Outgoing(mav.MAVLink_mission_request_int_message(sysid, compid, seq, 0),
+        return Outgoing(mav.MAVLink_mission_request_int_message(sysid, compid, seq,
+                                                                up.mission_type),
                         up.link, up.peer)
+
+    def _on_mission_item(self, m, link, peer, wall_us):
+        """Plain MISSION_ITEM (float x/y: degrees in the global frames, metres in the
+        local ones), as MISSION_FLOAT is advertised: kept as its MISSION_ITEM_INT form."""
+        if self._upload is None:
+            return []
+        if m.frame in GLOBAL_FRAMES:
+            x, y = _deg_e7(m.x), _deg_e7(m.y)
+        elif m.frame == mav.MAV_FRAME_LOCAL_NED:
+            x, y = _deg_e7(m.x * 1e-3), _deg_e7(m.y * 1e-3)  # (m * 1e4, as _INT carries)
+        else:
+            x, y = _deg_e7(m.x * 1e-7), _deg_e7(m.y * 1e-7)
+        as_int = mav.MAVLink_mission_item_int_message(
+            m.target_system, m.target_component, m.seq, m.frame, m.command, m.current,
+            m.autocontinue, m.param1, m.param2, m.param3, m.param4, x, y, m.z,
+            getattr(m, "mission_type", 0))
+        as_int._header = m._header
+        return self._on_mission_item_int(as_int, link, peer, wall_us)
 
     def _on_mission_item_int(self, m, link, peer, wall_us):
         up = self._upload
         if up is None:
             return []
+        mtype = up.mission_type
         expected = len(up.items)
         if m.seq != expected:
             return [self._request_item(expected)]  # out of order: ask again for ours
+        if m.frame not in SUPPORTED_FRAMES:  # PX4 answers this item at once
+            self._upload = None
+            self.cmd.text(cm.Severity.CRITICAL,
+                          f"Mission rejected: item {m.seq}: frame {m.frame} unsupported"[:50])
+            return [self._mission_ack(m, mav.MAV_MISSION_UNSUPPORTED_FRAME, link, peer, mtype)]
         up.items.append(m)
         up.last_request_wall_us = wall_us
         up.retries = 0
         if len(up.items) < up.count:
             return [self._request_item(len(up.items))]
-        try:
-            items = [self._to_mission_item(it) for it in up.items]
-        except ValueError as exc:
-            self._upload = None
-            self.cmd.text(cm.Severity.CRITICAL, f"Mission rejected: {exc}"[:50])
-            return [self._mission_ack(m, mav.MAV_MISSION_INVALID, link, peer)]
-        self._raw_mission = list(up.items)
         self._upload = None
-        self.cmd.set_mission(items)
-        return [self._mission_ack(m, mav.MAV_MISSION_ACCEPTED, link, peer)]
+        try:
+            self._apply_upload(mtype, up.items)
+        except (ValueError, FenceError) as exc:
+            what = {mav.MAV_MISSION_TYPE_FENCE: "Fence",
+                    mav.MAV_MISSION_TYPE_RALLY: "Rally points"}.get(mtype, "Mission")
+            self.cmd.text(cm.Severity.CRITICAL, f"{what} rejected: {exc}"[:50])
+            return [self._mission_ack(m, mav.MAV_MISSION_INVALID, link, peer, mtype)]
+        return [self._mission_ack(m, mav.MAV_MISSION_ACCEPTED, link, peer, mtype)]
 
-    def _to_mission_item(self, it) -> MissionItem:
+    def _apply_upload(self, mtype: int, items: list) -> None:
+        """Hand a complete upload of one type to the commander (ValueError / FenceError:
+        refused as a whole, nothing changed)."""
+        if mtype == mav.MAV_MISSION_TYPE_MISSION:
+            self.cmd.set_mission([self._to_mission_item(it) for it in items])
+        elif mtype == mav.MAV_MISSION_TYPE_FENCE:
+            self.cmd.set_fence(self._to_fence(items))
+        else:
+            self.cmd.set_rally([self._to_rally_point(it) for it in items])
+        self._stored[mtype] = list(items)
+
+    def _item_position(self, it) -> tuple:
+        """An item's position in the local ENU frame (NaN where not given)."""
         nan = math.nan
-        if it.frame in (mav.MAV_FRAME_GLOBAL_INT, mav.MAV_FRAME_GLOBAL_RELATIVE_ALT_INT,
-                        mav.MAV_FRAME_GLOBAL, mav.MAV_FRAME_GLOBAL_RELATIVE_ALT):
+        if it.frame in GLOBAL_FRAMES:
             lat, lon = it.x * 1e-7, it.y * 1e-7  # MISSION_ITEM_INT: degE7 in any global frame
             if (lat == 0 and lon == 0) or not (math.isfinite(lat) and math.isfinite(lon)):
                 xy = (nan, nan)
@@ -766,13 +816,16 @@ class VehicleAgent:
                 p = self.geo.to_local(lat, lon, self.geo.alt_m)
                 xy = (p[0], p[1])
             z = self._alt_to_local(it.z, it.frame) if math.isfinite(it.z) else nan
-            pos = (xy[0], xy[1], z)
-        elif it.frame == mav.MAV_FRAME_LOCAL_NED:  # MISSION_ITEM_INT: x, y in m * 1e4
-            pos = tuple(frames.ned_to_enu([it.x * 1e-4, it.y * 1e-4, it.z]) + self.origin)
-        elif it.frame == mav.MAV_FRAME_MISSION:
-            pos = (nan, nan, nan)
-        else:
-            raise ValueError(f"item {it.seq}: frame {it.frame} not supported")
+            return (xy[0], xy[1], z)
+        if it.frame == mav.MAV_FRAME_LOCAL_NED:  # MISSION_ITEM_INT: x, y in m * 1e4
+            return tuple(frames.ned_to_enu([it.x * 1e-4, it.y * 1e-4, it.z]) + self.origin)
+        if it.frame == mav.MAV_FRAME_MISSION:
+            return (nan, nan, nan)
+        raise ValueError(f"item {it.seq}: frame {it.frame} not supported")
+
+    def _to_mission_item(self, it) -> MissionItem:
+        nan = math.nan
+        pos = self._item_position(it)
         if it.command == mav.MAV_CMD_NAV_WAYPOINT:
             yaw = frames.yaw_ned_to_enu(math.radians(it.param4)) if math.isfinite(it.param4) \
                 else nan
@@ -785,31 +838,80 @@ class VehicleAgent:
             return MissionItem(it.command, speed_m_s=it.param2)
         return MissionItem(it.command, pos)
 
+    def _to_fence(self, items: list) -> Fence:
+        """Fence items in order: a polygon is param1 consecutive vertices of one kind."""
+        fence = Fence()
+        k = 0
+        while k < len(items):
+            it = items[k]
+            where = f"item {it.seq}"
+            if it.command in (mav.MAV_CMD_NAV_FENCE_POLYGON_VERTEX_INCLUSION,
+                              mav.MAV_CMD_NAV_FENCE_POLYGON_VERTEX_EXCLUSION):
+                n = int(it.param1) if math.isfinite(it.param1) else 0
+                group = items[k:k + n]
+                if n < 3 or len(group) < n or any(g.command != it.command for g in group):
+                    raise FenceError(f"{where}: a polygon of {it.param1:g} vertices needs "
+                                     f"that many vertex items in a row")
+                xy = [self._item_position(g)[:2] for g in group]
+                fence.areas.append(polygon(xy, it.command ==
+                                           mav.MAV_CMD_NAV_FENCE_POLYGON_VERTEX_INCLUSION,
+                                           where))
+                k += n
+                continue
+            if it.command in (mav.MAV_CMD_NAV_FENCE_CIRCLE_INCLUSION,
+                              mav.MAV_CMD_NAV_FENCE_CIRCLE_EXCLUSION):
+                fence.areas.append(circle(self._item_position(it)[:2], it.param1,
+                                          it.command == mav.MAV_CMD_NAV_FENCE_CIRCLE_INCLUSION,
+                                          where))
+            elif it.command == mav.MAV_CMD_NAV_FENCE_RETURN_POINT:
+                p = np.array(self._item_position(it))
+                if not np.all(np.isfinite(p[:2])):
+                    raise FenceError(f"{where}: the return point is not a finite position")
+                fence.return_point = p
+            else:
+                raise FenceError(f"{where}: command {it.command} is not a fence item")
+            k += 1
+        return fence
+
+    def _to_rally_point(self, it) -> np.ndarray:
+        if it.command != mav.MAV_CMD_NAV_RALLY_POINT:
+            raise FenceError(f"item {it.seq}: command {it.command} is not a rally point")
+        p = np.array(self._item_position(it))
+        if not np.all(np.isfinite(p[:2])):
+            raise FenceError(f"item {it.seq}: the rally point is not a finite position")
+        if not math.isfinite(p[2]):
+            p[2] = self.cmd.home[2]
+        return p
+
     def _on_mission_request_list(self, m, link, peer, wall_us):
         mtype = getattr(m, "mission_type", 0)
-        if mtype != mav.MAV_MISSION_TYPE_MISSION:
-            return [Outgoing(mav.MAVLink_mission_count_message(
-                m.get_srcSystem(), m.get_srcComponent(), 0, mtype), link, peer)]
+        count = len(self._stored.get(mtype, []))
         return [Outgoing(mav.MAVLink_mission_count_message(
-            m.get_srcSystem(), m.get_srcComponent(), len(self._raw_mission), 0), link, peer)]
+            m.get_srcSystem(), m.get_srcComponent(), count, mtype), link, peer)]
 
     def _on_mission_request(self, m, link, peer, wall_us):
-        if getattr(m, "mission_type", 0) != mav.MAV_MISSION_TYPE_MISSION:
+        mtype = getattr(m, "mission_type", 0)
+        stored = self._stored.get(mtype)
+        if stored is None:
             return []
-        if not 0 <= m.seq < len(self._raw_mission):
-            return [self._mission_ack(m, mav.MAV_MISSION_INVALID_SEQUENCE, link, peer)]
-        it = self._raw_mission[m.seq]
+        if not 0 <= m.seq < len(stored):
+            return [self._mission_ack(m, mav.MAV_MISSION_INVALID_SEQUENCE, link, peer, mtype)]
+        it = stored[m.seq]
+        current = 1 if mtype == mav.MAV_MISSION_TYPE_MISSION and it.seq == self.cmd.mission_seq \
+            else 0
         return [Outgoing(mav.MAVLink_mission_item_int_message(
             m.get_srcSystem(), m.get_srcComponent(), it.seq, it.frame, it.command,
-            1 if it.seq == self.cmd.mission_seq else 0, it.autocontinue, it.param1, it.param2,
-            it.param3, it.param4, it.x, it.y, it.z, 0), link, peer)]
+            current, it.autocontinue, it.param1, it.param2,
+            it.param3, it.param4, it.x, it.y, it.z, mtype), link, peer)]
 
     def _on_mission_clear_all(self, m, link, peer, wall_us):
         mtype = getattr(m, "mission_type", 0)
-        if mtype in (mav.MAV_MISSION_TYPE_MISSION, mav.MAV_MISSION_TYPE_ALL):
-            self._raw_mission = []
+        cleared = MISSION_TYPES if mtype == mav.MAV_MISSION_TYPE_ALL else \
+            (mtype,) if mtype in MISSION_TYPES else ()
+        for t in cleared:
+            self._apply_upload(t, [])
+        if cleared:
             self._upload = None
-            self.cmd.set_mission([])
         return [self._mission_ack(m, mav.MAV_MISSION_ACCEPTED, link, peer, mtype)]
 
     def _on_mission_set_current(self, m, link, peer, wall_us):
@@ -832,7 +934,8 @@ class VehicleAgent:
             self.cmd.text(cm.Severity.WARNING, "Mission upload timed out")
             sysid, compid = self._upload_src
             return [Outgoing(mav.MAVLink_mission_ack_message(
-                sysid, compid, mav.MAV_MISSION_OPERATION_CANCELLED, 0), up.link, up.peer)]
+                sysid, compid, mav.MAV_MISSION_OPERATION_CANCELLED, up.mission_type), up.link,
+                up.peer)]
         return [self._request_item(len(up.items))]
 
     def _on_timesync(self, m, link, peer, wall_us):
@@ -841,6 +944,14 @@ class VehicleAgent:
         # tc1 = 0 would read as a request: at simulated time 0 answer 1 ns
         return [Outgoing(mav.MAVLink_timesync_message(max(1, self.fleet.time_us * 1000), m.ts1),
                          link, peer)]
+
+
+def _deg_e7(v: float) -> int:
+    """A float coordinate as MISSION_ITEM_INT's int32 (out of range: 0, "not given")."""
+    if not math.isfinite(v):
+        return 0
+    r = round(v * 1e7)
+    return r if -2**31 <= r < 2**31 else 0
 
 
 def _f(v: float) -> float:
@@ -878,6 +989,7 @@ _HANDLERS = {
     "PARAM_SET": VehicleAgent._on_param_set,
     "MISSION_COUNT": VehicleAgent._on_mission_count,
     "MISSION_ITEM_INT": VehicleAgent._on_mission_item_int,
+    "MISSION_ITEM": VehicleAgent._on_mission_item,
     "MISSION_REQUEST_LIST": VehicleAgent._on_mission_request_list,
     "MISSION_REQUEST_INT": VehicleAgent._on_mission_request,
     "MISSION_REQUEST": VehicleAgent._on_mission_request,

@@ -286,9 +286,13 @@ class Simulation:
         self._reset_estimate(i)
 
     def _reset_estimate(self, i: int) -> None:
+        """A ring full of the present state, no noise yet: the estimate now (with its
+        biases, as read-outs before the next step see it)."""
         self.est_hist[i, :, :] = self.plant.x[i, :N_HIST]
         self.est[i, E_N:E_N + 12] = 0.0
-        self.xe[i] = self.plant.x[i]
+        estimate_step_one(self.est[i], self.est_hist[i], self.plant.x[i], self.xe[i],
+                          self.steps)
+        self.est[i, E_N:E_N + 12] = 0.0  # (the step's own draw comes when it is flown)
 
     def estimating(self, i: int = 0) -> bool:
         """True when vehicle i's controller flies on an imperfect estimate."""

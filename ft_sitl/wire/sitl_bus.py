@@ -52,6 +52,7 @@ class SitlBus:
         self._armed = None
         self._mode = None
         self._events_seen = 0
+        self._fence_seen = 0
         self.frames_rendered = 0
         self.pub = publisher_factory(self._on_config)
         self.pub.start()
@@ -86,6 +87,10 @@ class SitlBus:
         if mode != self._mode:
             self.event(EventType.MODE, mode=mode)
             self._mode = mode
+        breaches = cmd.fence_events
+        for _t_us, reason, action in breaches[self._fence_seen:]:
+            self.event(EventType.GEOFENCE, reason=reason, action=action)
+        self._fence_seen = len(breaches)
         events = fleet.events
         for ev in events[self._events_seen:]:
             if ev.vehicle == i and ev.kind == GuardEventKind.COLLISION:

@@ -141,3 +141,73 @@ def test_battery_drains_with_flight():
     f.run(20.0)
     assert 0.5 < c.battery.remaining < 0.8
     assert c.battery.voltage() < v0
+
+
+# --- geofence, rally points, a mission started on the ground ---------------------------------
+def _flying(params=None):
+    f = Fleet(P, params=[ParamSet(params or {})])
+    c = f.commanders[0]
+    c.arm()
+    c.takeoff()
+    assert f.run_until(lambda: c.mode_name == "AUTO.LOITER", 15)
+    return f, c
+
+
+@pytest.mark.parametrize("action,mode", [(1, "AUTO.LOITER"), (2, "AUTO.LOITER"),
+                                         (3, "AUTO.RTL"), (4, None), (5, "AUTO.LAND")])
+def test_a_geofence_breach_takes_gf_action(action, mode):
+    from ft_sitl.autopilot.geofence import Fence, circle
+
+    f, c = _flying({"GF_ACTION": action})
+    c.set_fence(Fence([circle([0.0, 0.0], 8.0, True, "test")]))
+    c.reposition(np.array([20.0, 0.0, 2.5]))  # out through the circle's edge
+    f.run_until(lambda: c.fence_events, 20)
+    assert [(r, a) for _, r, a in c.fence_events] == [("outside the fence",
+                                                       cm.GF_ACTIONS[action])]
+    x_breach = f.true_state(0).position[0]
+    assert 7.9 < x_breach < 8.5
+    f.run(3.0)
+    if action == 1:  # a warning: the reposition goes on
+        assert "Geofence breached: outside the fence" in texts(c)
+        assert f.state(0).position[0] > 12.0
+    elif action == 4:
+        assert c.terminated
+    else:
+        assert c.mode_name == mode and f.state(0).position[0] < 11.0
+    assert len(c.fence_events) == 1  # one breach, one action
+
+
+def test_max_distance_and_height_fences_and_rtl_to_the_nearest_rally_point():
+    f, c = _flying({"GF_MAX_VER_DIST": 4.0, "GF_ACTION": 3, "RTL_RETURN_ALT": 3.5})
+    c.set_rally([np.array([6.0, 6.0, 0.0]), np.array([-30.0, 0.0, 0.0])])
+    c.reposition(np.array([8.0, 8.0, 2.5]))
+    assert f.run_until(lambda: np.linalg.norm(f.state(0).position - [8, 8, 2.5]) < 0.2, 20)
+    c.reposition(np.array([8.0, 8.0, 5.0]))  # up through 4 m: RTL
+    assert f.run_until(lambda: c.fence_events, 20)
+    assert c.fence_events[0][1:] == ("more than 4 m above home", "return")
+    assert c.mode_name == "AUTO.RTL"
+    assert f.run_until(lambda: not c.armed, 60)
+    assert "RTL: land at rally point" in texts(c)
+    assert f.true_state(0).position[:2] == pytest.approx([6.0, 6.0], abs=0.3)
+
+
+def test_a_mission_started_on_the_ground_takes_off_first():
+    f = Fleet(P)
+    c = f.commanders[0]
+    c.set_mission([MissionItem(cm.CMD_NAV_WAYPOINT, (10.0, 0.0, 4.0)),
+                   MissionItem(cm.CMD_NAV_LAND, (10.0, 0.0, math.nan))])
+    c.arm()
+    assert c.set_mode(cm.MAIN_AUTO, cm.SUB_MISSION) == Result.ACCEPTED
+    path = []
+    for _ in range(400):
+        f.run(0.1)
+        path.append(f.true_state(0).position.copy())
+        if c.mission_state == MissionState.COMPLETE and not c.armed:
+            break
+    path = np.array(path)
+    assert "Mission: takeoff to 4.0 m first" in texts(c)
+    # straight up before it heads out: no eastward motion below 3.5 m
+    up = int(np.argmax(path[:, 2] >= 3.5))
+    assert up > 0 and np.abs(path[:up, 0]).max() < 0.3
+    assert c.mission_state == MissionState.COMPLETE and not c.armed
+    assert path[-1][:2] == pytest.approx([10.0, 0.0], abs=0.3)

@@ -145,6 +145,7 @@ def test_telemetry_decoder_rejects(payload, message):
     Event("trial_end", 60_000_000, {"outcome": "success", "path_m": 41.2, "ok": True,
                                     "goal": [5.0, 18.0, 1.5], "note": None}),
     Event("battery_low", 30_000_001, {"remaining": 0.15}),
+    Event("geofence", 12_000_000, {"reason": "outside the fence", "action": "return"}),
 ])
 def test_event_round_trip(event):
     payload = encode_event(event)
@@ -173,6 +174,7 @@ def test_event_normalises_numpy_values():
      r"Expected `float`, got `str` - at `\$.speed_m_s`"),
     (("mode", 0, {"mode": ""}), r"Expected `str` of length >= 1 - at `\$.mode`"),
     (("trial_end", 0, {}), "missing required field `outcome`"),
+    (("geofence", 0, {"reason": "outside the fence"}), "missing required field `action`"),
     (("armed", -5, {}), r"time_usec must be in \[0"),
     (("armed", 0, {"t": 1.0}), "field name 't' is reserved"),
     (("armed", 0, {"Bad-Name": 1}), "field name 'Bad-Name' must match"),
