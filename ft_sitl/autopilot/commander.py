@@ -131,6 +131,8 @@ class Battery:
     cells: int
     efficiency: float = 0.7
     used_j: float = 0.0
+    #: an injected battery failure: it reads empty
+    failed: bool = False
 
     @classmethod
     def for_platform(cls, platform: Platform, endurance_s: float) -> Battery:
@@ -145,6 +147,8 @@ class Battery:
 
     @property
     def remaining(self) -> float:
+        if self.failed:
+            return 0.0
         return max(0.0, 1.0 - self.used_j / self.capacity_j)
 
     def voltage(self, current_a: float = 0.0) -> float:
@@ -201,6 +205,8 @@ class Commander:
     rally: list = field(default_factory=list)
     #: every breach: (time_us, reason, action taken)
     fence_events: list = field(default_factory=list)
+    #: injected failures in force: unit name -> (type name, instance) (autopilot.failures)
+    failures: dict = field(default_factory=dict)
 
     def __post_init__(self):
         self._nav = _Nav()
@@ -221,6 +227,7 @@ class Commander:
         self._fence_breached = False
         self._rtl_dest = self.home.copy()
         self._mission_takeoff: np.ndarray | None = None
+        self._gps_lost_us: int | None = None
 
     # --- helpers -------------------------------------------------------------------
     @property
@@ -453,6 +460,7 @@ class Commander:
         self._update_landed(state)
         self._battery_failsafe()
         self._geofence_check(state)
+        self._position_loss_failsafe(state)
         if not self.armed:
             return self._emit(Setpoint.off())
         if self._auto_disarm():
@@ -520,6 +528,42 @@ class Commander:
         elif rem < self.params["BAT_LOW_THR"] and self._bat_warned < 1:
             self._bat_warned = 1
             self.text(Severity.WARNING, "Battery low")
+
+    # --- injected failures --------------------------------------------------------------
+    def record_failure(self, unit: str, ftype: str, instance: int) -> None:
+        """An injected failure (ft_sitl.sim.fleet.Fleet.inject_failure applies its
+        physics); ``ok`` clears the unit."""
+        if ftype == "ok":
+            if self.failures.pop(unit, None) is not None:
+                self.text(Severity.INFO, f"Failure injection: {unit} ok")
+            if unit == "gps":
+                self._gps_lost_us = None
+            if unit == "battery":
+                self.battery.failed = False
+            return
+        self.failures[unit] = (ftype, instance)
+        which = f" {instance}" if instance else ""
+        self.text(Severity.WARNING, f"Failure injection: {unit}{which} {ftype}")
+        if unit == "gps":
+            self._gps_lost_us = self.time_us
+        if unit == "battery":
+            self.battery.failed = True
+
+    def sensor_ok(self, unit: str) -> bool:
+        return unit not in self.failures
+
+    def _position_loss_failsafe(self, s: VehicleState) -> None:
+        """PX4: no position (GPS lost) for COM_POS_FS_DELAY in the air: land."""
+        lost = self._gps_lost_us
+        if lost is None or not self.armed or s.on_ground or self.terminated:
+            return
+        if self.time_us - lost < self.params["COM_POS_FS_DELAY"] * 1e6:
+            return
+        self._gps_lost_us = None  # (once)
+        if self.main_mode == MAIN_AUTO and self.sub_mode == SUB_LAND:
+            return
+        self.text(Severity.CRITICAL, "Failsafe: no position estimate, landing")
+        self.land()
 
     # --- geofence ------------------------------------------------------------------------
     def set_fence(self, fence: Fence) -> None:

@@ -84,6 +84,16 @@ NORMAL_RATES = {
     mav.MAVLINK_MSG_ID_MISSION_CURRENT: 1.0,
 }
 
+#: the SYS_STATUS health bit of each sensor failure injection can turn off
+SENSOR_BITS = {"gyro": mav.MAV_SYS_STATUS_SENSOR_3D_GYRO,
+               "accel": mav.MAV_SYS_STATUS_SENSOR_3D_ACCEL,
+               "mag": mav.MAV_SYS_STATUS_SENSOR_3D_MAG,
+               "baro": mav.MAV_SYS_STATUS_SENSOR_ABSOLUTE_PRESSURE,
+               "gps": mav.MAV_SYS_STATUS_SENSOR_GPS}
+#: what an injected MAVLink signal failure drops (commands still pass, so it can be undone)
+SIGNAL_LOSS_DROPS = ("HEARTBEAT", "SET_POSITION_TARGET_LOCAL_NED",
+                     "SET_POSITION_TARGET_GLOBAL_INT", "SET_ATTITUDE_TARGET")
+
 SENSORS = (
     mav.MAV_SYS_STATUS_SENSOR_3D_GYRO
     | mav.MAV_SYS_STATUS_SENSOR_3D_ACCEL
@@ -317,6 +327,9 @@ class VehicleAgent:
                 health &= ~mav.MAV_SYS_STATUS_PREARM_CHECK
             if self.cmd.fence_breached:
                 health &= ~mav.MAV_SYS_STATUS_GEOFENCE
+            for unit, bit in SENSOR_BITS.items():  # injected sensor failures
+                if not self.cmd.sensor_ok(unit):
+                    health &= ~bit
             return mav.MAVLink_sys_status_message(
                 present, present, health, 200, int(bat.voltage(current) * 1000),
                 int(current * 100), int(round(bat.remaining * 100)), 0, 0, 0, 0, 0, 0)
@@ -346,6 +359,9 @@ class VehicleAgent:
                 int(current * 100), int(bat.used_j / 3.6 / max(bat.voltage(), 1.0)), -1,
                 int(round(bat.remaining * 100)))
         if msg_id == mav.MAVLINK_MSG_ID_GPS_RAW_INT:
+            if not self.cmd.sensor_ok("gps"):  # an injected GPS failure: no fix
+                return mav.MAVLink_gps_raw_int_message(
+                    t_us, mav.GPS_FIX_TYPE_NO_FIX, 0, 0, 0, 65535, 65535, 65535, 65535, 0)
             lat, lon, alt = self.geo.to_global(s.position)
             return mav.MAVLink_gps_raw_int_message(
                 t_us, mav.GPS_FIX_TYPE_3D_FIX, int(round(lat * 1e7)), int(round(lon * 1e7)),
@@ -433,6 +449,8 @@ class VehicleAgent:
         handler = _HANDLERS.get(t)
         if handler is None or not self.for_us(m):
             return []
+        if t in SIGNAL_LOSS_DROPS and not self.cmd.sensor_ok("mavlink_signal"):
+            return []  # an injected MAVLink signal failure
         return handler(self, m, link, peer, wall_us)
 
     # commands --------------------------------------------------------------------------
@@ -491,6 +509,10 @@ class VehicleAgent:
             return c.reposition(target, yaw), []
         if command == mav.MAV_CMD_DO_CHANGE_SPEED:
             return c.change_speed(p[1]), []
+        if command == mav.MAV_CMD_INJECT_FAILURE:
+            if not all(math.isfinite(v) for v in p[:3]):
+                return Result.DENIED, []
+            return self.fleet.inject_failure(self.i, int(p[0]), int(p[1]), int(p[2])), []
         if command == mav.MAV_CMD_MISSION_START:
             if not c.mission:
                 return Result.DENIED, []

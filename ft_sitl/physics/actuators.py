@@ -18,7 +18,10 @@ What a vehicle's motors do differently from their datasheet, set per vehicle
   settings were applied (its command is cut: the rotor spins down with its own lag and
   produces nothing after). The controller keeps allocating for it: the others saturate
   as they try to make up (the row's ``saturation_fraction``), and a quadrotor losing a
-  motor tumbles and falls.
+  motor tumbles and falls;
+- **stuck motor:** motor ``stuck_motor`` (1-based; 0: none) keeps the speed command it
+  had ``stuck_at_s`` after the settings were applied, whatever the controller asks
+  (PX4's failure injection type "stuck").
 
 Degradation and lag are applied once, to the plant's rows; noise and failure by
 :func:`actuator_step_one` in the lockstep kernel between the controller and the plant.
@@ -47,10 +50,14 @@ SCHEMA = Schema((
     Param("fail_motor", 0, "-", (0, 16), doc="a motor that stops (1-based; 0: none)"),
     Param("fail_at_s", 0.0, "s", (0.0, 3600.0),
           doc="when it stops, after the settings were applied"),
+    Param("stuck_motor", 0, "-", (0, 16),
+          doc="a motor whose command freezes (1-based; 0: none)"),
+    Param("stuck_at_s", 0.0, "s", (0.0, 3600.0),
+          doc="when it freezes, after the settings were applied"),
 ))
 
-(A_ON, A_SEED, A_NOISE, A_WMAX, A_FAIL, A_FAIL_K) = range(6)
-N_ACT = 6
+(A_ON, A_SEED, A_NOISE, A_WMAX, A_FAIL, A_FAIL_K, A_STUCK, A_STUCK_K, A_STUCK_W) = range(9)
+N_ACT = 9
 
 
 class Actuators:
@@ -62,7 +69,7 @@ class Actuators:
         self.values = SCHEMA.resolve(values, owner)
         self.owner = owner
         v = self.values
-        for key in ("degraded_motor", "fail_motor"):
+        for key in ("degraded_motor", "fail_motor", "stuck_motor"):
             if n_rotors is not None and v[key] > n_rotors:
                 raise SchemaError(f"{owner}: {key}: {v[key]} must be within 0..{n_rotors} "
                                   f"(the platform's motors)")
@@ -72,7 +79,8 @@ class Actuators:
         v = self.values
         return (v["efficiency"] == 1.0 and (v["degraded_motor"] == 0 or
                                            v["degraded_efficiency"] == 1.0)
-                and v["lag_s"] == 0.0 and v["noise"] == 0.0 and v["fail_motor"] == 0)
+                and v["lag_s"] == 0.0 and v["noise"] == 0.0 and v["fail_motor"] == 0
+                and v["stuck_motor"] == 0)
 
     def efficiencies(self, n_rotors: int) -> np.ndarray:
         v = self.values
@@ -92,7 +100,10 @@ class Actuators:
         a[A_WMAX] = w_max
         a[A_FAIL] = float(v["fail_motor"] - 1)
         a[A_FAIL_K] = float(k0 + round(v["fail_at_s"] / dt))
-        a[A_ON] = 1.0 if (v["noise"] > 0 or v["fail_motor"]) else 0.0
+        a[A_STUCK] = float(v["stuck_motor"] - 1)
+        a[A_STUCK_K] = float(k0 + round(v["stuck_at_s"] / dt))
+        a[A_STUCK_W] = -1.0  # (the frozen command, once it froze)
+        a[A_ON] = 1.0 if (v["noise"] > 0 or v["fail_motor"] or v["stuck_motor"]) else 0.0
         return a
 
 
@@ -108,6 +119,11 @@ def actuator_step_one(ad, w_cmd, k):
         for j in range(w_cmd.shape[0]):
             if w_cmd[j] > 0.0:  # armed (a zero command stops the motor: left alone)
                 w_cmd[j] = max(w_cmd[j] + sigma * gauss(seed, k, j), 1e-9)
+    stuck = np.int64(ad[A_STUCK])
+    if stuck >= 0 and k >= np.int64(ad[A_STUCK_K]):
+        if ad[A_STUCK_W] < 0.0:
+            ad[A_STUCK_W] = w_cmd[stuck]
+        w_cmd[stuck] = ad[A_STUCK_W]
     fail = np.int64(ad[A_FAIL])
     if fail >= 0 and k >= np.int64(ad[A_FAIL_K]):
         w_cmd[fail] = 0.0

@@ -13,7 +13,14 @@ from collections.abc import Sequence
 
 import numpy as np
 
-from ft_sitl.autopilot.commander import MAIN_OFFBOARD, Commander, Severity, VehicleState
+from ft_sitl.autopilot import failures
+from ft_sitl.autopilot.commander import (
+    MAIN_OFFBOARD,
+    Commander,
+    Result,
+    Severity,
+    VehicleState,
+)
 from ft_sitl.autopilot.params import ParamSet
 from ft_sitl.autopilot.setpoints import Setpoint
 from ft_sitl.physics import dynamics as d
@@ -120,6 +127,37 @@ class Fleet:
             on_ground=self.sim.on_ground(i),
             tilt=math.acos(min(1.0, max(-1.0, c))),
         )
+
+    def inject_failure(self, i: int, unit: int, ftype: int, instance: int = 0) -> Result:
+        """PX4's MAV_CMD_INJECT_FAILURE for vehicle i (MAVLink's FAILURE_UNIT and
+        FAILURE_TYPE values; ft_sitl.autopilot.failures says what each does): DENIED unless
+        SYS_FAILURE_EN is 1, UNSUPPORTED for what is not simulated (a STATUSTEXT says
+        why), else applied now and ACCEPTED."""
+        cmd = self.commanders[i]
+        cmd.time_us = self.sim.time_us
+        if int(self.params[i]["SYS_FAILURE_EN"]) != 1:
+            cmd.text(Severity.CRITICAL, "Failure injection disabled (SYS_FAILURE_EN)")
+            return Result.DENIED
+        try:
+            u, t, inst = failures.check(unit, ftype, instance, self.sim.platforms[i].n_rotors)
+        except failures.FailureError as exc:
+            cmd.text(Severity.WARNING, f"Failure injection: {exc}"[:50])
+            return Result.UNSUPPORTED
+        if u == "motor":
+            act = dict(self.sim.actuator_settings[i] or {})
+            for key in ("fail_motor", "stuck_motor", "degraded_motor"):
+                if t == "ok" and (inst == 0 or act.get(key) == inst):
+                    act[key] = 0
+            if t == "off":
+                act.update(fail_motor=inst, fail_at_s=0.0)
+            elif t == "stuck":
+                act.update(stuck_motor=inst, stuck_at_s=0.0)
+            elif t in ("wrong", "slow"):
+                act.update(degraded_motor=inst,
+                           degraded_efficiency=failures.DEGRADED_EFFICIENCY)
+            self.sim.set_actuators(i, act, seed=i)
+        cmd.record_failure(u, t, inst)
+        return Result.ACCEPTED
 
     def refresh_params(self) -> None:
         """Apply parameter changes to the cascade."""

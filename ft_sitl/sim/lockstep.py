@@ -182,6 +182,7 @@ class Simulation:
         self._k_done = np.zeros(n, dtype=np.int64)
         self.wind = np.zeros((n, N_WIND))  # no wind: the kernel skips the stage
         self.act = np.zeros((n, N_ACT))  # nominal actuators: likewise
+        self.actuator_settings: list[dict | None] = [None] * n  # (as last set)
         self.est = np.zeros((n, N_EST))  # the truth as estimate: likewise
         # the estimates and the rings of past states, allocated by the first set_estimator
         self.xe = np.zeros((n, self.plant.x.shape[1]))
@@ -265,6 +266,7 @@ class Simulation:
             actuators = Actuators(actuators, n_rotors=n_rot)
         apply_constant(actuators, self.plant.prm[i], self.plant.alloc[i],
                        self._nominal[0][i], self._nominal[1][i])
+        self.actuator_settings[i] = dict(actuators.values)
         self.act[i] = actuators.row(self.dt, self.platforms[i].rotor_speed_max_rad_s, seed,
                                     self.steps)
 

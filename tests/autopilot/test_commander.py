@@ -211,3 +211,55 @@ def test_a_mission_started_on_the_ground_takes_off_first():
     assert up > 0 and np.abs(path[:up, 0]).max() < 0.3
     assert c.mission_state == MissionState.COMPLETE and not c.armed
     assert path[-1][:2] == pytest.approx([10.0, 0.0], abs=0.3)
+
+
+# --- failure injection (Fleet.inject_failure, as MAV_CMD_INJECT_FAILURE) -----------------------
+GPS, BATTERY, MOTOR, GYRO, RC = 4, 100, 101, 0, 104
+OK, OFF, STUCK, WRONG, GARBAGE = 0, 1, 2, 4, 3
+
+
+def test_failure_injection_needs_sys_failure_en_and_refuses_what_is_not_simulated():
+    f, c = _flying()
+    assert f.inject_failure(0, MOTOR, OFF, 1) == Result.DENIED
+    assert "Failure injection disabled (SYS_FAILURE_EN)" in texts(c)
+    f.params[0].set("SYS_FAILURE_EN", 1)
+    assert f.inject_failure(0, RC, OFF, 0) == Result.UNSUPPORTED
+    assert f.inject_failure(0, GPS, GARBAGE, 0) == Result.UNSUPPORTED
+    assert f.inject_failure(0, MOTOR, OFF, 7) == Result.UNSUPPORTED  # a quad has 4
+    assert f.inject_failure(0, 77, OFF, 0) == Result.UNSUPPORTED
+    assert c.failures == {}
+
+
+def test_gps_loss_lands_after_the_delay_and_battery_loss_lands_at_once():
+    f, c = _flying({"SYS_FAILURE_EN": 1, "COM_POS_FS_DELAY": 2.0})
+    assert f.inject_failure(0, GPS, OFF, 0) == Result.ACCEPTED
+    assert not c.sensor_ok("gps")
+    f.run(1.5)
+    assert c.mode_name == "AUTO.LOITER"  # not yet
+    f.run(1.0)
+    assert c.mode_name == "AUTO.LAND" and "Failsafe: no position estimate, landing" in texts(c)
+    f2, c2 = _flying({"SYS_FAILURE_EN": 1})
+    assert f2.inject_failure(0, BATTERY, OFF, 0) == Result.ACCEPTED
+    f2.run(0.1)
+    assert c2.mode_name == "AUTO.LAND" and c2.battery.remaining == 0.0
+    assert f2.inject_failure(0, BATTERY, OK, 0) == Result.ACCEPTED
+    assert c2.battery.remaining > 0.9 and "battery" not in c2.failures
+
+
+def test_a_motor_off_stuck_or_weak_is_flown_by_the_physics():
+    f, c = _flying({"SYS_FAILURE_EN": 1})
+    assert f.inject_failure(0, MOTOR, STUCK, 2) == Result.ACCEPTED
+    w_stuck = f.sim.w_cmd[0, 1]
+    c.reposition(np.array([3.0, 0.0, 2.5]))
+    f.run(0.3)
+    assert f.sim.w_cmd[0, 1] == w_stuck  # frozen while the others work
+    assert f.inject_failure(0, MOTOR, OK, 2) == Result.ACCEPTED
+    f.run(0.3)
+    assert f.sim.w_cmd[0, 1] != w_stuck
+    assert f.inject_failure(0, MOTOR, WRONG, 3) == Result.ACCEPTED
+    assert f.sim.actuator_settings[0]["degraded_efficiency"] == 0.5
+    assert f.inject_failure(0, MOTOR, OFF, 1) == Result.ACCEPTED
+    f.run(1.0)
+    assert f.sim.rotor_speeds(0)[0] < 1.0
+    assert f.true_state(0).position[2] < 1.5 or c.crashed  # a quad without a motor falls
+    assert set(c.failures) == {"motor"}
