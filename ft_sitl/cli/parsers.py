@@ -16,7 +16,8 @@ from ft_sitl.bridge import ARDUPILOT_DEFAULT_PORT
 from ft_sitl.scenarios.render import DEFAULT_DPI  # numpy only: cheap at start-up
 
 ACTUATORS_HELP = ("imperfect actuators as KEY=VALUE,... (efficiency, degraded_motor, "
-                  "degraded_efficiency, lag_s, noise, fail_motor, fail_at_s; "
+                  "degraded_efficiency, lag_s, noise, fail_motor, fail_at_s, stuck_motor, "
+                  "stuck_at_s; "
                   "docs/platforms.md, Actuator imperfection)")
 
 
