@@ -32,11 +32,14 @@ MAIN_MANUAL, MAIN_ALTCTL, MAIN_POSCTL, MAIN_AUTO, MAIN_ACRO, MAIN_OFFBOARD, MAIN
     1, 2, 3, 4, 5, 6, 7,
 )
 SUB_READY, SUB_TAKEOFF, SUB_LOITER, SUB_MISSION, SUB_RTL, SUB_LAND = 1, 2, 3, 4, 5, 6
+#: PX4's position-mode sub mode of an orbit (MAV_CMD_DO_ORBIT)
+SUB_POSCTL_ORBIT = 1
 
 MODE_NAMES = {
     (MAIN_MANUAL, 0): "MANUAL",
     (MAIN_ALTCTL, 0): "ALTCTL",
     (MAIN_POSCTL, 0): "POSCTL",
+    (MAIN_POSCTL, SUB_POSCTL_ORBIT): "POSCTL.ORBIT",
     (MAIN_AUTO, SUB_READY): "AUTO.READY",
     (MAIN_AUTO, SUB_TAKEOFF): "AUTO.TAKEOFF",
     (MAIN_AUTO, SUB_LOITER): "AUTO.LOITER",
@@ -97,6 +100,9 @@ class Severity(IntEnum):
 # MAV_CMD ids of the mission items the navigator executes
 #: GF_ACTION's values (PX4's geofence_result constants), by name
 GF_ACTIONS = {0: "none", 1: "warning", 2: "hold", 3: "return", 4: "terminate", 5: "land"}
+
+#: DO_ORBIT's limits and default speed (PX4: MC_ORBIT_RAD_MAX's default, its 1 m minimum)
+ORBIT_MIN_RADIUS_M, ORBIT_MAX_RADIUS_M, ORBIT_DEFAULT_SPEED_M_S = 1.0, 1000.0, 1.0
 
 CMD_NAV_WAYPOINT = 16
 CMD_NAV_RETURN_TO_LAUNCH = 20
@@ -228,6 +234,8 @@ class Commander:
         self._rtl_dest = self.home.copy()
         self._mission_takeoff: np.ndarray | None = None
         self._gps_lost_us: int | None = None
+        #: an orbit: (centre, signed radius, speed, yaw behaviour, initial yaw)
+        self.orbit_state: tuple | None = None
 
     # --- helpers -------------------------------------------------------------------
     @property
@@ -412,6 +420,53 @@ class Commander:
         self._nav = _Nav(target=target, yaw=yaw if math.isfinite(yaw) else self._yaw(),
                          phase="goto", t_phase_us=self.time_us)
         return Result.ACCEPTED
+
+    # --- orbit ---------------------------------------------------------------------------
+    def orbit(self, center: np.ndarray, radius_m: float, speed_m_s: float,
+              yaw_behaviour: int) -> Result:
+        """MAV_CMD_DO_ORBIT: circle ``center`` (local ENU; NaN x/y: the current position,
+        NaN z: the current altitude) at ``radius_m`` (positive: clockwise seen from above,
+        PX4's sign) and ``speed_m_s`` (NaN: ORBIT_DEFAULT_SPEED); ``yaw_behaviour`` is
+        MAVLink's ORBIT_YAW_BEHAVIOUR. Mode POSCTL.ORBIT, as PX4."""
+        if not self.armed or self.landed_state == LandedState.ON_GROUND:
+            return self._deny("Orbit denied: not flying", Result.TEMPORARILY_REJECTED)
+        if not math.isfinite(radius_m) or not ORBIT_MIN_RADIUS_M <= abs(radius_m) \
+                <= ORBIT_MAX_RADIUS_M:
+            return self._deny(f"Orbit denied: radius must be {ORBIT_MIN_RADIUS_M:g} to "
+                              f"{ORBIT_MAX_RADIUS_M:g} m", Result.DENIED)
+        p = self._pos()
+        c = np.array([center[i] if math.isfinite(center[i]) else p[i] for i in range(3)])
+        speed = abs(speed_m_s) if math.isfinite(speed_m_s) and speed_m_s != 0 \
+            else ORBIT_DEFAULT_SPEED_M_S
+        # the centripetal acceleration within MPC_ACC_HOR_MAX, the speed within the cap
+        speed = min(speed, self.params["MPC_XY_VEL_MAX"],
+                    math.sqrt(self.params["MPC_ACC_HOR_MAX"] * abs(radius_m)))
+        self.orbit_state = (c, float(radius_m), speed, int(yaw_behaviour), self._yaw())
+        self._set_mode(MAIN_POSCTL, SUB_POSCTL_ORBIT)
+        self.text(Severity.INFO, f"Orbit: radius {abs(radius_m):.1f} m at {speed:.1f} m/s")
+        return Result.ACCEPTED
+
+    def _orbit_setpoint(self, s: VehicleState) -> Setpoint:
+        c, r, v, yaw_mode, yaw0 = self.orbit_state
+        d = s.position[:2] - c[:2]
+        dist = float(np.hypot(*d))
+        er = d / dist if dist > 1e-3 else np.array([1.0, 0.0])
+        # positive radius: clockwise seen from above (east-north plane: -90 deg from e_r)
+        et = np.array([er[1], -er[0]]) if r > 0 else np.array([-er[1], er[0]])
+        radial = _clamp_abs(self.params["MPC_XY_P"] * (abs(r) - dist), self._cruise())
+        vel = v * et + radial * er
+        acc = -(v * v / abs(r)) * er if abs(abs(r) - dist) < 0.2 * abs(r) else np.zeros(2)
+        if yaw_mode == 0:  # front to the centre
+            yaw = math.atan2(-er[1], -er[0])
+        elif yaw_mode == 3:  # front along the tangent
+            yaw = math.atan2(et[1], et[0])
+        elif yaw_mode == 2:  # uncontrolled: wherever it points
+            yaw = math.nan
+        else:  # the initial heading (1; RC-controlled, 4, without RC)
+            yaw = yaw0
+        return Setpoint.trajectory(position=[math.nan, math.nan, c[2]],
+                                   velocity=[vel[0], vel[1], math.nan],
+                                   acceleration=[acc[0], acc[1], math.nan], yaw=yaw)
 
     def change_speed(self, speed_m_s: float) -> Result:
         if not math.isfinite(speed_m_s) or speed_m_s <= 0:
@@ -628,6 +683,11 @@ class Commander:
                 return sp
         if self.main_mode == MAIN_AUTO:
             return self._auto_setpoint(s)
+        if (self.main_mode, self.sub_mode) == (MAIN_POSCTL, SUB_POSCTL_ORBIT):
+            if s.on_ground or self.orbit_state is None:
+                self._set_mode(MAIN_POSCTL)
+            else:
+                return self._orbit_setpoint(s)
         # POSCTL / ALTCTL / MANUAL / STABILIZED / ACRO without sticks: hold
         if s.on_ground:
             self._hold_here()
@@ -820,6 +880,10 @@ class Commander:
             alt = max(target[2], self.home[2] + self.params["MIS_TAKEOFF_ALT"])
             self._mission_takeoff = np.array([p[0], p[1], alt])
             self.text(Severity.INFO, f"Mission: takeoff to {alt - self.home[2]:.1f} m first")
+
+
+def _clamp_abs(v: float, limit: float) -> float:
+    return max(-limit, min(limit, v))
 
 
 def hover_thrust(platform: Platform) -> float:

@@ -28,6 +28,8 @@ from ft_sitl.physics.quaternion import qrotate_inv, qto_euler
 from ft_sitl.sim.fleet import Fleet
 
 COMPID = mav.MAV_COMP_ID_AUTOPILOT1
+#: ORBIT_EXECUTION_STATUS while orbiting, every (simulated) 0.5 s
+ORBIT_STATUS_PERIOD_US = 500_000
 #: the mission protocol's item lists a vehicle keeps (PX4's three)
 MISSION_TYPES = (mav.MAV_MISSION_TYPE_MISSION, mav.MAV_MISSION_TYPE_FENCE,
                  mav.MAV_MISSION_TYPE_RALLY)
@@ -184,6 +186,7 @@ class VehicleAgent:
         self._texts_sent = 0
         self._text_id = 0
         self._reached_sent = 0
+        self._orbit_due_us = 0
         self._upload: _Transfer | None = None
         self._download_items: list = []
         #: MISSION_ITEM_INT messages as uploaded, per mission type (mission, fence, rally)
@@ -431,6 +434,15 @@ class VehicleAgent:
         if key != self._last_mission_current:
             self._last_mission_current = key
             out.append(Outgoing(mc))
+        c = self.cmd
+        if (c.main_mode, c.sub_mode) == (cm.MAIN_POSCTL, cm.SUB_POSCTL_ORBIT) and \
+                self.fleet.time_us >= self._orbit_due_us and c.orbit_state is not None:
+            self._orbit_due_us = self.fleet.time_us + ORBIT_STATUS_PERIOD_US
+            center, radius, _, _, _ = c.orbit_state
+            lat, lon, alt = self.geo.to_global(center)
+            out.append(Outgoing(mav.MAVLink_orbit_execution_status_message(
+                self.fleet.time_us, radius, mav.MAV_FRAME_GLOBAL_INT, int(round(lat * 1e7)),
+                int(round(lon * 1e7)), alt)))
         return out
 
     # --- incoming -------------------------------------------------------------------
@@ -509,6 +521,18 @@ class VehicleAgent:
             return c.reposition(target, yaw), []
         if command == mav.MAV_CMD_DO_CHANGE_SPEED:
             return c.change_speed(p[1]), []
+        if command == mav.MAV_CMD_DO_ORBIT:
+            if is_int:
+                lat, lon = p[4] * 1e-7, p[5] * 1e-7
+            else:
+                lat, lon = p[4], p[5]
+            center = np.array([math.nan, math.nan, math.nan])
+            if math.isfinite(lat) and math.isfinite(lon) and not (lat == 0 and lon == 0):
+                center[:2] = self.geo.to_local(lat, lon, self.geo.alt_m)[:2]
+            if math.isfinite(p[6]):  # PX4 reads an orbit's altitude as AMSL in any frame
+                center[2] = p[6] - self.geo.alt_m
+            yaw_mode = int(p[2]) if math.isfinite(p[2]) else 0
+            return c.orbit(center, p[0], p[1], yaw_mode), []
         if command == mav.MAV_CMD_INJECT_FAILURE:
             if not all(math.isfinite(v) for v in p[:3]):
                 return Result.DENIED, []
