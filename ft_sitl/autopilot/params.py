@@ -165,7 +165,6 @@ _SPECS = [
 ]
 
 
-
 def _load_table(path: Path = _TABLE) -> tuple[dict[str, ParamSpec], dict]:
     """PX4's parameters as the table gives them (all marked stored), and its header."""
     doc = json.loads(path.read_text())
@@ -286,10 +285,6 @@ class ParamSet:
             raise ParamError(f"{name}: {value!r}{unit} is outside {_bounds(spec)}")
         self._values[name] = int(value) if spec.is_int else float(value)
         return self._values[name]
-
-    def changed(self) -> dict[str, float]:
-        """The parameters whose value differs from the default, in :data:`PARAMS` order."""
-        return {n: v for n, v in self._values.items() if v != PARAMS[n].default}
 
     def items(self):
         return self._values.items()
