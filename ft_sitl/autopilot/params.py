@@ -1,17 +1,35 @@
 """PX4-named parameters of the virtual flight controller, each with a unit and bounds.
 
-Defaults are PX4's, except where the FLYINGTRUST protocol fixes a value (marked
-"benchmark"). ``FT_*`` parameters are ft-sitl's own (gain mode, rate-loop bandwidths).
-Setting an unknown name or an out-of-bounds value raises :class:`ParamError`; PX4 refuses
-such a PARAM_SET the same way.
+Two kinds, one declaration each:
+
+* **honoured** (:data:`HONOURED`): the :class:`ParamSpec` list below, the parameters
+  ft-sitl acts on (the cascade's gains and limits, the commander's and navigator's
+  thresholds). Defaults are PX4's, except where the FLYINGTRUST protocol fixes a value
+  (marked "benchmark") or ft-sitl deliberately differs; ``FT_*`` are ft-sitl's own (gain
+  mode, rate-loop bandwidths).
+* **stored**: every other parameter of the PX4 modules ft-sitl emulates, from the table
+  ``data/px4_params.json`` (PX4 :data:`PX4_RELEASE`; built by
+  ``scripts/px4_params_table.py``): accepted, range-checked, remembered and echoed, with
+  no effect on the flight.
+
+A name in both is declared by its ParamSpec; its table row (:data:`PX4_TABLE`) only tells
+where ft-sitl differs from PX4 (:func:`px4_differences`). Setting an unknown name or an
+out-of-bounds value raises :class:`ParamError`; ft-sitl refuses such a PARAM_SET the same
+way.
 """
 
 from __future__ import annotations
 
+import json
 import math
-from dataclasses import dataclass
+import struct
+from dataclasses import dataclass, replace
+from pathlib import Path
 
 from ft_sitl.config import did_you_mean
+
+INT32_MIN, INT32_MAX = -(2**31), 2**31 - 1
+_TABLE = Path(__file__).with_name("data") / "px4_params.json"
 
 
 class ParamError(ValueError):
@@ -20,6 +38,12 @@ class ParamError(ValueError):
 
 @dataclass(frozen=True)
 class ParamSpec:
+    """One parameter. ``lo``/``hi`` are the bounds a set is checked against (for a PX4
+    parameter without a published range: the INT32 range, or +-inf for a FLOAT; 0..1 for a
+    boolean). ``honoured``: ft-sitl acts on it (else it is only stored). ``group`` is
+    PX4's parameter group ("ft-sitl" for ft-sitl's own), ``kind`` "enum", "bitmask",
+    "boolean" or ""."""
+
     name: str
     default: float
     lo: float
@@ -27,6 +51,23 @@ class ParamSpec:
     unit: str
     doc: str
     is_int: bool = False
+    honoured: bool = True
+    group: str = ""
+    kind: str = ""
+
+    @property
+    def px4_type(self) -> str:
+        """PX4's type name: INT32 or FLOAT."""
+        return "INT32" if self.is_int else "FLOAT"
+
+    @property
+    def bounded_lo(self) -> bool:
+        """Whether the lower bound is a real limit (not the type's own range)."""
+        return self.lo > (INT32_MIN if self.is_int else -math.inf)
+
+    @property
+    def bounded_hi(self) -> bool:
+        return self.hi < (INT32_MAX if self.is_int else math.inf)
 
 
 _SPECS = [
@@ -133,7 +174,79 @@ _SPECS = [
     ParamSpec("FT_POS_LOOP_HZ", 50.0, 10.0, 1000.0, "Hz", "position/velocity loop rate"),
 ]
 
-PARAMS: dict[str, ParamSpec] = {s.name: s for s in _SPECS}
+
+def _load_table(path: Path = _TABLE) -> tuple[dict[str, ParamSpec], dict]:
+    """PX4's parameters as the table gives them (all marked stored), and its header."""
+    doc = json.loads(path.read_text())
+    fields = doc["fields"]
+    out: dict[str, ParamSpec] = {}
+    for row in doc["params"]:
+        r = dict(zip(fields, row, strict=True))
+        is_int = r["type"] == "INT32"
+        lo, hi = r["min"], r["max"]
+        if r["kind"] == "boolean":
+            lo, hi = (0 if lo is None else lo), (1 if hi is None else hi)
+        if lo is None:
+            lo = INT32_MIN if is_int else -math.inf
+        if hi is None:
+            hi = INT32_MAX if is_int else math.inf
+        out[r["name"]] = ParamSpec(
+            r["name"], r["default"], lo, hi, r["unit"], r["description"], is_int=is_int,
+            honoured=False, group=r["group"], kind=r["kind"] or "")
+    return out, {k: v for k, v in doc.items() if k != "params"}
+
+
+#: PX4's published parameters of the emulated modules (:data:`PX4_RELEASE`), as given
+PX4_TABLE, _HEADER = _load_table()
+#: the PX4 release (and commit) the table was read from
+PX4_RELEASE: str = _HEADER["px4_release"]
+PX4_COMMIT: str = _HEADER["px4_commit"]
+
+#: the parameters ft-sitl acts on, in declaration order (PX4's group filled in; "ft-sitl"
+#: for ft-sitl's own)
+HONOURED: dict[str, ParamSpec] = {
+    s.name: replace(s, group=PX4_TABLE[s.name].group if s.name in PX4_TABLE
+                    else "ft-sitl" if s.name.startswith("FT_") else "")
+    for s in _SPECS
+}
+#: every parameter: the honoured ones, then the stored ones by name (PARAM_VALUE's index)
+PARAMS: dict[str, ParamSpec] = {
+    **HONOURED, **{n: s for n, s in PX4_TABLE.items() if n not in HONOURED}
+}
+
+
+def px4_differences() -> dict[str, dict[str, tuple]]:
+    """Where an honoured parameter differs from PX4's table: {name: {field: (ft-sitl,
+    PX4)}} over type, default, min and max (None: PX4 publishes no bound); a name PX4's
+    table lacks maps to {"name": (name, None)}. ``FT_*`` are ft-sitl's own and left out."""
+    out: dict[str, dict[str, tuple]] = {}
+    for name, s in HONOURED.items():
+        if name.startswith("FT_"):
+            continue
+        p = PX4_TABLE.get(name)
+        if p is None:
+            out[name] = {"name": (name, None)}
+            continue
+        d = {}
+        if s.is_int != p.is_int:
+            d["type"] = (s.px4_type, p.px4_type)
+        if s.default != p.default:
+            d["default"] = (s.default, p.default)
+        if s.lo != p.lo:
+            d["min"] = (s.lo, p.lo if p.bounded_lo else None)
+        if s.hi != p.hi:
+            d["max"] = (s.hi, p.hi if p.bounded_hi else None)
+        if d:
+            out[name] = d
+    return out
+
+
+def _f32(x: float) -> float:
+    """x rounded to float32, as PX4 stores a FLOAT (and MAVLink carries it)."""
+    if not math.isfinite(x):
+        return x
+    return struct.unpack("<f", struct.pack("<f", x))[0]
+
 
 #: the controller-gain modes by name: FT_GAIN_MODE's values as a campaign's ``gains`` key and
 #: a trial spec's ``gains`` field name them (docs/control.md, "Gain modes")
@@ -173,10 +286,13 @@ class ParamSet:
             raise ParamError(f"{name}: {value!r} is not finite")
         if spec.is_int and value != int(value):
             raise ParamError(f"{name}: {value!r} must be an integer")
-        if not spec.lo <= value <= spec.hi:
-            raise ParamError(
-                f"{name}: {value!r} {spec.unit} is outside [{spec.lo:g}, {spec.hi:g}] {spec.unit}"
-            )
+        # a FLOAT is compared in float32, as it travels: 0.6 sent over MAVLink arrives as
+        # 0.6000000238 and must still pass a bound of 0.6
+        v, lo, hi = (value, spec.lo, spec.hi) if spec.is_int else \
+            (_f32(value), _f32(spec.lo), _f32(spec.hi))
+        if not lo <= v <= hi:
+            unit = f" {spec.unit}" if spec.unit else ""
+            raise ParamError(f"{name}: {value!r}{unit} is outside {_bounds(spec)}")
         self._values[name] = int(value) if spec.is_int else float(value)
         return self._values[name]
 
@@ -185,3 +301,10 @@ class ParamSet:
 
     def as_dict(self) -> dict[str, float]:
         return dict(self._values)
+
+
+def _bounds(spec: ParamSpec) -> str:
+    lo = f"{spec.lo:g}" if spec.bounded_lo else "-"
+    hi = f"{spec.hi:g}" if spec.bounded_hi else "-"
+    unit = f" {spec.unit}" if spec.unit else ""
+    return f"[{lo}, {hi}]{unit}"

@@ -127,9 +127,22 @@ def build_parser() -> argparse.ArgumentParser:
 
     par = sub.add_parser("params", help="flight-controller parameters")
     parsub = par.add_subparsers(dest="params_command", metavar="ACTION", required=True)
-    parl = parsub.add_parser("list", help="list PX4-named parameters with defaults and bounds")
+    parl = parsub.add_parser("list", help="list PX4-named parameters with defaults and bounds",
+                             description="Every parameter the flight controller serves: "
+                             "honoured (ft-sitl acts on it) or stored (accepted, remembered "
+                             "and echoed over MAVLink, no effect on the flight).")
     parl.add_argument("--json", action="store_true", help="machine-readable output")
+    which = parl.add_mutually_exclusive_group()
+    which.add_argument("--honoured", action="store_true",
+                       help="only the parameters ft-sitl acts on")
+    which.add_argument("--stored", action="store_true",
+                       help="only the parameters that are merely stored")
     parl.set_defaults(handler="params:cmd_params_list")
+    pars = parsub.add_parser("show", help="one parameter: type, default, range, meaning and "
+                             "how it compares with PX4's")
+    pars.add_argument("name", help="parameter name (ft-sitl params list)")
+    pars.add_argument("--json", action="store_true", help="machine-readable output")
+    pars.set_defaults(handler="params:cmd_params_show")
 
     _add_missions(sub)
     _add_navigators(sub)

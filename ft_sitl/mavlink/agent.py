@@ -113,6 +113,12 @@ SENSORS = (
 
 MISSION_TIMEOUT_US = 1_500_000  # wall time between re-requests during a transfer
 MISSION_RETRIES = 5
+#: PARAM_VALUEs sent per poll while streaming the list: a burst of all ~480 small datagrams
+#: could overrun a client's socket buffer; chunks of this size cannot
+PARAM_STREAM_CHUNK = 40
+#: each parameter's PARAM_VALUE index (PARAMS order)
+PARAM_INDEX = {name: k for k, name in enumerate(PARAMS)}
+PARAM_NAMES = list(PARAMS)
 
 
 @dataclass
@@ -193,6 +199,8 @@ class VehicleAgent:
         self._stored: dict[int, list] = {t: [] for t in MISSION_TYPES}
         self._last_mission_current: tuple | None = None
         self._snap: _Snapshot | None = None
+        # PARAM_REQUEST_LIST answers in progress: (link, peer) -> next index to send
+        self._param_streams: dict[tuple, int] = {}
         # PX4 SITL: each instance's local frame starts where it spawned
         self.origin = np.asarray(self.cmd.home, dtype=float).copy()
 
@@ -724,13 +732,27 @@ class VehicleAgent:
         return []
 
     # parameters ---------------------------------------------------------------------
-    def _param_value(self, name: str, index: int) -> mav.MAVLink_param_value_message:
+    def _param_value(self, name: str) -> mav.MAVLink_param_value_message:
         return mav.MAVLink_param_value_message(
             name.encode("ascii"), _param_wire(name, self.params[name]), _param_type(name),
-            len(PARAMS), index)
+            len(PARAMS), PARAM_INDEX[name])
 
     def _on_param_request_list(self, m, link, peer, wall_us):
-        return [Outgoing(self._param_value(n, k), link, peer) for k, n in enumerate(PARAMS)]
+        # all of them, index 0..count-1, to the asker: the first chunk now, the rest from
+        # poll() (a new request from the same peer starts over)
+        self._param_streams[(link, peer)] = 0
+        return self._stream_params()
+
+    def _stream_params(self) -> list[Outgoing]:
+        out = []
+        for key, start in list(self._param_streams.items()):
+            stop = min(start + PARAM_STREAM_CHUNK, len(PARAM_NAMES))
+            out.extend(Outgoing(self._param_value(n), *key) for n in PARAM_NAMES[start:stop])
+            if stop >= len(PARAM_NAMES):
+                del self._param_streams[key]
+            else:
+                self._param_streams[key] = stop
+        return out
 
     def _param_name(self, raw) -> str:
         if isinstance(raw, bytes):
@@ -738,16 +760,15 @@ class VehicleAgent:
         return raw.split("\x00", 1)[0]
 
     def _on_param_request_read(self, m, link, peer, wall_us):
-        names = list(PARAMS)
         if m.param_index >= 0:
-            if m.param_index >= len(names):
+            if m.param_index >= len(PARAM_NAMES):
                 return []
-            name = names[m.param_index]
+            name = PARAM_NAMES[m.param_index]
         else:
             name = self._param_name(m.param_id)
             if name not in PARAMS:
                 return []
-        return [Outgoing(self._param_value(name, names.index(name)), link, peer)]
+        return [Outgoing(self._param_value(name), link, peer)]
 
     def _on_param_set(self, m, link, peer, wall_us):
         name = self._param_name(m.param_id)
@@ -758,13 +779,13 @@ class VehicleAgent:
         old = self.params[name]
         try:
             self.params.set(name, value)
-            self.fleet.refresh_params()
+            if PARAMS[name].honoured:  # a stored parameter changes nothing to rebuild
+                self.fleet.refresh_params()
         except ParamError as exc:
             self.params.set(name, old)  # refused as a whole: nothing half-applied
             self.fleet.refresh_params()
             self.cmd.text(cm.Severity.WARNING, str(exc)[:50])
-        idx = list(PARAMS).index(name)
-        return [Outgoing(self._param_value(name, idx))]
+        return [Outgoing(self._param_value(name))]
 
     # missions, fences, rally points ----------------------------------------------------
     def _mission_ack(self, m, result: int, link, peer, mission_type=0) -> Outgoing:
@@ -969,7 +990,12 @@ class VehicleAgent:
         return []
 
     def poll(self, wall_us: int) -> list[Outgoing]:
-        """Wall-clock duties: re-request mission items, give up abandoned uploads."""
+        """Wall-clock duties: stream the parameter list on, re-request mission items, give
+        up abandoned uploads."""
+        out = self._stream_params() if self._param_streams else []
+        return out + self._poll_upload(wall_us)
+
+    def _poll_upload(self, wall_us: int) -> list[Outgoing]:
         up = self._upload
         if up is None or wall_us - up.last_request_wall_us < MISSION_TIMEOUT_US:
             return []

@@ -14,7 +14,7 @@ from dataclasses import dataclass, field, replace
 
 from ft_sitl.autopilot.estimator import SCHEMA as ESTIMATOR_SCHEMA
 from ft_sitl.autopilot.estimator import Estimator
-from ft_sitl.autopilot.params import DEFAULT_GAINS, GAIN_MODES, ParamError, ParamSet
+from ft_sitl.autopilot.params import DEFAULT_GAINS, GAIN_MODES, PARAMS, ParamError, ParamSet
 from ft_sitl.missions.perception import SCHEMA as PERCEPTION_SCHEMA
 from ft_sitl.missions.perception import Perception
 from ft_sitl.navigation.base import Limits
@@ -326,7 +326,7 @@ def px4_params(values, owner: str = "params") -> dict | None:
     """A trial's PX4 parameter overrides, checked against the parameter table (names,
     bounds, integers) and sorted by name; None for none. TrialSpecError naming ``owner``
     and the parameter; the parameters the protocol sets are refused with the key that
-    sets them."""
+    sets them, and the stored ones (no effect on the flight) as such."""
     if values is None:
         return None
     if not isinstance(values, dict):
@@ -336,6 +336,10 @@ def px4_params(values, owner: str = "params") -> dict | None:
         if name in PROTOCOL_PARAMS:
             raise TrialSpecError(f"{owner}: {name} is set by the trial protocol: use "
                                  f"{PROTOCOL_PARAMS[name]} instead")
+        if name in PARAMS and not PARAMS[name].honoured:
+            raise TrialSpecError(f"{owner}: {name} is a stored PX4 parameter that ft-sitl "
+                                 f"does not act on, so a trial cannot vary it (see "
+                                 f"'ft-sitl params list --honoured')")
     try:
         ps = ParamSet({k: values[k] for k in values})
     except ParamError as exc:

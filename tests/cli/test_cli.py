@@ -83,6 +83,41 @@ def test_params_list_json():
     rows = {r["name"]: r for r in json.loads(run("params", "list", "--json").stdout)}
     assert rows["MPC_XY_VEL_MAX"]["default"] == 4.0
     assert rows["MPC_TILTMAX_AIR"]["max"] == 89.0
+    assert rows["MPC_XY_VEL_MAX"]["status"] == "honoured" and rows["MPC_XY_VEL_MAX"]["honoured"]
+    rcl = rows["COM_RCL_EXCEPT"]
+    assert (rcl["status"], rcl["honoured"], rcl["type"], rcl["default"], rcl["min"],
+            rcl["max"]) == ("stored", False, "INT32", 0, 0, 31)
+    assert rows["COM_OBL_RC_ACT"]["min"] is None  # PX4 publishes no range
+    assert sum(r["honoured"] for r in rows.values()) == 57 and len(rows) == 479
+
+
+def test_params_filters_and_show(capsys):
+    """In-process (main()): the command's other forms, without a process each."""
+    from ft_sitl.cli import main  # (in-process: the rest of this module runs ft-sitl itself)
+
+    def out(*argv, status=0):
+        assert main(list(argv)) == status
+        return capsys.readouterr()
+
+    honoured = json.loads(out("params", "list", "--json", "--honoured").out)
+    stored = json.loads(out("params", "list", "--json", "--stored").out)
+    assert {r["status"] for r in honoured} == {"honoured"} and len(honoured) == 57
+    assert {r["status"] for r in stored} == {"stored"} and len(stored) == 479 - 57
+    lines = out("params", "list").out.splitlines()
+    assert lines[0].split()[:3] == ["MPC_XY_VEL_MAX", "honoured", "4"]
+    rcl = next(ln for ln in lines if ln.startswith("COM_RCL_EXCEPT "))
+    assert rcl.split()[1:4] == ["stored", "0", "[0,"]
+    text = out("params", "show", "MPC_ACC_HOR_MAX").out
+    assert "honoured" in text and "PX4 v1.15.2: default 5, range [2, 15] m/s^2" in text
+    data = json.loads(out("params", "show", "FLW_TGT_MAX_VEL", "--json").out)
+    assert (data["status"], data["default"], data["max"]) == ("stored", 5.0, 20.0)
+    assert data["px4"]["release"] == "v1.15.2" and data["px4"]["differs"] == []
+    err = out("params", "show", "COM_RCL_EXCPT", status=2).err
+    assert err.count("\n") == 1 and err.startswith(
+        "ft-sitl: error: unknown parameter 'COM_RCL_EXCPT'; did you mean 'COM_RCL_EXCEPT'")
+    with pytest.raises(SystemExit) as exc:
+        main(["params", "list", "--honoured", "--stored"])
+    assert exc.value.code == 2 and "not allowed with" in capsys.readouterr().err
 
 
 def test_demo_flies_and_lands(tmp_path):

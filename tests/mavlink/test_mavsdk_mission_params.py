@@ -10,6 +10,8 @@ from mavsdk.asyncio.plugins.telemetry import TelemetryAsync
 from mavsdk.plugins.mission import MissionItem, MissionPlan
 from mavsdk.plugins.param import ParamError
 
+from ft_sitl.autopilot.params import PARAMS
+
 from .mavsdk_util import connect, first
 from .sitl_harness import running_sitl
 
@@ -75,12 +77,25 @@ def test_parameters_get_set_get_all_and_bounds():
         assert await param.get_param_int("FT_GAIN_MODE") == 0
         await param.set_param_int("MC_AIRMODE", 1)
         assert await param.get_param_int("MC_AIRMODE") == 1
+        # stored PX4 parameters (accepted and echoed, no effect on the flight)
+        await param.set_param_int("COM_RCL_EXCEPT", 4)
+        assert await param.get_param_int("COM_RCL_EXCEPT") == 4
+        await param.set_param_float("FLW_TGT_MAX_VEL", 7.5)
+        assert await param.get_param_float("FLW_TGT_MAX_VEL") == pytest.approx(7.5)
         all_params = await param.get_all_params()
-        names = {p.name for p in all_params.float_params} | {p.name for p in all_params.int_params}
-        assert {"MIS_TAKEOFF_ALT", "RTL_RETURN_ALT", "COM_OF_LOSS_T", "FT_GAIN_MODE"} <= names
+        ints = {p.name: p.value for p in all_params.int_params}
+        floats = {p.name: p.value for p in all_params.float_params}
+        assert len(ints) + len(floats) == len(PARAMS)  # the whole list
+        assert set(ints) == {n for n, s in PARAMS.items() if s.is_int}
+        assert {"MIS_TAKEOFF_ALT", "RTL_RETURN_ALT", "COM_OF_LOSS_T"} <= set(floats)
+        assert (ints["COM_RCL_EXCEPT"], ints["NAV_DLL_ACT"], floats["FLW_TGT_MAX_VEL"]) == \
+            (4, 0, pytest.approx(7.5))
         with pytest.raises(ParamError):
             await param.set_param_float("MPC_XY_VEL_MAX", 99.0)  # out of bounds: refused
         assert await param.get_param_float("MPC_XY_VEL_MAX") == pytest.approx(3.5)
+        with pytest.raises(ParamError):
+            await param.set_param_int("NAV_DLL_ACT", 7)  # PX4's range is 0..6
+        assert await param.get_param_int("NAV_DLL_ACT") == 0
         with pytest.raises(ParamError):
             await param.get_param_float("NO_SUCH_PARAM")
         m.destroy()
@@ -89,3 +104,4 @@ def test_parameters_get_set_get_all_and_bounds():
         asyncio.run(run())
         assert server.fleet.params[0]["MPC_XY_VEL_MAX"] == 3.5
         assert server.fleet.params[0]["MC_AIRMODE"] == 1
+        assert server.fleet.params[0]["COM_RCL_EXCEPT"] == 4
