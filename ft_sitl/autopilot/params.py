@@ -129,11 +129,11 @@ _SPECS = [
     ParamSpec("BAT_LOW_THR", 0.15, 0.12, 0.5, "norm", "low battery warning level"),
     ParamSpec("BAT_CRIT_THR", 0.07, 0.05, 0.25, "norm", "critical battery level (RTL)"),
     ParamSpec("BAT_EMERGEN_THR", 0.05, 0.03, 0.1, "norm", "emergency battery level (land)"),
-    ParamSpec("SYS_FAILURE_EN", 0, 0, 1, "bool", "failure injection (MAV_CMD_INJECT_FAILURE) "
+    ParamSpec("SYS_FAILURE_EN", 0, 0, 1, "", "failure injection (MAV_CMD_INJECT_FAILURE) "
               "allowed", is_int=True),
-    ParamSpec("COM_POS_FS_DELAY", 1.0, 1.0, 100.0, "s",
-              "position loss (GPS failure) time before the failsafe lands"),
-    ParamSpec("GF_ACTION", 2, 0, 5, "enum", "geofence breach action: 0 none, 1 warning, "
+    ParamSpec("COM_POS_FS_DELAY", 1, 1, 100, "s",
+              "position loss (GPS failure) time before the failsafe lands", is_int=True),
+    ParamSpec("GF_ACTION", 2, 0, 5, "", "geofence breach action: 0 none, 1 warning, "
               "2 hold, 3 return, 4 terminate, 5 land", is_int=True),
     ParamSpec("GF_MAX_HOR_DIST", 0.0, 0.0, 10000.0, "m",
               "geofence: maximum horizontal distance from home (0: off)"),

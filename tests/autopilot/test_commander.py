@@ -231,7 +231,7 @@ def test_failure_injection_needs_sys_failure_en_and_refuses_what_is_not_simulate
 
 
 def test_gps_loss_lands_after_the_delay_and_battery_loss_lands_at_once():
-    f, c = _flying({"SYS_FAILURE_EN": 1, "COM_POS_FS_DELAY": 2.0})
+    f, c = _flying({"SYS_FAILURE_EN": 1, "COM_POS_FS_DELAY": 2})
     assert f.inject_failure(0, GPS, OFF, 0) == Result.ACCEPTED
     assert not c.sensor_ok("gps")
     f.run(1.5)

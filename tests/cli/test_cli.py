@@ -88,7 +88,7 @@ def test_params_list_json():
     assert (rcl["status"], rcl["honoured"], rcl["type"], rcl["default"], rcl["min"],
             rcl["max"]) == ("stored", False, "INT32", 0, 0, 31)
     assert rows["COM_OBL_RC_ACT"]["min"] is None  # PX4 publishes no range
-    assert sum(r["honoured"] for r in rows.values()) == 57 and len(rows) == 479
+    assert sum(r["honoured"] for r in rows.values()) == 62 and len(rows) == 479
 
 
 def test_params_filters_and_show(capsys):
@@ -101,8 +101,8 @@ def test_params_filters_and_show(capsys):
 
     honoured = json.loads(out("params", "list", "--json", "--honoured").out)
     stored = json.loads(out("params", "list", "--json", "--stored").out)
-    assert {r["status"] for r in honoured} == {"honoured"} and len(honoured) == 57
-    assert {r["status"] for r in stored} == {"stored"} and len(stored) == 479 - 57
+    assert {r["status"] for r in honoured} == {"honoured"} and len(honoured) == 62
+    assert {r["status"] for r in stored} == {"stored"} and len(stored) == 479 - 62
     lines = out("params", "list").out.splitlines()
     assert lines[0].split()[:3] == ["MPC_XY_VEL_MAX", "honoured", "4"]
     rcl = next(ln for ln in lines if ln.startswith("COM_RCL_EXCEPT "))
