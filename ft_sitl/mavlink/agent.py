@@ -443,9 +443,9 @@ class VehicleAgent:
                 return Result.DENIED, []
             return (c.arm(force) if p[0] > 0.5 else c.disarm(force)), []
         if command == mav.MAV_CMD_NAV_TAKEOFF:
-            alt = p[6]
+            alt = p[6]  # AMSL; lat/lon (p[4], p[5]) and yaw (p[3]) are not used
             local = None if not math.isfinite(alt) else alt - self.geo.alt_m
-            return c.takeoff(local), []
+            return c.nav_takeoff(local), []
         if command == mav.MAV_CMD_NAV_LAND:
             return c.land(), []
         if command == mav.MAV_CMD_NAV_RETURN_TO_LAUNCH:

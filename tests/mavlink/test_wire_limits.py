@@ -1,0 +1,79 @@
+"""What a client cannot break over the wire: a takeoff altitude below home, message
+intervals that would silence the vehicle, a long stall of the server; and BATTERY_STATUS
+for packs of more than ten cells. Real UDP sockets and pymavlink, as a client would.
+
+The vehicles here run as PX4 instance 30 (ports 14570/14610), clear of the ports the
+other MAVLink tests use, so they can run beside them."""
+
+import math
+import time
+
+import pytest
+from pymavlink import mavutil
+from pymavlink.dialects.v20 import common as mav
+
+from .sitl_harness import running_sitl
+
+INSTANCE = 30
+API_PORT = 14540 + INSTANCE  # where the vehicle's API link sends (MAVSDK's udpin port)
+VEHICLE_PORT = 14580 + INSTANCE  # where it listens
+
+
+def client():
+    c = mavutil.mavlink_connection(f"udpin:127.0.0.1:{API_PORT}", source_system=246,
+                                   source_component=191)
+    assert c.wait_heartbeat(timeout=10) is not None
+    return c
+
+
+def wait_msg(c, type_, cond=lambda m: True, timeout=20.0):
+    end = time.time() + timeout
+    while time.time() < end:
+        m = c.recv_match(type=type_, blocking=True, timeout=0.5)
+        if m is not None and cond(m):
+            return m
+    raise AssertionError(f"no {type_} matching within {timeout} s")
+
+
+def ack_of(c, command, timeout=5.0):
+    return wait_msg(c, "COMMAND_ACK", lambda m: m.command == command, timeout)
+
+
+def texts_until(c, needle, timeout=10.0):
+    seen = []
+    end = time.time() + timeout
+    while time.time() < end:
+        m = c.recv_match(type="STATUSTEXT", blocking=True, timeout=0.5)
+        if m is not None:
+            seen.append(m.text)
+            if needle in m.text:
+                return seen
+    raise AssertionError(f"no status text with {needle!r} within {timeout} s: {seen}")
+
+
+def test_takeoff_below_home_climbs_to_the_minimum_takeoff_altitude():
+    # MAVProxy's `takeoff 5` sends NAV_TAKEOFF with param7 = 5 (read by PX4 as AMSL, far
+    # below the 488 m home) and zeros elsewhere; PX4 raises it to MIS_TAKEOFF_ALT above the
+    # vehicle and climbs, instead of "taking off" to -483 m and disarming on the ground
+    with running_sitl(speed_factor=2.0, base_instance=INSTANCE) as server:
+        c = client()
+        c.mav.command_long_send(1, 1, mav.MAV_CMD_COMPONENT_ARM_DISARM, 0, 1, 0, 0, 0, 0, 0, 0)
+        assert ack_of(c, mav.MAV_CMD_COMPONENT_ARM_DISARM).result == mav.MAV_RESULT_ACCEPTED
+        c.mav.command_long_send(1, 0, mav.MAV_CMD_NAV_TAKEOFF, 0, 0, 0, 0, 0, 0, 0, 5.0)
+        assert ack_of(c, mav.MAV_CMD_NAV_TAKEOFF).result == mav.MAV_RESULT_ACCEPTED
+        seen = texts_until(c, "Takeoff to")
+        assert "Using minimum takeoff altitude: 2.50 m" in seen
+        assert "Takeoff to 2.5 m above home" in seen[-1]
+        texts_until(c, "Takeoff complete", timeout=15)
+        # holds there (after a small overshoot), armed
+        wait_msg(c, "GLOBAL_POSITION_INT", lambda m: abs(m.relative_alt - 2500) < 100)
+        cmd = server.fleet.commanders[0]
+        assert cmd.armed and cmd.mode_name == "AUTO.LOITER"
+        # NaN (MAVSDK's takeoff): MIS_TAKEOFF_ALT above where the vehicle is, no complaint
+        c.mav.command_long_send(1, 1, mav.MAV_CMD_NAV_TAKEOFF, 0, 0, 0, 0, math.nan,
+                                math.nan, math.nan, math.nan)
+        assert ack_of(c, mav.MAV_CMD_NAV_TAKEOFF).result == mav.MAV_RESULT_ACCEPTED
+        seen = texts_until(c, "Takeoff to")
+        assert not any("minimum" in t for t in seen)
+        above = float(seen[-1].split("Takeoff to ")[1].split(" m")[0])
+        assert above == pytest.approx(5.0, abs=0.3)
