@@ -90,6 +90,9 @@ SENSORS = (
     | mav.MAV_SYS_STATUS_PREARM_CHECK
 )
 
+MAX_STREAM_HZ = 500.0  # SET_MESSAGE_INTERVAL: the fastest a message is streamed
+HEARTBEAT_MIN_HZ = 1.0  # ... and the slowest the heartbeat may be set to
+
 MISSION_TIMEOUT_US = 1_500_000  # wall time between re-requests during a transfer
 MISSION_RETRIES = 5
 
@@ -482,19 +485,7 @@ class VehicleAgent:
                 c.set_mission_current(int(p[0]))
             return c.set_mode(cm.MAIN_AUTO, cm.SUB_MISSION), []
         if command == mav.MAV_CMD_SET_MESSAGE_INTERVAL:
-            msg_id = int(p[0]) if math.isfinite(p[0]) else -1
-            if self.build_probe(msg_id) is None:
-                return Result.DENIED, []
-            interval = p[1]
-            if not math.isfinite(interval) or interval == 0:
-                hz = (ONBOARD_RATES if link == 0 else NORMAL_RATES).get(msg_id, 0.0)
-            elif interval < 0:
-                hz = 0.0
-            else:
-                hz = 1e6 / interval
-            self.rates[link][msg_id] = min(hz, 500.0)
-            self.next_due[link].setdefault(msg_id, 0)
-            return Result.ACCEPTED, []
+            return self._set_message_interval(p[0], p[1], link), []
         if command == mav.MAV_CMD_REQUEST_MESSAGE:
             msg_id = int(p[0]) if math.isfinite(p[0]) else -1
             m = self.build(msg_id) if msg_id != mav.MAVLINK_MSG_ID_PARAM_VALUE else None
@@ -532,6 +523,29 @@ class VehicleAgent:
                 c.text(cm.Severity.INFO, "Rebooting autopilot")
             return Result.ACCEPTED, []
         return Result.UNSUPPORTED, []
+
+    def _set_message_interval(self, msg_id: float, interval_us: float, link: int) -> Result:
+        """MAV_CMD_SET_MESSAGE_INTERVAL on this link: interval > 0 sets 1e6 / interval Hz (at
+        most MAX_STREAM_HZ), 0 the link's default rate, a negative one (-1) stops the
+        message. DENIED: a message we cannot produce, a non-finite interval, and anything
+        that would send the heartbeat less than once a second (a client must not be able to
+        make the vehicle look dead to every other client on the link)."""
+        if not math.isfinite(msg_id):
+            return Result.DENIED
+        msg_id = int(round(msg_id))  # PX4: (int)(param1 + 0.5f)
+        if not math.isfinite(interval_us) or self.build_probe(msg_id) is None:
+            return Result.DENIED
+        if interval_us == 0:
+            hz = (ONBOARD_RATES if link == 0 else NORMAL_RATES).get(msg_id, 0.0)
+        elif interval_us < 0:
+            hz = 0.0
+        else:
+            hz = min(1e6 / interval_us, MAX_STREAM_HZ)
+        if msg_id == mav.MAVLINK_MSG_ID_HEARTBEAT and hz < HEARTBEAT_MIN_HZ:
+            return Result.DENIED
+        self.rates[link][msg_id] = hz
+        self.next_due[link].setdefault(msg_id, 0)
+        return Result.ACCEPTED
 
     def build_probe(self, msg_id: int):
         try:
