@@ -75,8 +75,6 @@ def wire_task_from_args(args):
 
 
 def cmd_navigate(args) -> int:
-    if not (0.01 <= args.speed_factor <= 100):
-        raise CliError(f"--speed-factor: {args.speed_factor} must be within 0.01..100")
     if args.mqtt:
         option_value("--mqtt", parse_broker_url, args.mqtt)
     wt = wire_task_from_args(args)

@@ -135,6 +135,62 @@ def test_sitl_serves_prints_urls_and_stops_cleanly_on_ctrl_c(tmp_path):
     assert log.stat().st_size > 1000
 
 
+# (arguments, what the one-line error says): every numeric option of sitl, both bridges and
+# navigate is checked as it is parsed (ft_sitl.cli.common.number)
+BAD_NUMBERS = [
+    (["sitl", "--duration", "nan"], "--duration: nan is not a finite number"),
+    (["sitl", "--duration", "-5"], "--duration: -5 must be more than 0"),
+    (["sitl", "--duration", "inf"], "--duration: inf is not a finite number"),
+    (["sitl", "--speed-factor", "nan"], "--speed-factor: nan is not a finite number"),
+    (["sitl", "--speed-factor", "2000"], "--speed-factor: 2000 must be within 0.01..1000"),
+    (["sitl", "--telemetry-rate", "inf"], "--telemetry-rate: inf is not a finite number"),
+    (["sitl", "--instance", "-1"], "--instance: -1 must be within 0..999"),
+    (["sitl", "--instances", "2.5"], "--instances: '2.5' is not an integer"),
+    (["sitl", "--wind-seed", "-3"], "--wind-seed: -3 must be at least 0"),
+    (["bridge", "px4", "--duration", "nan"], "--duration: nan is not a finite number"),
+    (["bridge", "px4", "--speed-factor=-inf"], "--speed-factor: -inf is not a finite number"),
+    (["bridge", "px4", "--instance", "1000"], "--instance: 1000 must be within 0..999"),
+    (["bridge", "ardupilot", "--speed-factor", "0"], "--speed-factor: 0 must be within"),
+    (["bridge", "ardupilot", "--port", "70000"], "--port: 70000 must be within 1..65535"),
+    (["navigate", "--algorithm", "straight", "--speed-factor", "nan"],
+     "--speed-factor: nan is not a finite number"),
+    (["navigate", "--algorithm", "straight", "--max-speed", "0"],
+     "--max-speed: 0 must be more than 0 and at most 20"),
+    (["navigate", "--algorithm", "straight", "--timeout", "inf"],
+     "--timeout: inf is not a finite number"),
+    (["navigate", "--algorithm", "straight", "--connect-timeout", "-1"],
+     "--connect-timeout: -1 must be more than 0"),
+    (["navigate", "--algorithm", "straight", "--heading", "nan"],
+     "--heading: nan is not a finite number"),
+]
+
+
+def test_non_finite_and_out_of_range_numbers_are_one_line_errors(capsys):
+    # `sitl --duration nan` used to serve forever and `--duration -5` to exit 0 at once.
+    # The real command for one case of each command (in parallel: each start costs a
+    # second), the parser in this process for all of them
+    assert EXE
+    real = [BAD_NUMBERS[i] for i in (0, 1, 9, 13, 14)] + [
+        (["sitl", "--home", "nan,8.5,488"], "--home: home latitude: nan")]
+    procs = [subprocess.Popen([EXE, *args], stdout=subprocess.PIPE, stderr=subprocess.PIPE,
+                              text=True) for args, _ in real]
+    for (args, needle), proc in zip(real, procs):
+        try:
+            _, err = proc.communicate(timeout=60)
+        except subprocess.TimeoutExpired:
+            proc.kill()
+            proc.communicate()
+            raise AssertionError(f"{args} did not stop") from None
+        assert proc.returncode == 2, (args, err)
+        assert err.startswith(f"ft-sitl: error: {needle}") and err.count("\n") == 1, err
+    from ft_sitl.cli import main
+
+    for args, needle in BAD_NUMBERS:
+        assert main(args) == 2, args
+        err = capsys.readouterr().err
+        assert err.startswith(f"ft-sitl: error: {needle}") and err.count("\n") == 1, err
+
+
 def test_sitl_bad_arguments_are_one_line_errors():
     for args, needle in ((["--home", "1,2"], "--home"), (["--home", "95,0,0"], "latitude"),
                          (["--instances", "0"], "--instances"), (["--speed-factor", "0"],
