@@ -1,6 +1,7 @@
 """The ft-sitl command as a user runs it: the installed console script, real processes."""
 
 import json
+import os
 import shutil
 import subprocess
 import sys
@@ -189,6 +190,33 @@ def test_non_finite_and_out_of_range_numbers_are_one_line_errors(capsys):
         assert main(args) == 2, args
         err = capsys.readouterr().err
         assert err.startswith(f"ft-sitl: error: {needle}") and err.count("\n") == 1, err
+
+
+def test_mavsdk_is_a_dependency_and_its_absence_is_one_line(tmp_path):
+    # the README's first command installs no extra, yet `navigate` and `campaign run
+    # --transport mavlink` fly MAVSDK clients: it is a core dependency, and if it cannot be
+    # imported all the same, the command says what to install before it starts
+    import tomllib
+
+    project = tomllib.loads((Path(__file__).resolve().parents[2] / "pyproject.toml")
+                            .read_text())["project"]
+    assert any(d.startswith("mavsdk>=") for d in project["dependencies"])
+    stub = tmp_path / "stub" / "mavsdk"
+    stub.mkdir(parents=True)
+    (stub / "__init__.py").write_text(
+        "raise ModuleNotFoundError(\"No module named 'mavsdk'\", name='mavsdk')\n")
+    env = {**os.environ, "PYTHONPATH": os.pathsep.join(
+        [str(stub.parent), *filter(None, [os.environ.get("PYTHONPATH")])])}
+    for args in (["navigate", "--algorithm", "straight", "--goal", "5,0,-2"],
+                 ["campaign", "run", "quick", "--transport", "mavlink", "--limit", "1",
+                  "--out", str(tmp_path / "out")]):
+        proc = subprocess.run([EXE, *args], capture_output=True, text=True, env=env,
+                              timeout=120)
+        assert proc.returncode == 2, (args, proc.stderr)
+        assert proc.stderr.startswith("ft-sitl: error: the MAVSDK client needs the Python "
+                                      "package 'mavsdk'"), proc.stderr
+        assert "pip install 'mavsdk>=4.1'" in proc.stderr and proc.stderr.count("\n") == 1
+    assert not (tmp_path / "out").exists()
 
 
 def test_sitl_bad_arguments_are_one_line_errors():
