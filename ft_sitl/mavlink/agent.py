@@ -326,12 +326,11 @@ class VehicleAgent:
         if msg_id == mav.MAVLINK_MSG_ID_BATTERY_STATUS:
             bat = self.cmd.battery
             current = bat.current_a(self._shaft_power())
-            cell = bat.voltage(current) / bat.cells
-            volts = [int(cell * 1000)] * min(bat.cells, 10) + [65535] * (10 - min(bat.cells, 10))
+            volts, volts_ext = _cell_voltages_mv(bat.voltage(current) / bat.cells, bat.cells)
             return mav.MAVLink_battery_status_message(
                 0, mav.MAV_BATTERY_FUNCTION_ALL, mav.MAV_BATTERY_TYPE_LIPO, 2500, volts,
                 int(current * 100), int(bat.used_j / 3.6 / max(bat.voltage(), 1.0)), -1,
-                int(round(bat.remaining * 100)))
+                int(round(bat.remaining * 100)), voltages_ext=volts_ext)
         if msg_id == mav.MAVLINK_MSG_ID_GPS_RAW_INT:
             lat, lon, alt = self.geo.to_global(s.position)
             return mav.MAVLink_gps_raw_int_message(
@@ -855,6 +854,18 @@ class VehicleAgent:
         # tc1 = 0 would read as a request: at simulated time 0 answer 1 ns
         return [Outgoing(mav.MAVLink_timesync_message(max(1, self.fleet.time_us * 1000), m.ts1),
                          link, peer)]
+
+
+def _cell_voltages_mv(cell_v: float, cells: int) -> tuple[list[int], list[int]]:
+    """BATTERY_STATUS ``voltages`` (cells 1-10) and ``voltages_ext`` (cells 11-14, a
+    MAVLink 2 extension) in mV, as the message definition and PX4's BATTERY_STATUS stream
+    fill them: an absent cell is UINT16_MAX in ``voltages`` but 0 ("not supported", so
+    the extension can be truncated) in ``voltages_ext``, where a measured 0 is sent as 1.
+    Cells past the 14th are not reported."""
+    mv = min(max(int(cell_v * 1000), 0), 65534)
+    volts = [mv if k < cells else 65535 for k in range(10)]
+    ext = [max(mv, 1) if k < cells else 0 for k in range(10, 14)]
+    return volts, ext
 
 
 def _f(v: float) -> float:

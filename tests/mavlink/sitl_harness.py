@@ -14,8 +14,8 @@ PLATFORM = "0.98kg-EGO Planner DIY"
 
 @contextmanager
 def running_sitl(instances: int = 1, speed_factor: float = 1.0, params=None, scenario=None,
-                 estimator=None, **kwargs):
-    p = get_platform(PLATFORM)
+                 estimator=None, platform: str = PLATFORM, **kwargs):
+    p = get_platform(platform)
     if scenario is None:
         spawn, yaw = [[0.0, 2.0 * i, 0.0] for i in range(instances)], None
     else:  # the takeoff point, further vehicles 2 m east

@@ -77,3 +77,28 @@ def test_takeoff_below_home_climbs_to_the_minimum_takeoff_altitude():
         assert not any("minimum" in t for t in seen)
         above = float(seen[-1].split("Takeoff to ")[1].split(" m")[0])
         assert above == pytest.approx(5.0, abs=0.3)
+
+
+def test_battery_status_reports_cells_11_to_14_in_the_extension():
+    # a 12S pack (5.45 kg): cells 1-10 in `voltages`, 11-12 in the MAVLink 2 extension
+    # `voltages_ext`, whose unused cells are 0 (`voltages`' are UINT16_MAX), as PX4 sends
+    with running_sitl(platform="5.45kg-JFRC", base_instance=INSTANCE) as server:
+        assert server.fleet.commanders[0].battery.cells == 12
+        c = client()
+        c.mav.command_long_send(1, 1, mav.MAV_CMD_REQUEST_MESSAGE, 0,
+                                mav.MAVLINK_MSG_ID_BATTERY_STATUS, 0, 0, 0, 0, 0, 0)
+        bat = wait_msg(c, "BATTERY_STATUS", timeout=5)
+        sys_status = wait_msg(c, "SYS_STATUS", timeout=5)
+    cells = list(bat.voltages) + list(bat.voltages_ext[:2])
+    assert all(mv == cells[0] for mv in cells) and 4100 <= cells[0] <= 4200  # full
+    assert list(bat.voltages_ext[2:]) == [0, 0]
+    assert sum(cells) == pytest.approx(sys_status.voltage_battery, abs=12)
+
+
+def test_absent_cells_are_uint16_max_in_voltages_and_0_in_the_extension():
+    from ft_sitl.mavlink.agent import _cell_voltages_mv
+
+    assert _cell_voltages_mv(3.95, 4) == ([3950] * 4 + [65535] * 6, [0, 0, 0, 0])
+    assert _cell_voltages_mv(3.95, 14) == ([3950] * 10, [3950] * 4)
+    assert _cell_voltages_mv(0.0, 12) == ([0] * 10, [1, 1, 0, 0])  # a measured 0 is 1
+
