@@ -188,8 +188,10 @@ def cmd_sitl(args) -> int:
         if broker is not None:
             broker.stop()
     sim_s = fleet.time_us * 1e-6
+    behind = (f"; fell {server.behind_s:.1f} s behind the wall clock (stalls are not made "
+              "up)" if server.behind_s >= 0.05 else "")
     print(f"stopped after {sim_s:.1f} s simulated; achieved speed factor "
           f"{server.achieved_speed_factor:.2f} (asked {args.speed_factor:g}); "
-          f"{server.bad_packets} bad packets dropped", file=sys.stderr)
+          f"{server.bad_packets} bad packets dropped{behind}", file=sys.stderr)
     return 0
 

@@ -102,3 +102,37 @@ def test_absent_cells_are_uint16_max_in_voltages_and_0_in_the_extension():
     assert _cell_voltages_mv(3.95, 14) == ([3950] * 10, [3950] * 4)
     assert _cell_voltages_mv(0.0, 12) == ([0] * 10, [1, 1, 0, 0])  # a measured 0 is 1
 
+
+def test_a_stalled_server_falls_behind_instead_of_bursting():
+    # a 3 s blocking call in the server's event loop (as a suspended process or a slow
+    # disk would stall it): afterwards it answers at once and simulates at its pace, with
+    # at most MAX_CATCH_UP_S made up, instead of running the 3 s backlog in one burst
+    from ft_sitl.mavlink.server import MAX_CATCH_UP_S
+
+    with running_sitl(base_instance=INSTANCE) as server:
+        c = client()
+        wait_msg(c, "HEARTBEAT")
+        stall = {}
+
+        def block_once():
+            if not stall:
+                stall["sim_us"] = server.fleet.time_us
+                time.sleep(3.0)
+                stall["end"] = time.monotonic()
+
+        server.on_chunk = block_once
+        end = time.time() + 10
+        while "end" not in stall and time.time() < end:
+            time.sleep(0.01)
+        assert "end" in stall, "the server never stalled"
+        while c.recv_match(blocking=False) is not None:  # what came before and during
+            pass
+        c.mav.command_long_send(1, 1, mav.MAV_CMD_REQUEST_MESSAGE, 0,
+                                mav.MAVLINK_MSG_ID_AUTOPILOT_VERSION, 0, 0, 0, 0, 0, 0)
+        assert ack_of(c, mav.MAV_CMD_REQUEST_MESSAGE, timeout=1.0).result == \
+            mav.MAV_RESULT_ACCEPTED
+        time.sleep(max(0.0, stall["end"] + 1.0 - time.monotonic()))
+        advanced_s = (server.fleet.time_us - stall["sim_us"]) / 1e6
+        assert 0.6 <= advanced_s <= 1.0 + MAX_CATCH_UP_S + 0.25, advanced_s
+        assert server.behind_s == pytest.approx(3.0 - MAX_CATCH_UP_S, abs=0.3)
+        wait_msg(c, "HEARTBEAT", timeout=2.0)  # and the telemetry goes on
