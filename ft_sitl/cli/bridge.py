@@ -32,7 +32,8 @@ def cmd_bridge_ardupilot(args) -> int:
         out = run_ardupilot_bridge(platform, args.scenario, args.port, args.speed_factor,
                                    host=args.bind, params_path=args.write_params,
                                    on_start=_stop_on_signals, wind=wind_option(args.wind),
-                                   actuators=actuators_option(args.actuators))
+                                   actuators=actuators_option(args.actuators),
+                                   spawn_heading_deg=args.spawn_yaw)
     except (FrameMatchError, ValueError) as exc:
         raise CliError(str(exc)) from None
     except OSError as exc:
@@ -48,7 +49,8 @@ def cmd_bridge_px4(args) -> int:
                        speed_factor=args.speed_factor, ground_truth=args.ground_truth,
                        host=args.bind, platform_files=args.platform_file or (),
                        duration_s=args.duration, wind=wind_option(args.wind),
-                       actuators=actuators_option(args.actuators))
+                       actuators=actuators_option(args.actuators),
+                       spawn_heading_deg=args.spawn_yaw)
     except (ValueError, BridgeError) as exc:
         raise CliError(str(exc)) from None
     return 0

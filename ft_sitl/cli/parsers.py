@@ -293,6 +293,9 @@ def _bridge_options(p) -> None:
                       "turbulence none|light|moderate|severe|standard, gust_m_s, ...; "
                       "docs/platforms.md, Wind)")
     p.add_argument("--actuators", metavar="SETTINGS", help=ACTUATORS_HELP)
+    p.add_argument("--spawn-yaw", type=number("--spawn-yaw", minimum=-360, maximum=360),
+                   metavar="DEG", help="heading the vehicle spawns with, degrees clockwise "
+                   "from north (default: north, or the scenario's start heading)")
 
 
 def _add_bridge(sub) -> None:

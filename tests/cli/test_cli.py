@@ -219,6 +219,16 @@ def test_mavsdk_is_a_dependency_and_its_absence_is_one_line(tmp_path):
     assert not (tmp_path / "out").exists()
 
 
+def test_bridge_spawn_heading_is_north_unless_given():
+    out = run("bridge", "px4", "--spawn-yaw", "45", "--duration", "0.3", "--instance", "777")
+    assert "no scenario, spawn heading 45.0 deg" in out.stdout.splitlines()[0]
+    out = run("bridge", "px4", "--duration", "0.3", "--instance", "777")
+    assert "no scenario, spawn heading 0.0 deg" in out.stdout.splitlines()[0]
+    proc = run("bridge", "ardupilot", "--spawn-yaw", "400", check=False)
+    assert proc.returncode == 2
+    assert proc.stderr == "ft-sitl: error: --spawn-yaw: 400 must be within -360..360\n"
+
+
 def test_sitl_bad_arguments_are_one_line_errors():
     for args, needle in ((["--home", "1,2"], "--home"), (["--home", "95,0,0"], "latitude"),
                          (["--instances", "0"], "--instances"), (["--speed-factor", "0"],
