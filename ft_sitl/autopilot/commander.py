@@ -349,8 +349,7 @@ class Commander:
         if sub == SUB_LOITER:
             self._hold_here()
         elif sub == SUB_TAKEOFF:
-            alt = self.home[2] + self.params["MIS_TAKEOFF_ALT"]
-            self._start_takeoff(alt)
+            self._start_takeoff(self._default_takeoff_alt())
         elif sub == SUB_LAND:
             self._nav = _Nav(target=self._pos(), yaw=self._yaw(), phase="land",
                              t_phase_us=self.time_us)
@@ -367,13 +366,32 @@ class Commander:
             self._item_hold_until = None
 
     def takeoff(self, altitude_m: float | None = None) -> Result:
-        """NAV_TAKEOFF: climb to the altitude (local z, m) or MIS_TAKEOFF_ALT above home."""
+        """Climb to the altitude (local z, m; never down) or, if None or not finite,
+        MIS_TAKEOFF_ALT above the current altitude, at the current horizontal position."""
         if altitude_m is not None and not math.isfinite(altitude_m):
             altitude_m = None
-        alt = self.home[2] + self.params["MIS_TAKEOFF_ALT"] if altitude_m is None else altitude_m
+        alt = self._default_takeoff_alt() if altitude_m is None else altitude_m
         self._set_mode(MAIN_AUTO, SUB_TAKEOFF)
         self._start_takeoff(alt)
         return Result.ACCEPTED
+
+    def nav_takeoff(self, altitude_m: float | None = None) -> Result:
+        """MAV_CMD_NAV_TAKEOFF as PX4's navigator takes it (takeoff.cpp, up to v1.14): the
+        target (local z, m) is at least MIS_TAKEOFF_ALT above the current altitude. A lower
+        one (e.g. a height above home sent as param7, which is AMSL) is raised to that
+        minimum with a critical message; None or NaN means the minimum."""
+        minimum = self._default_takeoff_alt()
+        if altitude_m is not None and math.isfinite(altitude_m) and altitude_m < minimum:
+            if altitude_m < minimum - 0.1:  # PX4: no complaint within 10 cm
+                self.text(Severity.CRITICAL, "Using minimum takeoff altitude: "
+                          f"{self.params['MIS_TAKEOFF_ALT']:.2f} m")
+            altitude_m = minimum
+        return self.takeoff(altitude_m)
+
+    def _default_takeoff_alt(self) -> float:
+        """MIS_TAKEOFF_ALT above the current altitude (PX4: global altitude + MIS_TAKEOFF_ALT;
+        on the ground at home, above home)."""
+        return float(self._pos()[2]) + self.params["MIS_TAKEOFF_ALT"]
 
     def _start_takeoff(self, alt: float) -> None:
         p = self._pos()
@@ -727,7 +745,7 @@ class Commander:
         sub = self.sub_mode
         if sub == SUB_TAKEOFF:
             if nav.target is None:
-                self._start_takeoff(self.home[2] + self.params["MIS_TAKEOFF_ALT"])
+                self._start_takeoff(self._default_takeoff_alt())
                 nav = self._nav
             if s.position[2] >= nav.target[2] - 0.1 and not s.on_ground:
                 self.text(Severity.INFO, "Takeoff complete: holding")

@@ -47,10 +47,11 @@ from pathlib import Path
 
 import numpy as np
 
+from ft_sitl import frames
 from ft_sitl.bridge import ARDUPILOT_DEFAULT_PORT
 from ft_sitl.bridge.ardupilot_frames import motor_mapping_for
 from ft_sitl.bridge.ardupilot_params import ardupilot_params
-from ft_sitl.bridge.vehicle import BridgeVehicle
+from ft_sitl.bridge.vehicle import BridgeVehicle, spawn_yaw_from_heading
 from ft_sitl.physics.catalog import PlatformRegistry
 from ft_sitl.physics.platform import Platform
 from ft_sitl.scenarios.io import scenario_from_spec
@@ -163,11 +164,15 @@ class ArduPilotBridge:
     accel_noise_m_s2: standard deviation of white noise added to accel_body (drawn from
     ``numpy.random.default_rng(seed)``); 0 sends the exact specific force, which is the
     default because ArduPilot's own SITL IMU driver already adds noise to it.
+    spawn_heading_deg: the heading the vehicle spawns with (deg clockwise from north; give
+    ArduPilot's ``--home`` the same heading); None: the scenario's start heading, or north
+    without a scenario.
     """
 
     def __init__(self, platform, *, scenario=None, port: int = DEFAULT_PORT,
                  host: str = "127.0.0.1", speed_factor: float | None = None, seed: int = 0,
-                 physics_hz: int = DEFAULT_PHYSICS_HZ, accel_noise_m_s2: float = 0.0):
+                 physics_hz: int = DEFAULT_PHYSICS_HZ, accel_noise_m_s2: float = 0.0,
+                 spawn_heading_deg: float | None = None):
         if speed_factor is not None and not (math.isfinite(speed_factor) and speed_factor > 0):
             raise ValueError(f"speed_factor: {speed_factor!r} must be a positive number or "
                              f"None (lockstep as fast as ArduPilot sends)")
@@ -177,7 +182,9 @@ class ArduPilotBridge:
             raise ValueError(f"accel_noise_m_s2: {accel_noise_m_s2!r} must be >= 0")
         self.platform = platform
         self.mapping = motor_mapping_for(platform)  # refuses a layout ArduPilot cannot fly
-        self.vehicle = BridgeVehicle(platform, scenario=scenario, physics_hz=physics_hz)
+        self.vehicle = BridgeVehicle(platform, scenario=scenario, physics_hz=physics_hz,
+                                     spawn_yaw=spawn_yaw_from_heading(spawn_heading_deg,
+                                                                      scenario))
         self.physics_hz = physics_hz
         self.host = host
         self.port = port
@@ -381,7 +388,8 @@ def run_ardupilot_bridge(platform_name, scenario_spec=None, port: int = DEFAULT_
                          seed: int = 0, physics_hz: int = DEFAULT_PHYSICS_HZ,
                          accel_noise_m_s2: float = 0.0, platform_files=(),
                          params_path=None, echo=print, on_start=None,
-                         wind: dict | None = None, actuators: dict | None = None) -> dict:
+                         wind: dict | None = None, actuators: dict | None = None,
+                         spawn_heading_deg: float | None = None) -> dict:
     """Serve one ArduPilot SITL until Ctrl-C; returns a summary (counters, time, crash).
 
     platform_name: a catalog or user-file name (``platform_files``), or a Platform.
@@ -394,7 +402,8 @@ def run_ardupilot_bridge(platform_name, scenario_spec=None, port: int = DEFAULT_
     wind: wind settings (ft_sitl.physics.wind) the vehicle flies in, turbulence seeded by
     ``seed``; None: calm air. actuators: imperfect actuators (ft_sitl.physics.actuators:
     ArduPilot's motor outputs are degraded, lagged, noisy or cut as in a campaign); None:
-    as built. A bad setting raises ValueError (SchemaError).
+    as built. A bad setting raises ValueError (SchemaError). spawn_heading_deg: the spawn
+    heading (deg, 0 north); None: the scenario's start heading, or north.
     """
 
     platform = (platform_name if isinstance(platform_name, Platform)
@@ -403,7 +412,8 @@ def run_ardupilot_bridge(platform_name, scenario_spec=None, port: int = DEFAULT_
     scenario = scenario_from_spec(scenario_spec)
     bridge = ArduPilotBridge(platform, scenario=scenario, port=port, host=host,
                              speed_factor=speed_factor, seed=seed, physics_hz=physics_hz,
-                             accel_noise_m_s2=accel_noise_m_s2)
+                             accel_noise_m_s2=accel_noise_m_s2,
+                             spawn_heading_deg=spawn_heading_deg)
     bridge.vehicle.sim.set_wind(0, wind, seed=seed)
     bridge.vehicle.sim.set_actuators(0, actuators, seed=seed)
     if params_path is not None:
@@ -413,16 +423,17 @@ def run_ardupilot_bridge(platform_name, scenario_spec=None, port: int = DEFAULT_
     bound = bridge.open()
     try:
         m = bridge.mapping
+        heading = math.degrees(frames.yaw_enu_to_ned(bridge.vehicle.spawn_yaw)) % 360.0
         say(f"ArduPilot JSON bridge: {platform.name} as ArduCopter {m.frame.name} "
             f"(FRAME_CLASS {m.frame.frame_class}, FRAME_TYPE {m.frame.frame_type}) on UDP "
-            f"{bound[0]}:{bound[1]}" + (f", scenario {scenario.name}" if scenario else ""),
-            flush=True)
+            f"{bound[0]}:{bound[1]}" + (f", scenario {scenario.name}" if scenario else "")
+            + f", spawn heading {heading:.1f} deg", flush=True)
         say("ArduPilot motor -> our rotor: " + ", ".join(
             f"{j + 1}->{i + 1}" for j, i in enumerate(m.ours_for_ardupilot)), flush=True)
         if params_path is not None:
             say(f"parameters written to {params_path}", flush=True)
         say(f"start ArduCopter with: arducopter --model JSON:{bound[0]} --serial0 tcp:0 "
-            f"--defaults {params_path or 'PARAMS.parm'} --home LAT,LON,ALT,HEADING "
+            f"--defaults {params_path or 'PARAMS.parm'} --home LAT,LON,ALT,{heading:.0f} "
             f"(--sim-port-out {bound[1]} if not 9002); Ctrl-C stops", flush=True)
         if on_start is not None:
             on_start(bridge)

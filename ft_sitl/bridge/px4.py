@@ -68,7 +68,7 @@ from pymavlink.dialects.v20 import common as mav
 
 from ft_sitl import G, frames
 from ft_sitl.bridge.sensors import MagField, SensorNoise, SensorSuite
-from ft_sitl.bridge.vehicle import BridgeVehicle, Crash
+from ft_sitl.bridge.vehicle import BridgeVehicle, Crash, spawn_yaw_from_heading
 from ft_sitl.physics.catalog import PlatformRegistry
 from ft_sitl.physics.layouts import get_layout
 
@@ -235,6 +235,9 @@ class Px4Bridge:
     IMU_INTEG_RATE 250). ``gps_rate_hz``: HIL_GPS rate. ``ground_truth``: also send
     HIL_STATE_QUATERNION each frame. ``seed``: sensor noise. ``home``: geodetic position of
     the spawn point (PX4 SITL's default); ``mag_field`` must be given for another home.
+    ``spawn_heading_deg``: the heading the vehicle spawns with (deg clockwise from north);
+    None: the scenario's start heading, or north without a scenario (90 is how PX4's
+    Gazebo worlds, with a zero model pose in their ENU frame, spawn it).
     """
 
     def __init__(self, platform, *, scenario=None, instance: int = 0,
@@ -242,7 +245,8 @@ class Px4Bridge:
                  gps_rate_hz: float = 10, ground_truth: bool = False, seed: int = 0,
                  host: str = "127.0.0.1", home=frames.PX4_SITL_HOME,
                  mag_field: MagField | None = None, noise: SensorNoise | None = None,
-                 diff_pressure: bool = False, physics_hz: int = 1000):
+                 diff_pressure: bool = False, physics_hz: int = 1000,
+                 spawn_heading_deg: float | None = None):
         if isinstance(instance, bool) or not isinstance(instance, int) or \
                 not 0 <= instance <= 65535 - PX4_BASE_PORT:
             raise ValueError(f"instance: {instance!r} must be an integer 0..{65535 - PX4_BASE_PORT}"
@@ -265,7 +269,9 @@ class Px4Bridge:
         self.port = PX4_BASE_PORT + instance
         self.speed_factor = None if speed_factor is None else float(speed_factor)
         self.ground_truth = bool(ground_truth)
-        self.vehicle = BridgeVehicle(platform, scenario=scenario, physics_hz=physics_hz)
+        self.vehicle = BridgeVehicle(platform, scenario=scenario, physics_hz=physics_hz,
+                                     spawn_yaw=spawn_yaw_from_heading(spawn_heading_deg,
+                                                                      scenario))
         self.period_us = 1_000_000 // imu_rate_hz
         if self.period_us % self.vehicle.sim.dt_us:
             raise ValueError(f"imu_rate_hz {imu_rate_hz}: a frame of {self.period_us} us is not"
@@ -672,7 +678,8 @@ def run_px4_bridge(platform_name: str, scenario=None, *, instance: int = 0,
                    duration_s: float | None = None, status_every_s: float = 10.0,
                    echo: Callable[[str], None] = print,
                    wind: dict | None = None,
-                   actuators: dict | None = None) -> Px4BridgeStats:
+                   actuators: dict | None = None,
+                   spawn_heading_deg: float | None = None) -> Px4BridgeStats:
     """Serve PX4 SITL instance ``instance`` until Ctrl-C (or ``duration_s`` of wall time).
 
     ``platform_name``: a catalog platform, or one from ``platform_files``; ``scenario``:
@@ -682,20 +689,22 @@ def run_px4_bridge(platform_name: str, scenario=None, *, instance: int = 0,
     ``wind``: wind settings (ft_sitl.physics.wind) the vehicle flies in, turbulence seeded
     by ``seed``; None: calm air. ``actuators``: imperfect actuators
     (ft_sitl.physics.actuators) between PX4's motor outputs and the rotors; None: as built.
+    ``spawn_heading_deg``: the spawn heading (deg, 0 north); None: the scenario's, or north.
     """
 
     platform = PlatformRegistry(platform_files).get(platform_name)
     bridge = Px4Bridge(platform, scenario=scenario_from_spec(scenario), instance=instance,
                        speed_factor=speed_factor, ground_truth=ground_truth, seed=seed,
-                       host=host)
+                       host=host, spawn_heading_deg=spawn_heading_deg)
     bridge.vehicle.sim.set_wind(0, wind, seed=seed)
     bridge.vehicle.sim.set_actuators(0, actuators, seed=seed)
     bridge.start()
     sc = bridge.scenario
     echo(f"PX4 bridge: {platform.name} ({platform.layout}, PX4 motor i -> our rotor "
          f"{[j + 1 for j in bridge.motor_map]}), "
-         f"{'scenario ' + sc.name if sc is not None else 'no scenario'}, listening on "
-         f"{host}:{bridge.port}")
+         f"{'scenario ' + sc.name if sc is not None else 'no scenario'}, spawn heading "
+         f"{math.degrees(frames.yaw_enu_to_ned(bridge.vehicle.spawn_yaw)) % 360.0:.1f} deg, "
+         f"listening on {host}:{bridge.port}")
     params = " ".join(f"PX4_PARAM_{k}={v:g}"
                       for k, v in px4_parameters(platform, bridge.motor_map).items())
     echo(f"  start PX4 (lockstep at {1e6 / bridge.period_us:.0f} Hz, "

@@ -16,10 +16,16 @@ plant for one vehicle, without our own commander or controller:
 - a collision with the scenario crashes the vehicle: its motors are forced off from then
   on and ``crash`` says what was hit at what speed (the autopilot sees the fall in its
   sensors).
+
+The vehicle spawns on the scenario's takeoff point facing its start direction, or at the
+origin facing north (ENU yaw pi/2, PX4 and ArduPilot heading 0); ``spawn_yaw`` (ENU, rad)
+or :func:`spawn_yaw_from_heading` turns it. (Gazebo puts a model at its pose's yaw in an
+ENU world: PX4's Gazebo worlds, with a zero pose, face east, heading 90.)
 """
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 
 import numpy as np
@@ -31,6 +37,18 @@ from ft_sitl.physics.layouts import get_layout
 from ft_sitl.physics.quaternion import qrotate_inv
 from ft_sitl.sim.guard import CollisionGuard, GuardEventKind
 from ft_sitl.sim.lockstep import Simulation
+
+NORTH_YAW_ENU = math.pi / 2.0  #: the spawn yaw without a scenario: facing north
+
+
+def spawn_yaw_from_heading(heading_deg: float | None, scenario=None) -> float:
+    """The ENU spawn yaw (rad) of a heading (deg clockwise from north, PX4's and
+    ArduPilot's convention); None: the scenario's start yaw, or north without one."""
+    if heading_deg is None:
+        return float(scenario.start_yaw) if scenario is not None else NORTH_YAW_ENU
+    if not math.isfinite(heading_deg):
+        raise ValueError(f"spawn heading: {heading_deg!r} is not a finite number of degrees")
+    return frames.yaw_ned_to_enu(math.radians(heading_deg))
 
 
 @dataclass(frozen=True)
@@ -50,7 +68,7 @@ class BridgeVehicle:
         if spawn is None:
             spawn = scenario.takeoff if scenario is not None else (0.0, 0.0, 0.0)
         if spawn_yaw is None:
-            spawn_yaw = float(scenario.start_yaw) if scenario is not None else 0.0
+            spawn_yaw = spawn_yaw_from_heading(None, scenario)
         self.spawn = np.array(spawn, dtype=float)
         self.spawn_yaw = float(spawn_yaw)
         self.scenario = scenario

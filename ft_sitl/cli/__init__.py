@@ -33,7 +33,11 @@ def resolve_handler(name: str):
 
 def main(argv: list[str] | None = None) -> int:
     ap = build_parser()
-    args = ap.parse_args(argv)
+    try:
+        args = ap.parse_args(argv)
+    except CliError as exc:  # a numeric option's value (common.number)
+        print(f"ft-sitl: error: {exc}", file=sys.stderr)
+        return EXIT_BAD_INPUT
     handler = resolve_handler(args.handler)
     try:
         return handler(args)

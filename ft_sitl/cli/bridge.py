@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import math
 import signal
 import sys
 
@@ -11,14 +10,6 @@ from ft_sitl.bridge.ardupilot_frames import FrameMatchError
 from ft_sitl.bridge.ardupilot_params import ardupilot_params
 from ft_sitl.bridge.px4 import BridgeError, run_px4_bridge
 from ft_sitl.cli.common import CliError, actuators_option, platform_registry, wind_option
-
-
-def _speed(v):
-    if v is None:
-        return None
-    if not (math.isfinite(v) and 0.01 <= v <= 100):
-        raise CliError(f"--speed-factor: {v} must be within 0.01..100")
-    return float(v)
 
 
 def _stop_on_signals(stoppable) -> None:
@@ -37,13 +28,12 @@ def cmd_bridge_ardupilot(args) -> int:
         except FrameMatchError as exc:
             raise CliError(str(exc)) from None
         return 0
-    if not 1 <= args.port <= 65535:
-        raise CliError(f"--port: {args.port} must be within 1..65535")
     try:
-        out = run_ardupilot_bridge(platform, args.scenario, args.port, _speed(args.speed_factor),
+        out = run_ardupilot_bridge(platform, args.scenario, args.port, args.speed_factor,
                                    host=args.bind, params_path=args.write_params,
                                    on_start=_stop_on_signals, wind=wind_option(args.wind),
-                                   actuators=actuators_option(args.actuators))
+                                   actuators=actuators_option(args.actuators),
+                                   spawn_heading_deg=args.spawn_yaw)
     except (FrameMatchError, ValueError) as exc:
         raise CliError(str(exc)) from None
     except OSError as exc:
@@ -53,16 +43,14 @@ def cmd_bridge_ardupilot(args) -> int:
 
 
 def cmd_bridge_px4(args) -> int:
-    if not 0 <= args.instance <= 999:
-        raise CliError(f"--instance: {args.instance} must be within 0..999")
-    if args.duration is not None and not args.duration > 0:
-        raise CliError(f"--duration: {args.duration} must be positive")
+    # --instance, --speed-factor, --duration: checked as parsed (cli.common.number)
     try:
         run_px4_bridge(args.platform, args.scenario, instance=args.instance,
-                       speed_factor=_speed(args.speed_factor), ground_truth=args.ground_truth,
+                       speed_factor=args.speed_factor, ground_truth=args.ground_truth,
                        host=args.bind, platform_files=args.platform_file or (),
                        duration_s=args.duration, wind=wind_option(args.wind),
-                       actuators=actuators_option(args.actuators))
+                       actuators=actuators_option(args.actuators),
+                       spawn_heading_deg=args.spawn_yaw)
     except (ValueError, BridgeError) as exc:
         raise CliError(str(exc)) from None
     return 0

@@ -6,13 +6,14 @@ Light on purpose: ``ft_sitl.cli`` imports it to start up, before any command run
 
 from __future__ import annotations
 
+import math
 from pathlib import Path
 
 from ft_sitl.physics.catalog import PlatformRegistry
 
-__all__ = ["EXIT_BAD_INPUT", "CliError", "check_out_dir", "fmt_point", "option_value",
-           "platform_registry", "wind_option", "estimator_option", "settings_option",
-           "actuators_option"]
+__all__ = ["EXIT_BAD_INPUT", "CliError", "check_out_dir", "fmt_point", "number",
+           "option_value", "platform_registry", "wind_option", "estimator_option",
+           "settings_option", "actuators_option"]
 
 EXIT_BAD_INPUT = 2
 
@@ -24,6 +25,42 @@ class CliError(Exception):
 def platform_registry(args) -> PlatformRegistry:
     """The catalog plus the ``--platform-file`` files of ``args``."""
     return PlatformRegistry(args.platform_file or ())
+
+
+def number(option: str, *, minimum: float | None = None, maximum: float | None = None,
+           above: float | None = None, integer: bool = False):
+    """The argparse ``type`` of a numeric option: a finite number (an integer with
+    ``integer``), at least ``minimum``, more than ``above``, at most ``maximum``.
+
+    A bad value raises :class:`CliError` naming the option, which argparse lets through
+    (it only turns ValueError and TypeError into its usage message), so the command
+    prints the usual one line ``ft-sitl: error: --duration: nan is not a finite number``
+    and exits 2 before anything starts."""
+    kind = "an integer" if integer else "a number"
+    if minimum is not None and maximum is not None:
+        allowed = f"within {minimum:g}..{maximum:g}"
+    elif above is not None:
+        allowed = f"more than {above:g}" + (f" and at most {maximum:g}"
+                                            if maximum is not None else "")
+    elif minimum is not None:
+        allowed = f"at least {minimum:g}"
+    else:
+        allowed = f"at most {maximum:g}" if maximum is not None else ""
+
+    def parse(text: str):
+        try:
+            value = int(text) if integer else float(text)
+        except ValueError:
+            raise CliError(f"{option}: {text!r} is not {kind}") from None
+        if not math.isfinite(value):
+            raise CliError(f"{option}: {text} is not a finite number")
+        if ((minimum is not None and value < minimum) or (above is not None and value <= above)
+                or (maximum is not None and value > maximum)):
+            raise CliError(f"{option}: {value:g} must be {allowed}")
+        return value
+
+    parse.__name__ = "integer" if integer else "number"  # (argparse names the type so)
+    return parse
 
 
 def option_value(option: str, parse, *values):

@@ -37,6 +37,7 @@ from ft_sitl.physics.platform import PlatformError
 from ft_sitl.scenarios.families import describe_family
 from ft_sitl.scenarios.render import render_scenario
 from ft_sitl.scenarios.scenario import ScenarioError
+from ft_sitl.wire.navigate import NavigateError, require_mavsdk
 
 
 def _campaign(source: str):
@@ -102,12 +103,14 @@ def cmd_campaign_run(args) -> int:
         raise CliError(f"--limit: {args.limit} must be at least 1")
     executor = _executor(args)
     out = Path(args.out)
-    for note in c.notes:
-        print(f"note: {note}", file=sys.stderr)
     try:
         transport = Transport(args.transport, args.speed_factor, args.mqtt)
-    except CampaignError as exc:
+        if transport.kind == "mavlink":  # each trial's navigator flies as a MAVSDK client
+            require_mavsdk()
+    except (CampaignError, NavigateError) as exc:
         raise CliError(str(exc)) from None
+    for note in c.notes:
+        print(f"note: {note}", file=sys.stderr)
     if args.mqtt:
         option_value("--mqtt", parse_broker_url, args.mqtt)
     try:

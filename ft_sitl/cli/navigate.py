@@ -14,7 +14,7 @@ from ft_sitl.bus.options import parse_broker_url
 from ft_sitl.cli.common import CliError, option_value, platform_registry
 from ft_sitl.navigation.registry import NavigatorError, create
 from ft_sitl.scenarios.io import scenario_from_spec
-from ft_sitl.wire.navigate import ClientResult, NavigateError, WireTask, fly
+from ft_sitl.wire.navigate import ClientResult, NavigateError, WireTask, fly, require_mavsdk
 
 
 def _vec3(name: str, text: str) -> list[float]:
@@ -75,8 +75,10 @@ def wire_task_from_args(args):
 
 
 def cmd_navigate(args) -> int:
-    if not (0.01 <= args.speed_factor <= 100):
-        raise CliError(f"--speed-factor: {args.speed_factor} must be within 0.01..100")
+    try:
+        require_mavsdk()
+    except NavigateError as exc:
+        raise CliError(str(exc)) from None
     if args.mqtt:
         option_value("--mqtt", parse_broker_url, args.mqtt)
     wt = wire_task_from_args(args)

@@ -13,6 +13,7 @@ from pathlib import Path
 
 from ft_sitl import __version__
 from ft_sitl.bridge import ARDUPILOT_DEFAULT_PORT
+from ft_sitl.cli.common import number
 from ft_sitl.scenarios.render import DEFAULT_DPI  # numpy only: cheap at start-up
 
 ACTUATORS_HELP = ("imperfect actuators as KEY=VALUE,... (efficiency, degraded_motor, "
@@ -75,7 +76,9 @@ def build_parser() -> argparse.ArgumentParser:
         "127.0.0.1:14550 (GCS, listens on 18570+i).")
     sitl.add_argument("--platform", default="0.98kg-EGO Planner DIY",
                       help="platform name (default: %(default)s)")
-    sitl.add_argument("--instances", type=int, default=1, help="number of vehicles (1..64)")
+    sitl.add_argument("--instances", type=number("--instances", minimum=1, maximum=64,
+                                                  integer=True),
+                      default=1, help="number of vehicles (1..64)")
     sitl.add_argument("--mqtt", metavar="URL", help="MQTT broker for the bus "
                       "(mqtt://[user[:pass]@]host[:port] or mqtts://...; default: an "
                       "embedded broker on a free port)")
@@ -85,16 +88,22 @@ def build_parser() -> argparse.ArgumentParser:
     sitl.add_argument("--mqtt-insecure", action="store_true",
                       help="do not verify the broker's certificate (testing only)")
     sitl.add_argument("--no-mqtt", action="store_true", help="no MQTT bus")
-    sitl.add_argument("--telemetry-rate", type=float, default=50.0, metavar="HZ",
-                      help="bus telemetry rate in simulated Hz (default 50)")
+    sitl.add_argument("--telemetry-rate", type=number("--telemetry-rate", minimum=1,
+                                                      maximum=1000),
+                      default=50.0, metavar="HZ",
+                      help="bus telemetry rate in simulated Hz, 1..1000 (default 50)")
     sitl.add_argument("--camera", choices=("benchmark", "d435", "none"), default="benchmark",
                       help="depth camera for bus depth frames with --scenario (default "
                            "benchmark: 160 x 120 @ 15 Hz)")
-    sitl.add_argument("--instance", type=int, default=0, metavar="I",
+    sitl.add_argument("--instance", type=number("--instance", minimum=0, maximum=999,
+                                                 integer=True),
+                      default=0, metavar="I",
                       help="first instance number, as PX4's -i: ports 14580+I, 14540+I, "
-                           "18570+I (default 0)")
-    sitl.add_argument("--speed-factor", type=float, default=1.0,
-                      help="simulated seconds per wall second (default: 1)")
+                           "18570+I (default 0; I + instances <= 1000)")
+    sitl.add_argument("--speed-factor", type=number("--speed-factor", minimum=0.01,
+                                                    maximum=1000),
+                      default=1.0,
+                      help="simulated seconds per wall second, 0.01..1000 (default: 1)")
     sitl.add_argument("--home", metavar="LAT,LON,ALT",
                       help="geodetic home (default: PX4 SITL's 47.397742,8.545594,488)")
     sitl.add_argument("--bind", default="127.0.0.1",
@@ -103,8 +112,8 @@ def build_parser() -> argparse.ArgumentParser:
                       help="record all MAVLink traffic as a telemetry log")
     sitl.add_argument("--signing-key", metavar="KEY",
                       help="MAVLink 2 signing passphrase: unsigned packets are rejected")
-    sitl.add_argument("--duration", type=float, metavar="S",
-                      help="stop after S wall seconds (default: run until Ctrl-C)")
+    sitl.add_argument("--duration", type=number("--duration", above=0), metavar="S",
+                      help="stop after S wall seconds, S > 0 (default: run until Ctrl-C)")
     sitl.add_argument("--scenario", metavar="FAMILY:INDEX[:SEED]|SPEC",
                       help="fly in a scenario world (e.g. forest:3, or a .yaml/.toml spec): "
                            "spawn at its takeoff point, crash on collision")
@@ -113,7 +122,8 @@ def build_parser() -> argparse.ArgumentParser:
                       help="wind as KEY=VALUE,... (speed_m_s, from_deg, vertical_m_s, "
                          "turbulence none|light|moderate|severe|standard, gust_m_s, ...; "
                          "docs/platforms.md, Wind)")
-    sitl.add_argument("--wind-seed", type=int, default=0, metavar="N",
+    sitl.add_argument("--wind-seed", type=number("--wind-seed", minimum=0, integer=True),
+                      default=0, metavar="N",
                       help="turbulence and estimator-noise seed (vehicle i uses N + i; "
                            "default 0)")
     sitl.add_argument("--estimator", metavar="SETTINGS",
@@ -263,18 +273,21 @@ def _add_navigate(sub) -> None:
     p.add_argument("--goal", metavar="N,E,D", help="goal in local NED metres (no --scenario)")
     p.add_argument("--start", default="0,0,-2", metavar="N,E,D",
                    help="start in local NED metres (default 0,0,-2)")
-    p.add_argument("--heading", type=float, metavar="DEG",
+    p.add_argument("--heading", type=number("--heading"), metavar="DEG",
                    help="start heading (deg, 0 north; default toward the goal)")
     p.add_argument("--platform", metavar="NAME", help="the vehicle's platform (indicators "
                    "and collision radius for the navigator)")
     p.add_argument("--platform-file", action="append", metavar="FILE",
                    help="extra platform definitions")
-    p.add_argument("--max-speed", type=float, default=4.0, help="speed cap (default 4 m/s)")
-    p.add_argument("--timeout", type=float, default=90.0, help="navigation timeout (s)")
-    p.add_argument("--speed-factor", type=float, default=1.0,
-                   help="the simulator's speed factor (time base without --mqtt)")
-    p.add_argument("--connect-timeout", type=float, default=60.0,
-                   help="seconds to wait for the vehicle (default 60)")
+    p.add_argument("--max-speed", type=number("--max-speed", above=0, maximum=20),
+                   default=4.0, help="speed cap, at most 20 m/s (default 4 m/s)")
+    p.add_argument("--timeout", type=number("--timeout", above=0), default=90.0,
+                   help="navigation timeout (s; default 90)")
+    p.add_argument("--speed-factor", type=number("--speed-factor", minimum=0.01, maximum=100),
+                   default=1.0, help="the simulator's speed factor, 0.01..100 (time base "
+                   "without --mqtt; default 1)")
+    p.add_argument("--connect-timeout", type=number("--connect-timeout", above=0),
+                   default=60.0, help="seconds to wait for the vehicle (default 60)")
     p.add_argument("--task-json", metavar="JSON", help=argparse.SUPPRESS)
     p.add_argument("--json", action="store_true", help="print the result as JSON")
     p.add_argument("--quiet", action="store_true", help="no progress lines")
@@ -294,6 +307,9 @@ def _bridge_options(p) -> None:
                       "turbulence none|light|moderate|severe|standard, gust_m_s, ...; "
                       "docs/platforms.md, Wind)")
     p.add_argument("--actuators", metavar="SETTINGS", help=ACTUATORS_HELP)
+    p.add_argument("--spawn-yaw", type=number("--spawn-yaw", minimum=-360, maximum=360),
+                   metavar="DEG", help="heading the vehicle spawns with, degrees clockwise "
+                   "from north (default: north, or the scenario's start heading)")
 
 
 def _add_bridge(sub) -> None:
@@ -306,10 +322,12 @@ def _add_bridge(sub) -> None:
                          description="Serve ArduPilot SITL's JSON interface (--model JSON): "
                                      "one JSON state per servo packet, in lockstep.")
     _bridge_options(ap)
-    ap.add_argument("--port", type=int, default=ARDUPILOT_DEFAULT_PORT,
+    ap.add_argument("--port", type=number("--port", minimum=1, maximum=65535, integer=True),
+                    default=ARDUPILOT_DEFAULT_PORT,
                     help=f"UDP port ArduPilot sends to (default {ARDUPILOT_DEFAULT_PORT})")
-    ap.add_argument("--speed-factor", type=float, metavar="X",
-                    help="pace to X x real time (default: as fast as ArduPilot steps)")
+    ap.add_argument("--speed-factor", type=number("--speed-factor", minimum=0.01, maximum=100),
+                    metavar="X", help="pace to X x real time, 0.01..100 (default: as fast as "
+                    "ArduPilot steps)")
     ap.add_argument("--print-params", action="store_true",
                     help="print the ArduCopter parameter file for the platform and exit")
     ap.add_argument("--write-params", metavar="FILE",
@@ -324,13 +342,17 @@ def _add_px4(bsub) -> None:
                                      "airframe none_iris) and fly our physics in lockstep: "
                                      "HIL_SENSOR / HIL_GPS out, HIL_ACTUATOR_CONTROLS in.")
     _bridge_options(px)
-    px.add_argument("--instance", type=int, default=0, metavar="I",
-                    help="PX4 instance (px4 -i I): TCP port 4560+I (default 0)")
-    px.add_argument("--speed-factor", type=float, metavar="X",
-                    help="pace to X x real time (default: as fast as PX4 steps)")
+    px.add_argument("--instance", type=number("--instance", minimum=0, maximum=999,
+                                               integer=True),
+                    default=0, metavar="I",
+                    help="PX4 instance (px4 -i I), 0..999: TCP port 4560+I (default 0)")
+    px.add_argument("--speed-factor", type=number("--speed-factor", minimum=0.01, maximum=100),
+                    metavar="X", help="pace to X x real time, 0.01..100 (default: as fast as "
+                    "PX4 steps)")
     px.add_argument("--ground-truth", action="store_true",
                     help="also send HIL_STATE_QUATERNION (ground truth)")
-    px.add_argument("--duration", type=float, metavar="S", help="stop after S wall seconds")
+    px.add_argument("--duration", type=number("--duration", above=0), metavar="S",
+                    help="stop after S wall seconds, S > 0")
     px.set_defaults(handler="bridge:cmd_bridge_px4")
 
 

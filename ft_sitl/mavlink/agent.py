@@ -111,6 +111,9 @@ SENSORS = (
     | mav.MAV_SYS_STATUS_PREARM_CHECK
 )
 
+MAX_STREAM_HZ = 500.0  # SET_MESSAGE_INTERVAL: the fastest a message is streamed
+HEARTBEAT_MIN_HZ = 1.0  # ... and the slowest the heartbeat may be set to
+
 MISSION_TIMEOUT_US = 1_500_000  # wall time between re-requests during a transfer
 MISSION_RETRIES = 5
 #: PARAM_VALUEs sent per poll while streaming the list: a burst of all ~480 small datagrams
@@ -363,12 +366,11 @@ class VehicleAgent:
         if msg_id == mav.MAVLINK_MSG_ID_BATTERY_STATUS:
             bat = self.cmd.battery
             current = bat.current_a(self._shaft_power())
-            cell = bat.voltage(current) / bat.cells
-            volts = [int(cell * 1000)] * min(bat.cells, 10) + [65535] * (10 - min(bat.cells, 10))
+            volts, volts_ext = _cell_voltages_mv(bat.voltage(current) / bat.cells, bat.cells)
             return mav.MAVLink_battery_status_message(
                 0, mav.MAV_BATTERY_FUNCTION_ALL, mav.MAV_BATTERY_TYPE_LIPO, 2500, volts,
                 int(current * 100), int(bat.used_j / 3.6 / max(bat.voltage(), 1.0)), -1,
-                int(round(bat.remaining * 100)))
+                int(round(bat.remaining * 100)), voltages_ext=volts_ext)
         if msg_id == mav.MAVLINK_MSG_ID_GPS_RAW_INT:
             if not self.cmd.sensor_ok("gps"):  # an injected GPS failure: no fix
                 return mav.MAVLink_gps_raw_int_message(
@@ -497,9 +499,9 @@ class VehicleAgent:
                 return Result.DENIED, []
             return (c.arm(force) if p[0] > 0.5 else c.disarm(force)), []
         if command == mav.MAV_CMD_NAV_TAKEOFF:
-            alt = p[6]
+            alt = p[6]  # AMSL; lat/lon (p[4], p[5]) and yaw (p[3]) are not used
             local = None if not math.isfinite(alt) else alt - self.geo.alt_m
-            return c.takeoff(local), []
+            return c.nav_takeoff(local), []
         if command == mav.MAV_CMD_NAV_LAND:
             return c.land(), []
         if command == mav.MAV_CMD_NAV_RETURN_TO_LAUNCH:
@@ -552,19 +554,7 @@ class VehicleAgent:
                 c.set_mission_current(int(p[0]))
             return c.set_mode(cm.MAIN_AUTO, cm.SUB_MISSION), []
         if command == mav.MAV_CMD_SET_MESSAGE_INTERVAL:
-            msg_id = int(p[0]) if math.isfinite(p[0]) else -1
-            if self.build_probe(msg_id) is None:
-                return Result.DENIED, []
-            interval = p[1]
-            if not math.isfinite(interval) or interval == 0:
-                hz = (ONBOARD_RATES if link == 0 else NORMAL_RATES).get(msg_id, 0.0)
-            elif interval < 0:
-                hz = 0.0
-            else:
-                hz = 1e6 / interval
-            self.rates[link][msg_id] = min(hz, 500.0)
-            self.next_due[link].setdefault(msg_id, 0)
-            return Result.ACCEPTED, []
+            return self._set_message_interval(p[0], p[1], link), []
         if command == mav.MAV_CMD_REQUEST_MESSAGE:
             msg_id = int(p[0]) if math.isfinite(p[0]) else -1
             m = self.build(msg_id) if msg_id != mav.MAVLINK_MSG_ID_PARAM_VALUE else None
@@ -602,6 +592,29 @@ class VehicleAgent:
                 c.text(cm.Severity.INFO, "Rebooting autopilot")
             return Result.ACCEPTED, []
         return Result.UNSUPPORTED, []
+
+    def _set_message_interval(self, msg_id: float, interval_us: float, link: int) -> Result:
+        """MAV_CMD_SET_MESSAGE_INTERVAL on this link: interval > 0 sets 1e6 / interval Hz (at
+        most MAX_STREAM_HZ), 0 the link's default rate, a negative one (-1) stops the
+        message. DENIED: a message we cannot produce, a non-finite interval, and anything
+        that would send the heartbeat less than once a second (a client must not be able to
+        make the vehicle look dead to every other client on the link)."""
+        if not math.isfinite(msg_id):
+            return Result.DENIED
+        msg_id = int(round(msg_id))  # PX4: (int)(param1 + 0.5f)
+        if not math.isfinite(interval_us) or self.build_probe(msg_id) is None:
+            return Result.DENIED
+        if interval_us == 0:
+            hz = (ONBOARD_RATES if link == 0 else NORMAL_RATES).get(msg_id, 0.0)
+        elif interval_us < 0:
+            hz = 0.0
+        else:
+            hz = min(1e6 / interval_us, MAX_STREAM_HZ)
+        if msg_id == mav.MAVLINK_MSG_ID_HEARTBEAT and hz < HEARTBEAT_MIN_HZ:
+            return Result.DENIED
+        self.rates[link][msg_id] = hz
+        self.next_due[link].setdefault(msg_id, 0)
+        return Result.ACCEPTED
 
     def build_probe(self, msg_id: int):
         try:
@@ -1024,6 +1037,18 @@ def _deg_e7(v: float) -> int:
         return 0
     r = round(v * 1e7)
     return r if -2**31 <= r < 2**31 else 0
+
+
+def _cell_voltages_mv(cell_v: float, cells: int) -> tuple[list[int], list[int]]:
+    """BATTERY_STATUS ``voltages`` (cells 1-10) and ``voltages_ext`` (cells 11-14, a
+    MAVLink 2 extension) in mV, as the message definition and PX4's BATTERY_STATUS stream
+    fill them: an absent cell is UINT16_MAX in ``voltages`` but 0 ("not supported", so
+    the extension can be truncated) in ``voltages_ext``, where a measured 0 is sent as 1.
+    Cells past the 14th are not reported."""
+    mv = min(max(int(cell_v * 1000), 0), 65534)
+    volts = [mv if k < cells else 65535 for k in range(10)]
+    ext = [max(mv, 1) if k < cells else 0 for k in range(10, 14)]
+    return volts, ext
 
 
 def _f(v: float) -> float:

@@ -34,6 +34,12 @@ GCS_LISTEN_BASE = 18570
 GCS_REMOTE_PORT = 14550
 PEER_TIMEOUT_S = 10.0
 CHUNK_US = 4000  # simulated time advanced between telemetry/IO service
+#: the most the server catches up after falling behind its pace, in wall seconds' worth
+#: of simulated time (speed factor x this): a longer stall (the process suspended, a
+#: blocking call, a cold numba cache at start) is not made up in a burst of simulation
+#: and telemetry; the simulated clock falls behind the wall clock instead, as PX4 SITL's
+#: lockstep clock stands still while the simulator does
+MAX_CATCH_UP_S = 0.2
 
 
 def signing_secret(key: str) -> bytes:
@@ -132,6 +138,8 @@ class SitlServer:
             self.agents.append(VehicleAgent(fleet, i, geo, 2, ["onboard", "normal"]))
         self._stop = asyncio.Event()
         self.achieved_speed_factor = 0.0
+        #: wall seconds of pace not made up after stalls (MAX_CATCH_UP_S)
+        self.behind_s = 0.0
         self.bad_packets = 0
         #: called after every chunk of simulated time (a trial's judge, the MQTT bus)
         self.on_chunk = None
@@ -231,13 +239,20 @@ class SitlServer:
             await self.start()
         wall0 = time.monotonic()
         sim0 = self.fleet.time_us
+        pace_sim0 = sim0  # simulated time due at wall0, moved back after each stall
+        max_behind_us = MAX_CATCH_UP_S * self.speed_factor * 1e6
         self.service()
         try:
             while not self._stop.is_set():
                 now = time.monotonic()
                 if duration_s is not None and now - wall0 >= duration_s:
                     break
-                target = sim0 + (now - wall0) * self.speed_factor * 1e6
+                target = pace_sim0 + (now - wall0) * self.speed_factor * 1e6
+                if target - self.fleet.time_us > max_behind_us:  # a stall: not made up
+                    dropped_us = target - self.fleet.time_us - max_behind_us
+                    pace_sim0 -= dropped_us
+                    target -= dropped_us
+                    self.behind_s += dropped_us / 1e6 / self.speed_factor
                 busy_until = now + 0.02
                 while self.fleet.time_us + CHUNK_US <= target and time.monotonic() < busy_until \
                         and not self._stop.is_set():

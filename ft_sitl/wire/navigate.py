@@ -170,6 +170,21 @@ class NavigateError(RuntimeError):
     """The client could not fly (no vehicle, refused arming, ...); the message says why."""
 
 
+MAVSDK_MISSING = ("the MAVSDK client needs the Python package 'mavsdk' ({why}); it is a "
+                  "dependency of ft-sitl: install it with `pip install 'mavsdk>=4.1'`, or "
+                  "reinstall ft-sitl (`bash scripts/setup.sh`, `pip install -e .`)")
+
+
+def require_mavsdk() -> None:
+    """MAVSDK can be imported; else NavigateError saying what to install. Called before
+    anything starts, so a broken install is one clear line rather than a traceback (or a
+    failed trial) later."""
+    try:
+        import mavsdk  # noqa: F401  (only checked here; loaded where the client flies)
+    except ImportError as exc:
+        raise NavigateError(MAVSDK_MISSING.format(why=exc)) from None
+
+
 class _State:
     """The latest vehicle state, from MAVSDK telemetry or the bus."""
 
@@ -267,6 +282,7 @@ async def fly(nav, wt: WireTask, connect: str, *, mqtt: str | None = None,
     """Fly ``nav`` through MAVSDK; returns a summary dict (``result``: success, timeout,
     gave_up, collision; ``detail``). ``real_latency``: switch the navigator's modelled
     planning latency off (a plan acts when it reaches the flight controller)."""
+    require_mavsdk()
     # MAVSDK: loaded only by the navigator client that flies over it
     from mavsdk import ComponentType
     from mavsdk.asyncio import Configuration, Mavsdk

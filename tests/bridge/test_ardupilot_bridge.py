@@ -229,7 +229,23 @@ def test_at_rest_the_accelerometer_reads_one_g_up(platform):
     np.testing.assert_allclose(st.gyro, 0.0, atol=1e-12)
     np.testing.assert_allclose(st.position, 0.0, atol=1e-12)
     np.testing.assert_allclose(st.quaternion, q_heading(bridge.vehicle.spawn_yaw), atol=1e-12)
-    np.testing.assert_allclose(st.quaternion, q_heading(0.0), atol=1e-12)  # facing east
+    # facing north (heading 0) unless told otherwise
+    np.testing.assert_allclose(st.quaternion, [1.0, 0.0, 0.0, 0.0], atol=1e-12)
+
+
+def test_the_spawn_heading_is_north_unless_told_otherwise(platform):
+    from ft_sitl.scenarios.families import build_scenario
+
+    with serving(platform, spawn_heading_deg=90.0) as (_, peer):
+        _, st = peer.fly(0, 10, OFF)
+    np.testing.assert_allclose(st.quaternion, q_heading(0.0), atol=1e-12)  # east
+    scenario = build_scenario("forest", 1, 0)
+    assert ArduPilotBridge(platform, scenario=scenario, port=0).vehicle.spawn_yaw == \
+        pytest.approx(scenario.start_yaw)  # a scenario's start heading by default
+    turned = ArduPilotBridge(platform, scenario=scenario, port=0, spawn_heading_deg=-45.0)
+    assert yaw_enu_to_ned(turned.vehicle.spawn_yaw) == pytest.approx(math.radians(-45.0))
+    with pytest.raises(ValueError, match="spawn heading: nan"):
+        ArduPilotBridge(platform, port=0, spawn_heading_deg=math.nan)
 
 
 def test_accel_noise_is_seeded_and_off_by_default(platform):
@@ -352,7 +368,7 @@ def test_hover_pwm_from_the_param_file_holds_altitude(name):
     assert abs(st1.velocity[2] - st0.velocity[2]) < 0.25  # m/s over 1.5 s
     assert st1.accel_body[2] == pytest.approx(-G, abs=0.2)
     assert st1.position[2] < -0.05  # still in the air
-    np.testing.assert_allclose(st1.quaternion, q_heading(0.0), atol=1e-9)  # level, no turn
+    np.testing.assert_allclose(st1.quaternion, [1, 0, 0, 0], atol=1e-9)  # level, no turn
 
 
 def test_a_failed_motor_behind_ardupilots_outputs_tumbles_the_vehicle(platform):

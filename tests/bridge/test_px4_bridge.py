@@ -176,9 +176,9 @@ def test_sensors_at_rest_match_gravity_atmosphere_field_and_home():
     assert abs(math.degrees(math.atan2(e_, n_)) - PX4_HOME_DECLINATION_DEG) < 0.5
     assert abs(math.degrees(math.atan2(d_, math.hypot(n_, e_))) - PX4_HOME_INCLINATION_DEG) < 0.5
     assert abs(math.sqrt(n_ * n_ + e_ * e_ + d_ * d_) - PX4_HOME_STRENGTH_G) < 0.005
-    # the vehicle spawned facing east (ENU yaw 0): NED yaw 90 deg in the ground truth
+    # the vehicle spawned facing north unless told otherwise: NED yaw 0 in the truth
     w, x, y, z = frames_[-1].state.attitude_quaternion
-    assert abs(Rotation.from_quat([x, y, z, w]).as_euler("ZYX", degrees=True)[0] - 90.0) < 0.1
+    assert abs(Rotation.from_quat([x, y, z, w]).as_euler("ZYX", degrees=True)[0]) < 0.1
     # GPS: at home, 3D fix, 10 satellites, 10 Hz (every 25th frame)
     gps = [f.gps for f in frames_ if f.gps is not None]
     assert 29 <= len(gps) <= 31
@@ -196,6 +196,22 @@ def test_sensors_at_rest_match_gravity_atmosphere_field_and_home():
     assert abs(st.lat / 1e7 - HOME_LAT) < 1e-7 and abs(st.lon / 1e7 - HOME_LON) < 1e-7
     assert abs(st.alt / 1e3 - HOME_ALT) < 0.01 and st.vx == st.vy == st.vz == 0
     assert st.zacc == -1000 and st.xacc == 0
+
+
+def test_the_spawn_heading_is_north_unless_told_otherwise():
+    # --spawn-yaw 90: the vehicle PX4 meets faces east, in the truth and in its compass
+    with bridge_and_peer(ground_truth=True, spawn_heading_deg=90.0) as (bridge, peer):
+        frames_ = into_lockstep(bridge, peer, n=5)
+    w, x, y, z = frames_[-1].state.attitude_quaternion
+    assert Rotation.from_quat([x, y, z, w]).as_euler("ZYX", degrees=True)[0] == \
+        pytest.approx(90.0, abs=0.1)
+    f = frames_[-1].sensor  # the field points north-ish: to the vehicle's left
+    assert f.ymag < -0.1 and abs(f.xmag) < 0.05
+    for heading, says in ((-90.0, "spawn heading 270.0 deg"), (None, "spawn heading 0.0 deg")):
+        lines = []
+        run_px4_bridge(PLATFORM.name, None, instance=next(_instances), duration_s=0.1,
+                       echo=lines.append, spawn_heading_deg=heading)
+        assert says in lines[0]
 
 
 def test_sensor_values_never_repeat_from_frame_to_frame():

@@ -1,6 +1,7 @@
 """The ft-sitl command as a user runs it: the installed console script, real processes."""
 
 import json
+import os
 import shutil
 import subprocess
 import sys
@@ -168,6 +169,99 @@ def test_sitl_serves_prints_urls_and_stops_cleanly_on_ctrl_c(tmp_path):
     assert proc.returncode == 0, err
     assert "achieved speed factor" in err and "Traceback" not in err
     assert log.stat().st_size > 1000
+
+
+# (arguments, what the one-line error says): every numeric option of sitl, both bridges and
+# navigate is checked as it is parsed (ft_sitl.cli.common.number)
+BAD_NUMBERS = [
+    (["sitl", "--duration", "nan"], "--duration: nan is not a finite number"),
+    (["sitl", "--duration", "-5"], "--duration: -5 must be more than 0"),
+    (["sitl", "--duration", "inf"], "--duration: inf is not a finite number"),
+    (["sitl", "--speed-factor", "nan"], "--speed-factor: nan is not a finite number"),
+    (["sitl", "--speed-factor", "2000"], "--speed-factor: 2000 must be within 0.01..1000"),
+    (["sitl", "--telemetry-rate", "inf"], "--telemetry-rate: inf is not a finite number"),
+    (["sitl", "--instance", "-1"], "--instance: -1 must be within 0..999"),
+    (["sitl", "--instances", "2.5"], "--instances: '2.5' is not an integer"),
+    (["sitl", "--wind-seed", "-3"], "--wind-seed: -3 must be at least 0"),
+    (["bridge", "px4", "--duration", "nan"], "--duration: nan is not a finite number"),
+    (["bridge", "px4", "--speed-factor=-inf"], "--speed-factor: -inf is not a finite number"),
+    (["bridge", "px4", "--instance", "1000"], "--instance: 1000 must be within 0..999"),
+    (["bridge", "ardupilot", "--speed-factor", "0"], "--speed-factor: 0 must be within"),
+    (["bridge", "ardupilot", "--port", "70000"], "--port: 70000 must be within 1..65535"),
+    (["navigate", "--algorithm", "straight", "--speed-factor", "nan"],
+     "--speed-factor: nan is not a finite number"),
+    (["navigate", "--algorithm", "straight", "--max-speed", "0"],
+     "--max-speed: 0 must be more than 0 and at most 20"),
+    (["navigate", "--algorithm", "straight", "--timeout", "inf"],
+     "--timeout: inf is not a finite number"),
+    (["navigate", "--algorithm", "straight", "--connect-timeout", "-1"],
+     "--connect-timeout: -1 must be more than 0"),
+    (["navigate", "--algorithm", "straight", "--heading", "nan"],
+     "--heading: nan is not a finite number"),
+]
+
+
+def test_non_finite_and_out_of_range_numbers_are_one_line_errors(capsys):
+    # `sitl --duration nan` used to serve forever and `--duration -5` to exit 0 at once.
+    # The real command for one case of each command (in parallel: each start costs a
+    # second), the parser in this process for all of them
+    assert EXE
+    real = [BAD_NUMBERS[i] for i in (0, 1, 9, 13, 14)] + [
+        (["sitl", "--home", "nan,8.5,488"], "--home: home latitude: nan")]
+    procs = [subprocess.Popen([EXE, *args], stdout=subprocess.PIPE, stderr=subprocess.PIPE,
+                              text=True) for args, _ in real]
+    for (args, needle), proc in zip(real, procs):
+        try:
+            _, err = proc.communicate(timeout=60)
+        except subprocess.TimeoutExpired:
+            proc.kill()
+            proc.communicate()
+            raise AssertionError(f"{args} did not stop") from None
+        assert proc.returncode == 2, (args, err)
+        assert err.startswith(f"ft-sitl: error: {needle}") and err.count("\n") == 1, err
+    from ft_sitl.cli import main
+
+    for args, needle in BAD_NUMBERS:
+        assert main(args) == 2, args
+        err = capsys.readouterr().err
+        assert err.startswith(f"ft-sitl: error: {needle}") and err.count("\n") == 1, err
+
+
+def test_mavsdk_is_a_dependency_and_its_absence_is_one_line(tmp_path):
+    # the README's first command installs no extra, yet `navigate` and `campaign run
+    # --transport mavlink` fly MAVSDK clients: it is a core dependency, and if it cannot be
+    # imported all the same, the command says what to install before it starts
+    import tomllib
+
+    project = tomllib.loads((Path(__file__).resolve().parents[2] / "pyproject.toml")
+                            .read_text())["project"]
+    assert any(d.startswith("mavsdk>=") for d in project["dependencies"])
+    stub = tmp_path / "stub" / "mavsdk"
+    stub.mkdir(parents=True)
+    (stub / "__init__.py").write_text(
+        "raise ModuleNotFoundError(\"No module named 'mavsdk'\", name='mavsdk')\n")
+    env = {**os.environ, "PYTHONPATH": os.pathsep.join(
+        [str(stub.parent), *filter(None, [os.environ.get("PYTHONPATH")])])}
+    for args in (["navigate", "--algorithm", "straight", "--goal", "5,0,-2"],
+                 ["campaign", "run", "quick", "--transport", "mavlink", "--limit", "1",
+                  "--out", str(tmp_path / "out")]):
+        proc = subprocess.run([EXE, *args], capture_output=True, text=True, env=env,
+                              timeout=120)
+        assert proc.returncode == 2, (args, proc.stderr)
+        assert proc.stderr.startswith("ft-sitl: error: the MAVSDK client needs the Python "
+                                      "package 'mavsdk'"), proc.stderr
+        assert "pip install 'mavsdk>=4.1'" in proc.stderr and proc.stderr.count("\n") == 1
+    assert not (tmp_path / "out").exists()
+
+
+def test_bridge_spawn_heading_is_north_unless_given():
+    out = run("bridge", "px4", "--spawn-yaw", "45", "--duration", "0.3", "--instance", "777")
+    assert "no scenario, spawn heading 45.0 deg" in out.stdout.splitlines()[0]
+    out = run("bridge", "px4", "--duration", "0.3", "--instance", "777")
+    assert "no scenario, spawn heading 0.0 deg" in out.stdout.splitlines()[0]
+    proc = run("bridge", "ardupilot", "--spawn-yaw", "400", check=False)
+    assert proc.returncode == 2
+    assert proc.stderr == "ft-sitl: error: --spawn-yaw: 400 must be within -360..360\n"
 
 
 def test_sitl_bad_arguments_are_one_line_errors():

@@ -14,8 +14,8 @@ PLATFORM = "0.98kg-EGO Planner DIY"
 
 @contextmanager
 def running_sitl(instances: int = 1, speed_factor: float = 1.0, params=None, scenario=None,
-                 estimator=None, **kwargs):
-    p = get_platform(PLATFORM)
+                 estimator=None, platform: str = PLATFORM, **kwargs):
+    p = get_platform(platform)
     if scenario is None:
         spawn, yaw = [[0.0, 2.0 * i, 0.0] for i in range(instances)], None
     else:  # the takeoff point, further vehicles 2 m east
@@ -29,7 +29,14 @@ def running_sitl(instances: int = 1, speed_factor: float = 1.0, params=None, sce
                         speed_factor=speed_factor, **kwargs)
     loop = asyncio.new_event_loop()
     started = threading.Event()
+    serving = threading.Event()
     errors = []
+
+    def first_chunk():  # the first step is where numba compiles (seconds on a cold cache)
+        server.on_chunk = None
+        serving.set()
+
+    server.on_chunk = first_chunk
 
     def runner():
         asyncio.set_event_loop(loop)
@@ -40,6 +47,7 @@ def running_sitl(instances: int = 1, speed_factor: float = 1.0, params=None, sce
         except Exception as exc:  # noqa: BLE001 - reported to the test below
             errors.append(exc)
             started.set()
+            serving.set()
         finally:
             server.close()
             loop.close()
@@ -47,6 +55,9 @@ def running_sitl(instances: int = 1, speed_factor: float = 1.0, params=None, sce
     thread = threading.Thread(target=runner, daemon=True)
     thread.start()
     assert started.wait(10), "server did not start"
+    assert not errors, errors
+    # yield a server that simulates, so the tests' timeouts do not include the compilation
+    assert serving.wait(180), "server did not simulate its first step"
     assert not errors, errors
     try:
         yield server

@@ -169,10 +169,11 @@ def test_tlog_records_traffic_that_pymavlink_reads_back(tmp_path):
 
 def test_hostile_input_never_crashes_the_vehicle():
     rng = np.random.default_rng(1234)
-    with running_sitl(speed_factor=4.0) as server:
-        c = client()
+    k = 31  # PX4 instance 31: ports clear of the other MAVLink tests
+    with running_sitl(speed_factor=4.0, base_instance=k) as server:
+        c = client(14540 + k)
         sock = c.port
-        dest = ("127.0.0.1", 14580)
+        dest = ("127.0.0.1", 14580 + k)
         enc = mav.MAVLink(None, 246, 191)
         good = [
             mav.MAVLink_command_long_message(1, 1, mav.MAV_CMD_COMPONENT_ARM_DISARM, 0, 1,
@@ -182,7 +183,12 @@ def test_hostile_input_never_crashes_the_vehicle():
         ]
         for m in good:
             sock.sendto(m.pack(enc), dest)
+        params_before = dict(server.fleet.params[0].items())
         bad_values = [math.nan, math.inf, -math.inf, 1e30, -1e30, 0.0]
+        # hostile but valid: heartbeat intervals that would silence the vehicle
+        silencers = [mav.MAVLink_command_long_message(
+            1, 1, mav.MAV_CMD_SET_MESSAGE_INTERVAL, 0, mav.MAVLINK_MSG_ID_HEARTBEAT, v,
+            0, 0, 0, 0, 0) for v in (1e30, math.inf, -1.0, -math.inf, math.nan, 2e6)]
         for k in range(600):
             kind = k % 6
             if kind == 0:  # random bytes
@@ -206,7 +212,7 @@ def test_hostile_input_never_crashes_the_vehicle():
             elif kind == 4:  # parameter sets of unknown names and absurd values
                 m = mav.MAVLink_param_set_message(
                     1, 1, rng.choice([b"MPC_XY_VEL_MAX", b"NOPE", b"FT_GAIN_MODE"]),
-                    float(rng.choice(bad_values)), int(rng.integers(1, 11)))
+                    float(rng.choice(bad_values[:5])), int(rng.integers(1, 11)))
             else:  # mission items out of the blue
                 m = mav.MAVLink_mission_item_int_message(
                     1, 1, int(rng.integers(0, 5)), int(rng.integers(0, 12)),
@@ -221,6 +227,9 @@ def test_hostile_input_never_crashes_the_vehicle():
             sock.sendto(bytes(data), dest)
             if k % 50 == 0:
                 time.sleep(0.05)
+                silencer = silencers[(k // 50) % len(silencers)]
+                for link_port in (14580 + k, 18570 + k):
+                    sock.sendto(silencer.pack(enc), ("127.0.0.1", link_port))
         time.sleep(1.0)
         # still alive and answering, state finite. Our receive buffer overflowed while we
         # flooded without reading: drain it first, and retry as MAVSDK would
@@ -238,6 +247,24 @@ def test_hostile_input_never_crashes_the_vehicle():
         assert np.isfinite(server.fleet.sim.x).all()
         assert np.isfinite(server.fleet.sim.w_cmd).all()
         assert server.bad_packets > 0
+        # nothing silenced the vehicle: heartbeats keep coming at least once a simulated
+        # second (and a wall second), and each silencer is refused
+        for silencer in silencers:
+            sock.sendto(silencer.pack(enc), dest)
+            assert ack_of(c, mav.MAV_CMD_SET_MESSAGE_INTERVAL).result == \
+                mav.MAV_RESULT_DENIED
+        sim0, wall0, beats, last = server.fleet.time_us, time.time(), 0, time.time()
+        while time.time() - wall0 < 3.0:
+            if c.recv_match(type="HEARTBEAT", blocking=True, timeout=0.2) is not None:
+                assert time.time() - last < 1.1
+                beats, last = beats + 1, time.time()
+        assert time.time() - last < 1.1
+        assert beats >= (server.fleet.time_us - sim0) / 1e6 - 1
+        # the parameters took none of the absurd values and still answer
+        assert dict(server.fleet.params[0].items()) == params_before
+        c.mav.param_request_read_send(1, 1, b"MPC_XY_VEL_MAX", -1)
+        pv = wait_msg(c, "PARAM_VALUE", lambda m: m.param_id == "MPC_XY_VEL_MAX", timeout=5)
+        assert pv.param_value == pytest.approx(params_before["MPC_XY_VEL_MAX"])
 
 
 def test_timesync_param_rollback_and_per_vehicle_local_origin():
