@@ -23,6 +23,7 @@ from ft_sitl.autopilot.geofence import MAX_ITEMS as MAX_FENCE_ITEMS
 from ft_sitl.autopilot.geofence import Fence, FenceError, circle, polygon
 from ft_sitl.autopilot.params import PARAMS, ParamError
 from ft_sitl.autopilot.setpoints import Setpoint, SetpointError
+from ft_sitl.mavlink.shell import Shell
 from ft_sitl.physics import dynamics as d
 from ft_sitl.physics.quaternion import qrotate_inv, qto_euler
 from ft_sitl.sim.fleet import Fleet
@@ -196,6 +197,7 @@ class VehicleAgent:
         self._text_id = 0
         self._reached_sent = 0
         self._orbit_due_us = 0
+        self._shell = Shell(self)
         self._upload: _Transfer | None = None
         self._download_items: list = []
         #: MISSION_ITEM_INT messages as uploaded, per mission type (mission, fence, rally)
@@ -582,6 +584,8 @@ class VehicleAgent:
             if p[0] > 0.5:
                 return c.terminate(), []
             return Result.ACCEPTED, []
+        if command == mav.MAV_CMD_PREFLIGHT_CALIBRATION:
+            return self._calibrate(p), []
         if command == mav.MAV_CMD_PREFLIGHT_REBOOT_SHUTDOWN:
             if c.armed:
                 return Result.DENIED, []
@@ -592,6 +596,24 @@ class VehicleAgent:
                 c.text(cm.Severity.INFO, "Rebooting autopilot")
             return Result.ACCEPTED, []
         return Result.UNSUPPORTED, []
+
+    def _calibrate(self, p) -> Result:
+        """PREFLIGHT_CALIBRATION as PX4 SITL answers it, completed at once: the "[cal]"
+        STATUSTEXT protocol (started, progress, done) MAVSDK's Calibration plugin and
+        QGroundControl follow. Refused when armed."""
+        kinds = [(0, 1, "gyro"), (1, 1, "mag"), (2, 1, "baro"), (4, 1, "accel"),
+                 (4, 2, "level"), (5, 1, "airspeed")]
+        chosen = [k for i, v, k in kinds if math.isfinite(p[i]) and round(p[i]) == v]
+        if not chosen:  # all zero: nothing to calibrate (PX4: cancels a running one)
+            return Result.ACCEPTED
+        if self.cmd.armed:
+            self.cmd.text(cm.Severity.CRITICAL, "[cal] calibration denied: vehicle armed")
+            return Result.TEMPORARILY_REJECTED
+        kind = chosen[0]
+        for text in (f"[cal] calibration started: 2 {kind}", "[cal] progress <50>",
+                     "[cal] progress <100>", f"[cal] calibration done: {kind}"):
+            self.cmd.text(cm.Severity.INFO, text)
+        return Result.ACCEPTED
 
     def _set_message_interval(self, msg_id: float, interval_us: float, link: int) -> Result:
         """MAV_CMD_SET_MESSAGE_INTERVAL on this link: interval > 0 sets 1e6 / interval Hz (at
@@ -789,16 +811,41 @@ class VehicleAgent:
             self.cmd.text(cm.Severity.WARNING, f"Param {name[:16]} unknown: not set")
             return []
         value = _param_from_wire(name, m.param_value, m.param_type)
+        try:
+            self.set_param(name, value)
+        except ParamError as exc:
+            self.cmd.text(cm.Severity.WARNING, str(exc)[:50])
+        return [Outgoing(self._param_value(name))]
+
+    def set_param(self, name: str, value) -> None:
+        """Set one parameter (PARAM_SET, the shell); ParamError refuses it as a whole,
+        nothing half-applied."""
         old = self.params[name]
         try:
             self.params.set(name, value)
             if PARAMS[name].honoured:  # a stored parameter changes nothing to rebuild
                 self.fleet.refresh_params()
-        except ParamError as exc:
-            self.params.set(name, old)  # refused as a whole: nothing half-applied
+        except ParamError:
+            self.params.set(name, old)
             self.fleet.refresh_params()
-            self.cmd.text(cm.Severity.WARNING, str(exc)[:50])
-        return [Outgoing(self._param_value(name))]
+            raise
+
+    # the shell ------------------------------------------------------------------------
+    def _on_serial_control(self, m, link, peer, wall_us):
+        """SERIAL_CONTROL to the shell device: run its lines, answer with their output in
+        SERIAL_CONTROL replies of at most 70 bytes (mavlink/shell.py)."""
+        if m.device != mav.SERIAL_CONTROL_DEV_SHELL:
+            return []
+        n = max(0, min(int(m.count), 70))
+        text = self._shell.feed(bytes(m.data[:n]))
+        raw = text.encode("ascii", "replace")
+        out = []
+        for k in range(0, len(raw), 70):
+            chunk = raw[k:k + 70]
+            out.append(Outgoing(mav.MAVLink_serial_control_message(
+                mav.SERIAL_CONTROL_DEV_SHELL, mav.SERIAL_CONTROL_FLAG_REPLY, 0, 0, len(chunk),
+                list(chunk) + [0] * (70 - len(chunk))), link, peer))
+        return out
 
     # missions, fences, rally points ----------------------------------------------------
     def _mission_ack(self, m, result: int, link, peer, mission_type=0) -> Outgoing:
@@ -1094,4 +1141,5 @@ _HANDLERS = {
     "MISSION_SET_CURRENT": VehicleAgent._on_mission_set_current,
     "MISSION_ACK": VehicleAgent._on_mission_ack,
     "TIMESYNC": VehicleAgent._on_timesync,
+    "SERIAL_CONTROL": VehicleAgent._on_serial_control,
 }
