@@ -33,6 +33,8 @@ is 1, as PX4 does.
 
 from __future__ import annotations
 
+from ft_sitl.schema import Param, Schema
+
 UNITS = {0: "gyro", 1: "accel", 2: "mag", 3: "baro", 4: "gps", 5: "optical_flow", 6: "vio",
          7: "distance_sensor", 8: "airspeed", 100: "battery", 101: "motor", 102: "servo",
          103: "avoidance", 104: "rc_signal", 105: "mavlink_signal"}
@@ -45,6 +47,18 @@ SUPPORTED = {"motor": ("off", "stuck", "wrong", "slow"), "gps": ("off",),
              "battery": ("off",), "mavlink_signal": ("off",)}
 #: a motor's thrust efficiency under a "wrong" or "slow" failure
 DEGRADED_EFFICIENCY = 0.5
+
+
+#: a scheduled injection (a trial's ``failures``, a campaign's failure axis): what and when
+SCHEDULE_SCHEMA = Schema((
+    Param("at_s", 0.0, "s", (0.0, 3600.0), doc="when, after the trial's first step"),
+    Param("unit", "motor", choices=tuple(SUPPORTED), doc="what fails (FAILURE_UNIT)"),
+    Param("type", "off", choices=("off", "stuck", "wrong", "slow", "ok"),
+          doc="how it fails (FAILURE_TYPE)"),
+    Param("instance", 1, "-", (0, 16), doc="which one (a motor: 1..n; 0: all / none)"),
+))
+UNIT_CODES = {v: k for k, v in UNITS.items()}
+TYPE_CODES = {v: k for k, v in TYPES.items()}
 
 
 class FailureError(ValueError):

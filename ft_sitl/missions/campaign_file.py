@@ -65,6 +65,7 @@ from ft_sitl.missions.spec import (
     TrialSpecError,
     actuator_settings,
     estimator_settings,
+    failure_setting,
     perception_settings,
     px4_params,
     wind_settings,
@@ -81,7 +82,7 @@ PRESETS = ("quick", "paper", "gains")
 TOP_KEYS = ("name", "trials", "seed", "scenario_seed", "platforms", "platform_files",
             "scenarios", "indices", "physics_hz", "protocol", "gains", "algorithms", "limits",
             "weights", "description", "wind", "params", "actuators", "perception",
-            "estimator")
+            "estimator", "failures")
 LIMIT_KEYS = ("max_speed_m_s", "timeout_s", "goal_radius_m", "hold_s", "max_acc_m_s2")
 WEIGHT_KEYS = ("scenarios", "platforms", "beta")
 
@@ -136,6 +137,8 @@ class Campaign:
     perceptions: list = field(default_factory=lambda: [None])
     #: the estimator axis: every trial flies with each (None: the truth as estimate)
     estimators: list = field(default_factory=lambda: [None])
+    #: the failure axis: every trial flies with each (None: no failure injected)
+    failure_sets: list = field(default_factory=lambda: [None])
 
     def spec_dict(self) -> dict:
         """The campaign as data: what resuming compares, what reports print."""
@@ -165,6 +168,8 @@ class Campaign:
                if self.perceptions != [None] else {}),
             **({"estimator": [e or {} for e in self.estimators]}
                if self.estimators != [None] else {}),
+            **({"failures": [f or {} for f in self.failure_sets]}
+               if self.failure_sets != [None] else {}),
         }
 
     def modes(self) -> list[str]:
@@ -191,10 +196,12 @@ class Campaign:
                             trial=t, seed=seed, limits=self.limits, campaign=self.name,
                             physics_hz=self.physics_hz, protocol=self.protocol,
                             gains=g, scenario_version=sc.version, wind=w, params=ps,
-                            actuators=ac, perception=pe, estimator=es)
+                            actuators=ac, perception=pe, estimator=es,
+                            failures=[fa] if fa else None)
                             for g in self.modes() for ps in self.param_sets
                             for ac in self.actuator_sets for pe in self.perceptions
-                            for es in self.estimators for w in self.winds)
+                            for es in self.estimators for fa in self.failure_sets
+                            for w in self.winds)
         out.sort(key=lambda s: (s.scenario_file or "", s.family, s.scenario_index))
         return out
 
@@ -255,10 +262,12 @@ def parse_campaign(doc: dict, path: Path | None = None) -> Campaign:
     _check_motors(t, actuator_sets, platforms)
     perceptions = _table_axis(t, "perception", "perception settings", perception_settings)
     estimators = _table_axis(t, "estimator", "estimator settings", estimator_settings)
+    failure_sets = _table_axis(t, "failures", "failure settings", failure_setting)
+    _check_motors(t, failure_sets, platforms, "failures", ("instance",))
     notes: list[str] = []
     return Campaign(winds=winds, gain_modes=gain_modes, param_sets=param_sets,
                     actuator_sets=actuator_sets, perceptions=perceptions,
-                    estimators=estimators,
+                    estimators=estimators, failure_sets=failure_sets,
         name=name, algorithms=parse_algorithms(where, doc["algorithms"], notes),
         platforms=platforms, scenarios=scenarios, trials=trials, seed=seed,
         scenario_seed=scenario_seed, limits=limits, weights=weights, physics_hz=physics_hz,
@@ -304,14 +313,18 @@ def _param_sets(t: Table) -> list:
     return _table_axis(t, "params", "PX4 parameters", px4_params)
 
 
-def _check_motors(t: Table, actuator_sets: list, platforms) -> None:
-    """The motors an actuator setting names exist on every platform of the campaign."""
+def _check_motors(t: Table, actuator_sets: list, platforms, axis: str = "actuators",
+                  keys=("degraded_motor", "fail_motor", "stuck_motor")) -> None:
+    """The motors an actuator (or failure) setting names exist on every platform of the
+    campaign."""
     fewest = min((p.n_rotors for p in platforms), default=0)
     for k, a in enumerate(actuator_sets):
-        for key in ("degraded_motor", "fail_motor"):
+        for key in keys:
             m = (a or {}).get(key, 0)
+            if key == "instance" and (a or {}).get("unit") != "motor":
+                continue
             if m > fewest:
-                owner = "actuators" if len(actuator_sets) == 1 else f"actuators[{k}]"
+                owner = axis if len(actuator_sets) == 1 else f"{axis}[{k}]"
                 raise t.fail(owner,
                              f"{key}: {m} must be within 0..{fewest} (the fewest motors of "
                              f"the campaign's platforms)")

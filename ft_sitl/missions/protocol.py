@@ -43,6 +43,7 @@ from enum import Enum
 import numpy as np
 
 from ft_sitl import __version__
+from ft_sitl.autopilot import failures
 from ft_sitl.autopilot.cascade import C_SAT_STEPS
 from ft_sitl.autopilot.params import GAIN_MODES, ParamSet
 from ft_sitl.missions.resources import RESOURCES, TrialResources
@@ -114,6 +115,8 @@ def identity_row(spec, platform, scenario) -> dict:
         if spec.perception else "",
         "estimator": json.dumps(spec.estimator, sort_keys=True, separators=(",", ":"))
         if spec.estimator else "",
+        "failures": json.dumps(spec.failures, sort_keys=True, separators=(",", ":"))
+        if spec.failures else "",
     }
 
 
@@ -500,4 +503,14 @@ def trial_vehicle(spec, scenario, platform, resources: TrialResources = RESOURCE
             raise TrialSpecError(f"actuators: {exc}") from None
     if spec.estimator is not None:  # the flight controller's estimate, from the start
         fleet.sim.set_estimator(0, spec.estimator, seed=estimator_seed(spec))
+    for f in spec.failures or ():  # timed from the trial's first step, PX4's way
+        try:
+            failures.check(failures.UNIT_CODES[f["unit"]], failures.TYPE_CODES[f["type"]],
+                           f["instance"], platform.n_rotors)
+        except failures.FailureError as exc:
+            raise TrialSpecError(f"failures: {exc}") from None
+        fleet.params[0].set("SYS_FAILURE_EN", 1)
+        fleet.schedule_failure(0, fleet.time_us + round(f["at_s"] * 1e6),
+                               failures.UNIT_CODES[f["unit"]], failures.TYPE_CODES[f["type"]],
+                               f["instance"])
     return guard, fleet

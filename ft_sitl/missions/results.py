@@ -21,7 +21,8 @@ default parameters for rows written before they existed)
     ``perception`` (the navigator's latency, state noise and dropped frames,
     ft_sitl.missions.perception, as JSON; "" ideal); ``estimator`` (the flight
     controller's noisy, biased, late estimate, ft_sitl.autopilot.estimator, as JSON; ""
-    the truth).
+    the truth); ``failures`` (failures injected during the trial, autopilot.failures, as
+    JSON; "" none).
 outcome
     ``success`` (bool), ``reason`` (an :class:`Outcome` value), ``detail`` (what was hit,
     which bound, the navigator's exception ...).
@@ -96,7 +97,7 @@ IDENTITY = ("trial_id", "campaign", "algorithm", "algorithm_params", "platform",
             "family", "scenario_category", "scenario_index", "scenario_seed", "scenario",
             "trial", "seed")
 AXES = ("wind_speed_m_s", "turbulence", "gust_m_s", "wind", "params", "actuators",
-        "perception", "estimator")
+        "perception", "estimator", "failures")
 OUTCOME = ("success", "reason", "detail")
 METRICS = ("time_to_goal_s", "nav_time_s", "path_length_m", "mean_speed_m_s",
            "max_speed_m_s", "min_clearance_m", "max_tilt_deg", "saturation_fraction",
@@ -143,6 +144,7 @@ def to_frame(rows):
     df["actuators"] = df["actuators"].astype(object).fillna("")
     df["perception"] = df["perception"].astype(object).fillna("")
     df["estimator"] = df["estimator"].astype(object).fillna("")
+    df["failures"] = df["failures"].astype(object).fillna("")
     for c in FLOAT:
         df[c] = pd.to_numeric(df[c], errors="coerce").astype("float64")
     df["success"] = df["success"].astype(bool)

@@ -14,6 +14,7 @@ from dataclasses import dataclass, field, replace
 
 from ft_sitl.autopilot.estimator import SCHEMA as ESTIMATOR_SCHEMA
 from ft_sitl.autopilot.estimator import Estimator
+from ft_sitl.autopilot.failures import SCHEDULE_SCHEMA as FAILURE_SCHEMA
 from ft_sitl.autopilot.params import DEFAULT_GAINS, GAIN_MODES, PARAMS, ParamError, ParamSet
 from ft_sitl.missions.perception import SCHEMA as PERCEPTION_SCHEMA
 from ft_sitl.missions.perception import Perception
@@ -162,6 +163,9 @@ class TrialSpec:
     #: the flight controller's estimate of the state, made imperfect (autopilot.estimator
     #: settings: noise, bias, latency per group; None: the truth), the non-default settings
     estimator: dict | None = None
+    #: failures injected during the trial, PX4's way (autopilot.failures: at_s, unit, type,
+    #: instance each), in time order; None: none
+    failures: list | None = None
 
     def __post_init__(self):
         for name in ("algorithm", "platform", "family"):
@@ -184,6 +188,7 @@ class TrialSpec:
         object.__setattr__(self, "actuators", actuator_settings(self.actuators))
         object.__setattr__(self, "perception", perception_settings(self.perception))
         object.__setattr__(self, "estimator", estimator_settings(self.estimator))
+        object.__setattr__(self, "failures", failure_schedule(self.failures))
         if self.scenario_file is None:
             try:
                 fam = describe_family(self.family)
@@ -232,6 +237,8 @@ class TrialSpec:
             d["perception"] = self.perception
         if self.estimator is not None:  # (likewise: the truth as estimate)
             d["estimator"] = self.estimator
+        if self.failures is not None:  # (likewise: no failures)
+            d["failures"] = self.failures
         return d
 
     @classmethod
@@ -307,6 +314,36 @@ def estimator_settings(values, owner: str = "estimator") -> dict | None:
     """A trial's flight-controller estimator as its canonical settings (those that differ
     from the defaults); None for the truth. TrialSpecError naming ``owner`` and the key."""
     return _non_default(values, owner, ESTIMATOR_SCHEMA, Estimator, "estimator settings")
+
+
+def failure_setting(values, owner: str = "failures") -> dict | None:
+    """One scheduled failure (autopilot.failures.SCHEDULE_SCHEMA: at_s, unit, type,
+    instance), every key kept; None for an empty table (no failure). TrialSpecError naming
+    ``owner`` and the key."""
+    if values is None or values == {}:
+        return None
+    if not isinstance(values, dict):
+        raise TrialSpecError(f"{owner}: must be a table of failure settings "
+                             f"({', '.join(FAILURE_SCHEMA.names())}), got {values!r}")
+    try:
+        v = FAILURE_SCHEMA.resolve(values, owner)
+    except SchemaError as exc:
+        raise TrialSpecError(str(exc)) from None
+    return {"at_s": float(v["at_s"]), "unit": v["unit"], "type": v["type"],
+            "instance": int(v["instance"])}
+
+
+def failure_schedule(values, owner: str = "failures") -> list | None:
+    """A trial's failures: a list of scheduled failures (or one), in time order; None
+    for none."""
+    if values is None:
+        return None
+    items = [values] if isinstance(values, dict) else values
+    if not isinstance(items, list):
+        raise TrialSpecError(f"{owner}: must be a list of failure tables, got {values!r}")
+    out = [f for k, item in enumerate(items)
+           if (f := failure_setting(item, f"{owner}[{k}]")) is not None]
+    return sorted(out, key=lambda f: f["at_s"]) or None
 
 
 def wind_settings(values, owner: str = "wind") -> dict | None:

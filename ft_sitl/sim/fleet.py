@@ -64,6 +64,7 @@ class Fleet:
         for i in range(n):
             self._place(i)
         self.steps_per_tick = max(1, round(1.0 / (COMMANDER_HZ * self.sim.dt)))
+        self._scheduled: list = []  # failures to inject: (time_us, vehicle, unit, type, n)
         self._tick_all()
 
     def _place(self, i: int) -> None:
@@ -128,6 +129,19 @@ class Fleet:
             tilt=math.acos(min(1.0, max(-1.0, c))),
         )
 
+    def schedule_failure(self, i: int, at_us: int, unit: int, ftype: int,
+                         instance: int = 0) -> None:
+        """Inject a failure into vehicle i at simulated time ``at_us`` (served at the
+        first commander tick at or after it: 20 ms resolution)."""
+        self._scheduled.append((int(at_us), i, unit, ftype, instance))
+        self._scheduled.sort()
+
+    def _inject_due(self) -> None:
+        now = self.sim.time_us
+        while self._scheduled and self._scheduled[0][0] <= now:
+            _, i, unit, ftype, instance = self._scheduled.pop(0)
+            self.inject_failure(i, unit, ftype, instance)
+
     def inject_failure(self, i: int, unit: int, ftype: int, instance: int = 0) -> Result:
         """PX4's MAV_CMD_INJECT_FAILURE for vehicle i (MAVLink's FAILURE_UNIT and
         FAILURE_TYPE values; ft_sitl.autopilot.failures says what each does): DENIED unless
@@ -172,6 +186,8 @@ class Fleet:
                                                 self.sim.energy_j(i)))
 
     def _tick_all(self) -> None:
+        if self._scheduled:
+            self._inject_due()
         for i, cmd in enumerate(self.commanders):
             self.sim.set_setpoint(i, cmd.update(self.sim.time_us, self.state(i),
                                                 self.sim.energy_j(i)))

@@ -331,3 +331,37 @@ def test_depth_image_noise_replaces_the_navigators_camera_noise(yard):
     err = frames[1].depth[both] - frames[0].depth[both]
     z = frames[0].depth[both]
     assert np.std(err / (0.004 * z * z)) == pytest.approx(1.0, abs=0.05)  # sigma = k z^2
+
+
+# --- the failure-injection axis -----------------------------------------------------------------
+FAILING = """\
+name = "failing"
+algorithms = ["straight"]
+platforms = ["1.00kg-SunnySky"]
+scenarios = [{file = "yard.yaml"}]
+trials = 1
+failures = [{}, {at_s = 3, unit = "motor", type = "off", instance = 2}]
+[limits]
+timeout_s = 6.0
+"""
+
+
+def test_a_failure_axis_injects_failures_at_their_times_and_rows_record_them(yard, tmp_path):
+    c = load_campaign(campaign_file(yard.parent, "failing.toml", FAILING))
+    specs = c.trial_specs()
+    assert [s.failures for s in specs] == [
+        None, [{"at_s": 3.0, "unit": "motor", "type": "off", "instance": 2}]]
+    assert "failures" not in specs[0].to_dict()
+    summary = run_campaign(c, tmp_path / "out", progress=False)
+    assert (summary.ran, summary.errors) == (2, [])
+    rows = {r["failures"]: r for r in read_jsonl(tmp_path / "out" / "trials.jsonl")}
+    failed = rows['[{"at_s":3.0,"instance":2,"type":"off","unit":"motor"}]']
+    assert failed["saturation_fraction"] > rows[""]["saturation_fraction"]
+    assert failed["reason"] != "success"  # a quadrotor that loses a motor does not arrive
+    with pytest.raises(CampaignError, match=r"failures\[1\]: instance: 7 must be within "
+                                            r"0\.\.4"):
+        load_campaign(campaign_file(yard.parent, "bad.toml", FAILING.replace("instance = 2",
+                                                                          "instance = 7")))
+    with pytest.raises(CampaignError, match=r"failures\[1\]: unit: must be 'motor' or"):
+        load_campaign(campaign_file(yard.parent, "bad2.toml", FAILING.replace('"motor"',
+                                                                           '"rotor"')))

@@ -508,7 +508,8 @@ FULL = TrialSpec(algorithm="straight", platform=PLATFORM, family="maze", scenari
                  gains="px4", scenario_version=2, wind={"speed_m_s": 3.0},
                  params={"MPC_XY_P": 1.1}, actuators={"lag_s": 0.01},
                  perception={"latency_s": 0.05},
-                 estimator={"position_bias_m": [0.1, 0.0, 0.0], "rate_latency_s": 0.004})
+                 estimator={"position_bias_m": [0.1, 0.0, 0.0], "rate_latency_s": 0.004},
+                 failures=[{"at_s": 5.0, "unit": "gps", "type": "off", "instance": 0}])
 
 
 def test_spec_round_trips_through_dict_and_json():
@@ -539,6 +540,7 @@ CHANGES = {
     "protocol": 1, "gains": "bandwidth", "scenario_version": 1, "wind": {"speed_m_s": 4.0},
     "params": {"MPC_XY_P": 1.2}, "actuators": {"lag_s": 0.02},
     "perception": {"latency_s": 0.1}, "estimator": {"position_noise_m": 0.1},
+    "failures": [{"at_s": 1.0, "unit": "battery", "type": "off", "instance": 0}],
 }
 # (protocol 2 here: FULL with protocol 3 would carry 3's acceleration limit, which 1 refuses)
 
