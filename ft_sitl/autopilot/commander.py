@@ -22,6 +22,7 @@ import numpy as np
 
 from ft_sitl import G
 from ft_sitl.autopilot import cascade as c
+from ft_sitl.autopilot.follow import FollowTask, TargetEstimator
 from ft_sitl.autopilot.geofence import Fence, nearest_safe_point
 from ft_sitl.autopilot.params import ParamSet
 from ft_sitl.autopilot.setpoints import Setpoint
@@ -34,6 +35,8 @@ MAIN_MANUAL, MAIN_ALTCTL, MAIN_POSCTL, MAIN_AUTO, MAIN_ACRO, MAIN_OFFBOARD, MAIN
 SUB_READY, SUB_TAKEOFF, SUB_LOITER, SUB_MISSION, SUB_RTL, SUB_LAND = 1, 2, 3, 4, 5, 6
 #: PX4's position-mode sub mode of an orbit (MAV_CMD_DO_ORBIT)
 SUB_POSCTL_ORBIT = 1
+#: PX4's AUTO sub mode of follow-target (follow me)
+SUB_FOLLOW_TARGET = 8
 
 MODE_NAMES = {
     (MAIN_MANUAL, 0): "MANUAL",
@@ -46,6 +49,7 @@ MODE_NAMES = {
     (MAIN_AUTO, SUB_MISSION): "AUTO.MISSION",
     (MAIN_AUTO, SUB_RTL): "AUTO.RTL",
     (MAIN_AUTO, SUB_LAND): "AUTO.LAND",
+    (MAIN_AUTO, SUB_FOLLOW_TARGET): "AUTO.FOLLOW_TARGET",
     (MAIN_ACRO, 0): "ACRO",
     (MAIN_OFFBOARD, 0): "OFFBOARD",
     (MAIN_STABILIZED, 0): "STABILIZED",
@@ -236,6 +240,7 @@ class Commander:
         self._gps_lost_us: int | None = None
         #: an orbit: (centre, signed radius, speed, yaw behaviour, initial yaw)
         self.orbit_state: tuple | None = None
+        self._init_follow()
 
     # --- helpers -------------------------------------------------------------------
     @property
@@ -281,6 +286,8 @@ class Commander:
                 return self._deny("Arming denied: no offboard setpoints")
             if self.main_mode == MAIN_AUTO and self.sub_mode == SUB_MISSION and not self.mission:
                 return self._deny("Arming denied: no valid mission")
+            if self._follow_active():
+                return self._deny("Arming denied: mode not suitable for arming")
         self.armed = True
         self._armed_t_us = self.time_us
         self._took_off = False
@@ -304,7 +311,8 @@ class Commander:
     def _disarm(self, why: str) -> None:
         self.armed = False
         self.text(Severity.INFO, why)
-        if self.main_mode == MAIN_AUTO and self.sub_mode in (SUB_LAND, SUB_RTL, SUB_TAKEOFF):
+        if self.main_mode == MAIN_AUTO and self.sub_mode in (SUB_LAND, SUB_RTL, SUB_TAKEOFF,
+                                                             SUB_FOLLOW_TARGET):
             self._set_mode(MAIN_AUTO, SUB_LOITER)
 
     def terminate(self) -> Result:
@@ -356,6 +364,8 @@ class Commander:
             self.text(Severity.INFO, "Landing at current position")
         elif sub == SUB_RTL:
             self._start_rtl()
+        elif sub == SUB_FOLLOW_TARGET:
+            self._start_follow()
         elif sub == SUB_MISSION:
             if (self.mission_state in (MissionState.NOT_STARTED, MissionState.COMPLETE)
                     or self.mission_seq >= len(self.mission)):
@@ -485,6 +495,55 @@ class Commander:
         return Setpoint.trajectory(position=[math.nan, math.nan, c[2]],
                                    velocity=[vel[0], vel[1], math.nan],
                                    acceleration=[acc[0], acc[1], math.nan], yaw=yaw)
+
+    # --- follow target ----------------------------------------------------------------
+    def _init_follow(self) -> None:
+        #: the follow-target estimate (FOLLOW_TARGET messages) and flight task (follow.py)
+        self.follow_target = TargetEstimator()
+        self._follow_task = FollowTask()
+        self._follow_t_us = 0
+        self._follow_lost_said = False
+
+    def _follow_active(self) -> bool:
+        return self.main_mode == MAIN_AUTO and self.sub_mode == SUB_FOLLOW_TARGET
+
+    def follow_target_measurement(self, t_us: int, position: np.ndarray,
+                                  velocity: np.ndarray | None) -> None:
+        """A FOLLOW_TARGET fix: local ENU position (z NaN: altitude unknown) and ENU
+        velocity (None: unknown), already checked by the caller."""
+        self.follow_target.measure(t_us, position, velocity, self.params["FLW_TGT_RS"])
+
+    def _start_follow(self) -> None:
+        """AUTO.FOLLOW_TARGET: a fresh flight task; a target lost (or never heard) starts
+        a fresh estimate too, as PX4 starts its estimator with the task."""
+        if self.follow_target.lost(self.time_us):
+            self.follow_target = TargetEstimator()
+        self._follow_task = FollowTask(yaw=self._yaw())
+        self._follow_t_us = self.time_us
+        self._follow_lost_said = False
+        self._hold_here()
+        self.text(Severity.INFO, "Follow target: following")
+
+    def _follow_setpoint(self, s: VehicleState) -> Setpoint:
+        if s.on_ground:  # PX4 refuses arming in it; on the ground it stays idle here
+            return self._on_ground_idle()
+        dt = max(self.time_us - self._follow_t_us, 0) * 1e-6
+        self._follow_t_us = self.time_us
+        est = self.follow_target
+        if not est.valid:  # no target yet: hold where the mode was entered
+            if self._nav.target is None:
+                self._hold_here()
+            return Setpoint.position(self._nav.target, yaw=self._nav.yaw)
+        lost = est.lost(self.time_us)
+        if lost and not self._follow_lost_said:
+            self.text(Severity.WARNING, "Follow target lost: holding")
+        elif not lost and self._follow_lost_said:
+            self.text(Severity.INFO, "Follow target found again")
+        self._follow_lost_said = lost
+        target, target_vel = est.estimate(self.time_us)
+        pos, vel, acc, yaw = self._follow_task.setpoint(dt, s.position, target, target_vel,
+                                                        self.params, self.home[2])
+        return Setpoint.trajectory(pos, vel, acc, yaw=yaw)
 
     def change_speed(self, speed_m_s: float) -> Result:
         if not math.isfinite(speed_m_s) or speed_m_s <= 0:
@@ -761,6 +820,8 @@ class Commander:
             return self._rtl_setpoint(s)
         if sub == SUB_MISSION:
             return self._mission_setpoint(s)
+        if sub == SUB_FOLLOW_TARGET:
+            return self._follow_setpoint(s)
         # LOITER (hold, reposition)
         if s.on_ground and not self._took_off:
             return self._on_ground_idle()

@@ -139,6 +139,20 @@ _SPECS = [
               "geofence: maximum horizontal distance from home (0: off)"),
     ParamSpec("GF_MAX_VER_DIST", 0.0, 0.0, 10000.0, "m",
               "geofence: maximum height above home (0: off)"),
+    # --- follow target (AUTO.FOLLOW_TARGET, ft_sitl/autopilot/follow.py) ---------------
+    ParamSpec("FLW_TGT_DST", 8.0, 1.0, math.inf, "m", "horizontal distance kept from the target"),
+    ParamSpec("FLW_TGT_HT", 8.0, 8.0, math.inf, "m",
+              "follow height: above home (FLW_TGT_ALT_M 0, 1) or the target (2)"),
+    ParamSpec("FLW_TGT_FA", 180.0, -180.0, 180.0, "",
+              "follow angle (deg) clockwise from the target's course: 0 in front, 180 behind"),
+    ParamSpec("FLW_TGT_ALT_M", 0, INT32_MIN, INT32_MAX, "",
+              "follow altitude: 0 above home, 1 above the (flat) ground, 2 above the target",
+              is_int=True),
+    ParamSpec("FLW_TGT_MAX_VEL", 5.0, 0.0, 20.0, "",
+              "largest tangential speed (m/s) when circling the target to a new angle"),
+    ParamSpec("FLW_TGT_RS", 0.1, 0.0, 1.0, "",
+              "target estimate: 1 - RS of each position innovation taken (lower: more "
+              "responsive)"),
     ParamSpec(
         "FT_BAT_ENDURANCE", 1200.0, 10.0, 36000.0, "s",
         "hover endurance that sizes the simulated battery (ft-sitl)",

@@ -31,6 +31,9 @@ from ft_sitl.sim.fleet import Fleet
 COMPID = mav.MAV_COMP_ID_AUTOPILOT1
 #: ORBIT_EXECUTION_STATUS while orbiting, every (simulated) 0.5 s
 ORBIT_STATUS_PERIOD_US = 500_000
+#: FOLLOW_TARGET fixes used: within this distance of home, altitudes (AMSL) in this range
+#: and speeds up to this (others: ignored, or the altitude / velocity taken as unknown)
+FOLLOW_MAX_RANGE_M, FOLLOW_ALT_RANGE_M, FOLLOW_MAX_SPEED_M_S = 100_000.0, (-500.0, 10_000.0), 100.0
 #: the mission protocol's item lists a vehicle keeps (PX4's three)
 MISSION_TYPES = (mav.MAV_MISSION_TYPE_MISSION, mav.MAV_MISSION_TYPE_FENCE,
                  mav.MAV_MISSION_TYPE_RALLY)
@@ -95,7 +98,7 @@ SENSOR_BITS = {"gyro": mav.MAV_SYS_STATUS_SENSOR_3D_GYRO,
                "gps": mav.MAV_SYS_STATUS_SENSOR_GPS}
 #: what an injected MAVLink signal failure drops (commands still pass, so it can be undone)
 SIGNAL_LOSS_DROPS = ("HEARTBEAT", "SET_POSITION_TARGET_LOCAL_NED",
-                     "SET_POSITION_TARGET_GLOBAL_INT", "SET_ATTITUDE_TARGET")
+                     "SET_POSITION_TARGET_GLOBAL_INT", "SET_ATTITUDE_TARGET", "FOLLOW_TARGET")
 
 SENSORS = (
     mav.MAV_SYS_STATUS_SENSOR_3D_GYRO
@@ -657,6 +660,31 @@ class VehicleAgent:
         self.cmd.set_mode(main, sub)
         return []
 
+    # follow target ------------------------------------------------------------------
+    def _on_follow_target(self, m, link, peer, wall_us):
+        """FOLLOW_TARGET (a follow-me client's position fix): lat/lon degE7, alt AMSL,
+        vel NED. Used as PX4's mavlink receiver does, in any mode (the estimate is for
+        AUTO.FOLLOW_TARGET); a fix without a usable position is ignored, an absurd
+        altitude or velocity is taken as unknown. A velocity counts when est_capabilities
+        says so (bit 1) or any of it is non-zero: MAVSDK sends zeros with only the
+        position bit set."""
+        lat, lon = m.lat * 1e-7, m.lon * 1e-7
+        if (m.lat == 0 and m.lon == 0) or not (abs(lat) <= 90.0 and abs(lon) <= 180.0):
+            return []
+        pos = self.geo.to_local(lat, lon, self.geo.alt_m)
+        if not np.all(np.isfinite(pos)) or np.hypot(*(pos[:2] - self.cmd.home[:2])) \
+                > FOLLOW_MAX_RANGE_M:
+            return []
+        alt = float(m.alt)
+        pos[2] = alt - self.geo.alt_m if math.isfinite(alt) and \
+            FOLLOW_ALT_RANGE_M[0] <= alt <= FOLLOW_ALT_RANGE_M[1] else math.nan
+        vel = [float(v) for v in m.vel]
+        use_vel = all(math.isfinite(v) and abs(v) <= FOLLOW_MAX_SPEED_M_S for v in vel) \
+            and (m.est_capabilities & 2 or any(v != 0.0 for v in vel))
+        self.cmd.follow_target_measurement(
+            self.fleet.time_us, pos, frames.ned_to_enu(np.array(vel)) if use_vel else None)
+        return []
+
     # offboard -----------------------------------------------------------------------
     def _offboard(self, sp: Setpoint) -> None:
         self.fleet.offboard_setpoint(self.i, sp)
@@ -1142,4 +1170,5 @@ _HANDLERS = {
     "MISSION_ACK": VehicleAgent._on_mission_ack,
     "TIMESYNC": VehicleAgent._on_timesync,
     "SERIAL_CONTROL": VehicleAgent._on_serial_control,
+    "FOLLOW_TARGET": VehicleAgent._on_follow_target,
 }

@@ -52,7 +52,7 @@ def test_one_declaration_per_parameter_honoured_first():
     honoured = [n for n, s in PARAMS.items() if s.honoured]
     stored = [n for n, s in PARAMS.items() if not s.honoured]
     assert list(PARAMS) == honoured + stored  # PARAM_VALUE's index order
-    assert honoured == list(P.HONOURED) and len(honoured) == 62
+    assert honoured == list(P.HONOURED) and len(honoured) == 68
     assert stored == sorted(set(PX4_TABLE) - set(P.HONOURED))
     assert len(PARAMS) == len(set(PX4_TABLE) | set(P.HONOURED)) == 479
     assert all(len(n) <= 16 for n in PARAMS)  # MAVLink's param_id
@@ -87,7 +87,7 @@ def test_table_records_its_px4_release_and_matches_the_descriptions():
     ("NAV_RCL_ACT", "INT32", 2, 1, 6, ""),
     ("COM_OBL_RC_ACT", "INT32", 0, None, None, ""),
     ("GF_PREDICT", "INT32", 0, 0, 1, ""),  # a boolean: 0 or 1
-    ("FLW_TGT_MAX_VEL", "FLOAT", 5.0, 0.0, 20.0, ""),
+    ("MPC_XY_TRAJ_P", "FLOAT", 0.5, 0.1, 1.0, ""),
     ("MPC_ACC_HOR", "FLOAT", 3.0, 2.0, 15.0, "m/s^2"),
     ("COM_FAIL_ACT_T", "FLOAT", 5.0, 0.0, 25.0, "s"),
     ("COM_DL_LOSS_T", "INT32", 10, 5, 300, "s"),
@@ -107,15 +107,15 @@ def test_stored_parameters_carry_px4s_facts(name, type_, default, lo, hi, unit):
 
 
 def test_stored_parameters_are_set_and_range_checked():
-    ps = ParamSet({"COM_RCL_EXCEPT": 4, "FLW_TGT_MAX_VEL": 7.5})
-    assert ps["COM_RCL_EXCEPT"] == 4 and ps["FLW_TGT_MAX_VEL"] == 7.5
+    ps = ParamSet({"COM_RCL_EXCEPT": 4, "MPC_XY_TRAJ_P": 0.75})
+    assert ps["COM_RCL_EXCEPT"] == 4 and ps["MPC_XY_TRAJ_P"] == 0.75
     assert ps.set("GF_PREDICT", 1) == 1 and isinstance(ps["GF_PREDICT"], int)
     assert ps.set("COM_OBL_RC_ACT", 7) == 7  # an enum PX4 gives no range: any INT32
     for name, value, message in [
         ("COM_RCL_EXCEPT", 32, "COM_RCL_EXCEPT: 32 is outside [0, 31]"),
         ("NAV_DLL_ACT", -1, "NAV_DLL_ACT: -1 is outside [0, 6]"),
         ("GF_PREDICT", 2, "GF_PREDICT: 2 is outside [0, 1]"),
-        ("FLW_TGT_MAX_VEL", 20.5, "FLW_TGT_MAX_VEL: 20.5 is outside [0, 20]"),
+        ("MPC_XY_TRAJ_P", 1.5, "MPC_XY_TRAJ_P: 1.5 is outside [0.1, 1]"),
         ("COM_FAIL_ACT_T", -5.0, "COM_FAIL_ACT_T: -5.0 s is outside [0, 25] s"),
         ("COM_OBL_RC_ACT", 2**31, "COM_OBL_RC_ACT: 2147483648 is outside [-, -]"),
         ("COM_RCL_EXCEPT", 1.5, "COM_RCL_EXCEPT: 1.5 must be an integer"),

@@ -89,7 +89,7 @@ def test_params_list_json():
     assert (rcl["status"], rcl["honoured"], rcl["type"], rcl["default"], rcl["min"],
             rcl["max"]) == ("stored", False, "INT32", 0, 0, 31)
     assert rows["COM_OBL_RC_ACT"]["min"] is None  # PX4 publishes no range
-    assert sum(r["honoured"] for r in rows.values()) == 62 and len(rows) == 479
+    assert sum(r["honoured"] for r in rows.values()) == 68 and len(rows) == 479
 
 
 def test_params_filters_and_show(capsys):
@@ -102,16 +102,16 @@ def test_params_filters_and_show(capsys):
 
     honoured = json.loads(out("params", "list", "--json", "--honoured").out)
     stored = json.loads(out("params", "list", "--json", "--stored").out)
-    assert {r["status"] for r in honoured} == {"honoured"} and len(honoured) == 62
-    assert {r["status"] for r in stored} == {"stored"} and len(stored) == 479 - 62
+    assert {r["status"] for r in honoured} == {"honoured"} and len(honoured) == 68
+    assert {r["status"] for r in stored} == {"stored"} and len(stored) == 479 - 68
     lines = out("params", "list").out.splitlines()
     assert lines[0].split()[:3] == ["MPC_XY_VEL_MAX", "honoured", "4"]
     rcl = next(ln for ln in lines if ln.startswith("COM_RCL_EXCEPT "))
     assert rcl.split()[1:4] == ["stored", "0", "[0,"]
     text = out("params", "show", "MPC_ACC_HOR_MAX").out
     assert "honoured" in text and "PX4 v1.15.2: default 5, range [2, 15] m/s^2" in text
-    data = json.loads(out("params", "show", "FLW_TGT_MAX_VEL", "--json").out)
-    assert (data["status"], data["default"], data["max"]) == ("stored", 5.0, 20.0)
+    data = json.loads(out("params", "show", "MPC_XY_TRAJ_P", "--json").out)
+    assert (data["status"], data["default"], data["max"]) == ("stored", 0.5, 1.0)
     assert data["px4"]["release"] == "v1.15.2" and data["px4"]["differs"] == []
     err = out("params", "show", "COM_RCL_EXCPT", status=2).err
     assert err.count("\n") == 1 and err.startswith(

@@ -80,16 +80,16 @@ def test_parameters_get_set_get_all_and_bounds():
         # stored PX4 parameters (accepted and echoed, no effect on the flight)
         await param.set_param_int("COM_RCL_EXCEPT", 4)
         assert await param.get_param_int("COM_RCL_EXCEPT") == 4
-        await param.set_param_float("FLW_TGT_MAX_VEL", 7.5)
-        assert await param.get_param_float("FLW_TGT_MAX_VEL") == pytest.approx(7.5)
+        await param.set_param_float("MPC_XY_TRAJ_P", 0.75)
+        assert await param.get_param_float("MPC_XY_TRAJ_P") == pytest.approx(0.75)
         all_params = await param.get_all_params()
         ints = {p.name: p.value for p in all_params.int_params}
         floats = {p.name: p.value for p in all_params.float_params}
         assert len(ints) + len(floats) == len(PARAMS)  # the whole list
         assert set(ints) == {n for n, s in PARAMS.items() if s.is_int}
         assert {"MIS_TAKEOFF_ALT", "RTL_RETURN_ALT", "COM_OF_LOSS_T"} <= set(floats)
-        assert (ints["COM_RCL_EXCEPT"], ints["NAV_DLL_ACT"], floats["FLW_TGT_MAX_VEL"]) == \
-            (4, 0, pytest.approx(7.5))
+        assert (ints["COM_RCL_EXCEPT"], ints["NAV_DLL_ACT"], floats["MPC_XY_TRAJ_P"]) == \
+            (4, 0, pytest.approx(0.75))
         with pytest.raises(ParamError):
             await param.set_param_float("MPC_XY_VEL_MAX", 99.0)  # out of bounds: refused
         assert await param.get_param_float("MPC_XY_VEL_MAX") == pytest.approx(3.5)

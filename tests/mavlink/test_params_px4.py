@@ -47,18 +47,18 @@ def test_stored_parameters_set_read_back_and_refused_as_px4_refuses():
                 assert (pv.param_type, from_wire(pv.param_value)) == (INT32, value), name
                 assert (pv.param_count, pv.param_index) == (len(PARAMS), index[name])
             assert server.fleet.params[0][name] == value
-        pv = param_set(c, "FLW_TGT_MAX_VEL", 7.5, False)
-        assert (pv.param_type, pv.param_value) == (REAL32, 7.5)
-        assert param_read(c, "FLW_TGT_MAX_VEL").param_value == 7.5
+        pv = param_set(c, "MPC_XY_TRAJ_P", 0.75, False)
+        assert (pv.param_type, pv.param_value) == (REAL32, 0.75)
+        assert param_read(c, "MPC_XY_TRAJ_P").param_value == 0.75
         # out of PX4's published range: refused, the value kept and echoed, a warning
         for name, bad, kept in [("COM_RCL_EXCEPT", 32, 4), ("NAV_DLL_ACT", 7, 2),
                                 ("SYS_FAILURE_EN", 2, 1)]:
             assert from_wire(param_set(c, name, bad, True).param_value) == kept, name
-        assert param_set(c, "FLW_TGT_MAX_VEL", 25.0, False).param_value == 7.5
-        text = wait_msg(c, "STATUSTEXT", lambda m: m.text.startswith("FLW_TGT_MAX_VEL"))
-        assert text.text == "FLW_TGT_MAX_VEL: 25.0 is outside [0, 20]"
+        assert param_set(c, "MPC_XY_TRAJ_P", 1.5, False).param_value == 0.75
+        text = wait_msg(c, "STATUSTEXT", lambda m: m.text.startswith("MPC_XY_TRAJ_P"))
+        assert text.text == "MPC_XY_TRAJ_P: 1.5 is outside [0.1, 1]"
         assert text.severity == mav.MAV_SEVERITY_WARNING
-        assert server.fleet.params[0]["FLW_TGT_MAX_VEL"] == 7.5
+        assert server.fleet.params[0]["MPC_XY_TRAJ_P"] == 0.75
         assert server.fleet.params[0]["COM_RCL_EXCEPT"] == 4
 
 
