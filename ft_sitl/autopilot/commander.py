@@ -27,6 +27,7 @@ from ft_sitl.autopilot.geofence import Fence, nearest_safe_point
 from ft_sitl.autopilot.params import ParamSet
 from ft_sitl.autopilot.setpoints import Setpoint
 from ft_sitl.physics.platform import Platform
+from ft_sitl.physics.quaternion import qfrom_axis_angle, qmul
 
 # PX4 custom modes: main mode, and the sub mode for AUTO
 MAIN_MANUAL, MAIN_ALTCTL, MAIN_POSCTL, MAIN_AUTO, MAIN_ACRO, MAIN_OFFBOARD, MAIN_STABILIZED = (
@@ -104,6 +105,12 @@ class Severity(IntEnum):
 # MAV_CMD ids of the mission items the navigator executes
 #: GF_ACTION's values (PX4's geofence_result constants), by name
 GF_ACTIONS = {0: "none", 1: "warning", 2: "hold", 3: "return", 4: "terminate", 5: "land"}
+#: NAV_RCL_ACT's values (PX4's manual control loss actions), by name
+NAV_RCL_ACTIONS = {1: "hold", 2: "return", 3: "land", 5: "terminate", 6: "disarm"}
+#: the modes flown with the sticks (PX4 multicopters fly MANUAL as STABILIZED)
+STICK_MODES = (MAIN_MANUAL, MAIN_ALTCTL, MAIN_POSCTL, MAIN_STABILIZED)
+#: the modes PX4 calls manual (its arming checks look at the throttle stick in them)
+MANUAL_MODES = STICK_MODES + (MAIN_ACRO,)
 
 #: DO_ORBIT's limits and default speed (PX4: MC_ORBIT_RAD_MAX's default, its 1 m minimum)
 ORBIT_MIN_RADIUS_M, ORBIT_MAX_RADIUS_M, ORBIT_DEFAULT_SPEED_M_S = 1.0, 1000.0, 1.0
@@ -241,6 +248,7 @@ class Commander:
         #: an orbit: (centre, signed radius, speed, yaw behaviour, initial yaw)
         self.orbit_state: tuple | None = None
         self._init_follow()
+        self._init_manual()
 
     # --- helpers -------------------------------------------------------------------
     @property
@@ -288,6 +296,10 @@ class Commander:
                 return self._deny("Arming denied: no valid mission")
             if self._follow_active():
                 return self._deny("Arming denied: mode not suitable for arming")
+            why = self._manual_arm_check()
+            if why:
+                return self._deny(why)
+        self._manual_on_arm()
         self.armed = True
         self._armed_t_us = self.time_us
         self._took_off = False
@@ -593,6 +605,7 @@ class Commander:
         self._battery_failsafe()
         self._geofence_check(state)
         self._position_loss_failsafe(state)
+        self._manual_control_failsafe(state)
         if not self.armed:
             return self._emit(Setpoint.off())
         if self._auto_disarm():
@@ -697,6 +710,255 @@ class Commander:
         self.text(Severity.CRITICAL, "Failsafe: no position estimate, landing")
         self.land()
 
+    # --- manual control (MANUAL_CONTROL sticks, RC loss) ---------------------------------
+    def _init_manual(self) -> None:
+        #: the latest sticks (x pitch, y roll, z throttle 0..1, r yaw) and when they came
+        self.sticks: tuple[float, float, float, float] = (0.0, 0.0, 0.5, 0.0)
+        self._man_t_us: int | None = None
+        self._man_lost = False
+        self._man_lost_at_arming = True
+        #: the failsafe in force: (action, mode it set, due time of a delayed action or None)
+        self._man_fs: tuple | None = None
+        self._man_user_mode: tuple[int, int] = (MAIN_POSCTL, 0)
+        #: position/altitude/yaw locks of the stick modes, and the mode and time they are for
+        self._man_lock_xy: np.ndarray | None = None
+        self._man_lock_z: float | None = None
+        self._man_yaw: float | None = None
+        self._man_key: tuple = ()
+        self._man_tick_us = 0
+
+    def manual_control(self, x: float, y: float, z: float, r: float) -> bool:
+        """New stick positions, as PX4 reads MANUAL_CONTROL: x pitch (forward +), y roll
+        (right +), r yaw (clockwise +) in -1..1, z throttle in 0..1. Values outside are
+        clamped; a non-finite one refuses the whole input (False). Ignored (False) when
+        COM_RC_IN_MODE allows no joystick (0 RC only, 4 disabled)."""
+        if int(self.params["COM_RC_IN_MODE"]) not in (1, 2, 3):
+            return False
+        vals = (x, y, z, r)
+        if not all(isinstance(v, (int, float)) and math.isfinite(v) for v in vals):
+            return False
+        self.sticks = (min(1.0, max(-1.0, float(x))), min(1.0, max(-1.0, float(y))),
+                       min(1.0, max(0.0, float(z))), min(1.0, max(-1.0, float(r))))
+        self._man_t_us = self.time_us
+        return True
+
+    def manual_fresh(self) -> bool:
+        """Sticks arrived within COM_RC_LOSS_T."""
+        return (self._man_t_us is not None and
+                self.time_us - self._man_t_us <= self.params["COM_RC_LOSS_T"] * 1e6)
+
+    def _manual_arm_check(self) -> str:
+        """PX4's stick checks at arming in a manual mode (Commander.cpp): with a climb-rate
+        mode (ALTCTL, POSCTL) the throttle must not be above centre (> 0.6 of 0..1), in the
+        others it must be low (< 0.1)."""
+        if self.main_mode not in MANUAL_MODES or not self.manual_fresh():
+            return ""
+        throttle = 2.0 * self.sticks[2] - 1.0
+        if self.main_mode in (MAIN_POSCTL, MAIN_ALTCTL):
+            return "Arming denied: throttle above center" if throttle > 0.2 else ""
+        return "Arming denied: high throttle" if throttle >= -0.8 else ""
+
+    def _manual_on_arm(self) -> None:
+        # PX4: without manual control at arming, its loss is no failsafe until it comes
+        self._man_lost_at_arming = not self.manual_fresh()
+        self._man_key = ()
+
+    @staticmethod
+    def _deadzone(v: float, dz: float) -> float:
+        if dz >= 1.0 or abs(v) <= dz:
+            return 0.0
+        return (v - math.copysign(dz, v)) / (1.0 - dz)
+
+    def _man_climb_rate(self, dz: float) -> float:
+        """Climb rate (m/s, up +) from the throttle around its centre."""
+        t = self._deadzone(2.0 * self.sticks[2] - 1.0, dz)
+        return t * (self.params["MPC_Z_VEL_MAX_UP"] if t > 0 else
+                    self.params["MPC_Z_VEL_MAX_DN"])
+
+    def _manual_setpoint(self, s: VehicleState) -> Setpoint:
+        """The stick modes, as PX4's flight tasks fly them (see docs/mavlink.md, Manual
+        control): POSCTL velocity, ALTCTL tilt, both with climb rate and position,
+        altitude and heading locks at centred sticks; MANUAL / STABILIZED attitude and
+        direct throttle."""
+        key = (self.main_mode, self.sub_mode)
+        if key != self._man_key or self.time_us - self._man_tick_us > 200_000:
+            self._man_key = key
+            self._man_lock_xy, self._man_lock_z, self._man_yaw = None, None, None
+        dt = min(max(self.time_us - self._man_tick_us, 0), 200_000) * 1e-6
+        self._man_tick_us = self.time_us
+        x, y, _, r = self.sticks
+        dz = self.params["MPC_HOLD_DZ"]
+        xs, ys, rs = self._deadzone(x, dz), self._deadzone(y, dz), self._deadzone(r, dz)
+        norm = math.hypot(xs, ys)
+        if norm > 1.0:
+            xs, ys, norm = xs / norm, ys / norm, 1.0
+        yaw_rate = -rs * math.radians(self.params["MPC_MAN_Y_MAX"])  # ENU: counter-clockwise
+        cy, sy = math.cos(s.yaw), math.sin(s.yaw)
+
+        def body_to_enu(fwd: float, right: float) -> tuple[float, float]:
+            return fwd * cy + right * sy, fwd * sy - right * cy
+
+        if self.main_mode in (MAIN_POSCTL, MAIN_ALTCTL):
+            vz = self._man_climb_rate(dz)
+            if s.on_ground:
+                self._man_lock_xy, self._man_lock_z, self._man_yaw = None, None, None
+                if 2.0 * self.sticks[2] - 1.0 <= 0.3:  # PX4 takes off above 65 % throttle
+                    return self._on_ground_idle()
+                return Setpoint.trajectory(position=[s.position[0], s.position[1], math.nan],
+                                           velocity=[math.nan, math.nan, max(vz, 0.0)],
+                                           yaw=s.yaw)
+            pos, vel, acc = [math.nan] * 3, [math.nan] * 3, [math.nan] * 3
+            if self.main_mode == MAIN_POSCTL:
+                vmax = min(self.params["MPC_VEL_MANUAL"], self.params["MPC_XY_VEL_MAX"])
+                if xs or ys:
+                    self._man_lock_xy = None
+                    vel[0], vel[1] = body_to_enu(xs * vmax, ys * vmax)
+                else:
+                    hold = self.params["MPC_HOLD_MAX_XY"]
+                    if self._man_lock_xy is None and (
+                            hold <= 0 or math.hypot(*s.velocity[:2]) < hold):
+                        self._man_lock_xy = s.position[:2].copy()
+                    if self._man_lock_xy is None:
+                        vel[0], vel[1] = 0.0, 0.0
+                    else:
+                        pos[0], pos[1] = self._man_lock_xy
+            else:  # ALTCTL: the sticks tilt the vehicle, as an acceleration
+                scale = G * math.tan(norm * math.radians(self.params["MPC_MAN_TILT_MAX"])) \
+                    / norm if norm else 0.0
+                acc[0], acc[1] = body_to_enu(xs * scale, ys * scale)
+            if vz:
+                self._man_lock_z = None
+                vel[2] = vz
+            else:
+                hold_z = self.params["MPC_HOLD_MAX_Z"]
+                if self._man_lock_z is None and (hold_z <= 0 or abs(s.velocity[2]) < hold_z):
+                    self._man_lock_z = float(s.position[2])
+                if self._man_lock_z is None:
+                    vel[2] = 0.0
+                else:
+                    pos[2] = self._man_lock_z
+            if rs:
+                self._man_yaw = None
+                yaw, yr = None, yaw_rate
+            else:
+                if self._man_yaw is None:
+                    self._man_yaw = s.yaw
+                yaw, yr = self._man_yaw, None
+            sp = Setpoint.trajectory(position=pos, velocity=vel, acceleration=acc, yaw=yaw,
+                                     yaw_rate=yr)
+            # the tilt of ALTCTL is bound by the tilt limit only, not by MPC_ACC_HOR_MAX
+            return sp.offboard() if self.main_mode == MAIN_ALTCTL else sp
+        # MANUAL / STABILIZED: attitude from the sticks, throttle direct
+        t = 2.0 * self.sticks[2] - 1.0
+        hover = min(max(hover_thrust(self.platform), 0.05), 0.95)
+        lo, hi = self.params["MPC_MANTHR_MIN"], self.params["MPC_THR_MAX"]
+        thrust = lo + (hover - lo) * (t + 1.0) if t < 0 else hover + (hi - hover) * t
+        thrust = min(max(thrust, 0.0), 1.0)
+        if self._man_yaw is None or s.on_ground:
+            self._man_yaw = s.yaw
+        if s.on_ground and thrust <= hover:
+            return self._on_ground_idle()
+        self._man_yaw = _wrap_pi(self._man_yaw + yaw_rate * dt)
+        tmax = math.radians(self.params["MPC_MAN_TILT_MAX"])
+        # FLU: forward stick pitches the nose down (+y rotation), right stick rolls right
+        rv = np.array([ys * tmax, xs * tmax, 0.0])
+        angle = float(np.linalg.norm(rv))
+        q_yaw = np.array([math.cos(self._man_yaw / 2), 0.0, 0.0, math.sin(self._man_yaw / 2)])
+        q_tilt = qfrom_axis_angle(rv, angle) if angle > 0 else np.array([1.0, 0, 0, 0])
+        return Setpoint.attitude(qmul(q_yaw, q_tilt), thrust)
+
+    def _manual_control_failsafe(self, s: VehicleState) -> None:
+        """PX4's manual control loss: sticks that came and stopped for COM_RC_LOSS_T take
+        NAV_RCL_ACT (after COM_FAIL_ACT_T in Hold, for hold/return/land), unless the mode
+        is exempt by COM_RCL_EXCEPT, or the sticks were already absent at arming."""
+        if self._man_t_us is None:
+            return
+        if self.manual_fresh():
+            if self._man_lost:
+                self._man_lost = False
+                gap = (self.time_us - self._man_t_us) * 1e-6
+                self.text(Severity.INFO, f"Manual control regained after {gap:.1f} s")
+                self._manual_regained()
+            self._man_lost_at_arming = False
+            return
+        if not self._man_lost:
+            self._man_lost = True
+            self.text(Severity.INFO, "Manual control lost")
+            self._manual_lost(s)
+        if self._man_fs is not None:
+            action, mode, due = self._man_fs
+            if (self.main_mode, self.sub_mode) != mode:  # the user changed mode: over
+                self._man_fs = None
+            elif due is not None and self.time_us >= due:
+                self._manual_fs_act(action)
+
+    def _manual_lost(self, s: VehicleState) -> None:
+        if not self.armed or self.terminated or self._man_lost_at_arming:
+            return
+        mode = (self.main_mode, self.sub_mode)
+        exc = int(self.params["COM_RCL_EXCEPT"])
+        if ((mode == (MAIN_AUTO, SUB_MISSION) and exc & 1)
+                or (mode in ((MAIN_AUTO, SUB_LOITER), (MAIN_AUTO, SUB_TAKEOFF)) and exc & 2)
+                or (mode == (MAIN_OFFBOARD, 0) and exc & 4)
+                or mode in ((MAIN_AUTO, SUB_RTL), (MAIN_AUTO, SUB_LAND))):
+            return
+        action = int(self.params["NAV_RCL_ACT"])
+        if action in (5, 6):  # terminate, disarm: at once, wherever it is
+            self._man_user_mode = mode
+            self._manual_fs_act(action)
+            return
+        if action not in (1, 2, 3) or s.on_ground:
+            return
+        self._man_user_mode = mode
+        delay = self.params["COM_FAIL_ACT_T"]
+        self._set_mode(MAIN_AUTO, SUB_LOITER)
+        self._hold_here()
+        if delay > 0.1 and action != 1:
+            self.text(Severity.CRITICAL,
+                      f"Failsafe activated: entering Hold for {round(delay)} seconds")
+            self._man_fs = (action, (MAIN_AUTO, SUB_LOITER),
+                            self.time_us + int(delay * 1e6))
+        else:
+            self._manual_fs_act(action)
+
+    def _manual_fs_act(self, action: int) -> None:
+        name = NAV_RCL_ACTIONS.get(action, "none")
+        self.text(Severity.CRITICAL, f"Manual control lost: failsafe {name}")
+        if action == 1:
+            self._set_mode(MAIN_AUTO, SUB_LOITER)
+            self._hold_here()
+        elif action == 2:
+            self.return_to_launch()
+        elif action == 3:
+            self.land()
+        elif action == 5:
+            self.terminate()
+        elif action == 6:
+            if self.armed:
+                self._disarm("Disarmed by failsafe")
+        self._man_fs = (action, (self.main_mode, self.sub_mode), None) \
+            if action in (1, 2, 3) else None
+
+    def _manual_regained(self) -> None:
+        """PX4 clears a hold or land failsafe (and the hold before a delayed action) when
+        the sticks come back: the vehicle returns to the mode it was in. A return goes on
+        until the user changes mode."""
+        if self._man_fs is None:
+            return
+        action, mode, due = self._man_fs
+        self._man_fs = None
+        if (self.main_mode, self.sub_mode) != mode or (action == 2 and due is None):
+            return
+        if not self.armed:
+            return
+        main, sub = self._man_user_mode
+        self._set_mode(main, sub)
+        self._man_key = ()
+        if main == MAIN_AUTO:
+            self._enter_auto(sub)
+        else:
+            self._hold_here()
+
     # --- geofence ------------------------------------------------------------------------
     def set_fence(self, fence: Fence) -> None:
         self.fence = fence
@@ -765,6 +1027,8 @@ class Commander:
                 self._set_mode(MAIN_POSCTL)
             else:
                 return self._orbit_setpoint(s)
+        if self.manual_fresh() and self.main_mode in STICK_MODES:
+            return self._manual_setpoint(s)
         # POSCTL / ALTCTL / MANUAL / STABILIZED / ACRO without sticks: hold
         if s.on_ground:
             self._hold_here()
@@ -968,3 +1232,7 @@ def _clamp_abs(v: float, limit: float) -> float:
 def hover_thrust(platform: Platform) -> float:
     """Normalised collective thrust that holds a hover."""
     return platform.mass_kg * G / platform.thrust_max_n
+
+
+def _wrap_pi(a: float) -> float:
+    return (a + math.pi) % (2.0 * math.pi) - math.pi

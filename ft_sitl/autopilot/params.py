@@ -153,6 +153,30 @@ _SPECS = [
     ParamSpec("FLW_TGT_RS", 0.1, 0.0, 1.0, "",
               "target estimate: 1 - RS of each position innovation taken (lower: more "
               "responsive)"),
+    # --- manual control (MANUAL_CONTROL sticks) and its loss ------------------------------
+    ParamSpec("COM_RC_IN_MODE", 3, 0, 4, "", "stick input: 0 RC only (MAVLink sticks ignored), "
+              "1 joystick only, 2 RC and joystick with fallback, 3 RC or joystick, keep first, "
+              "4 stick input disabled", is_int=True),
+    ParamSpec("COM_RC_LOSS_T", 0.5, 0.0, 35.0, "s",
+              "time without manual control before it counts as lost"),
+    ParamSpec("NAV_RCL_ACT", 2, 1, 6, "", "manual control loss action: 1 hold, 2 return, "
+              "3 land, 5 terminate, 6 disarm", is_int=True),
+    ParamSpec("COM_RCL_EXCEPT", 0, 0, 31, "", "modes without manual control loss failsafe "
+              "(bitmask): 1 mission, 2 hold (and take-off), 4 offboard", is_int=True),
+    ParamSpec("COM_FAIL_ACT_T", 5.0, 0.0, 25.0, "s",
+              "hold time between a failsafe's trigger and its return or land"),
+    ParamSpec("MPC_VEL_MANUAL", 10.0, 3.0, 20.0, "m/s",
+              "largest horizontal speed from the sticks in POSCTL (capped by MPC_XY_VEL_MAX)"),
+    ParamSpec("MPC_MAN_TILT_MAX", 35.0, 1.0, 70.0, "deg",
+              "largest tilt from the sticks in STABILIZED and ALTCTL"),
+    ParamSpec("MPC_MAN_Y_MAX", 150.0, 0.0, 400.0, "deg/s", "largest yaw rate from the sticks"),
+    ParamSpec("MPC_HOLD_DZ", 0.1, 0.0, 1.0, "", "stick dead zone in the manual modes"),
+    ParamSpec("MPC_HOLD_MAX_XY", 0.8, 0.0, 3.0, "m/s",
+              "horizontal speed below which POSCTL locks the position (0: at once)"),
+    ParamSpec("MPC_HOLD_MAX_Z", 0.6, 0.0, 3.0, "m/s",
+              "vertical speed below which ALTCTL/POSCTL lock the altitude (0: at once)"),
+    ParamSpec("MPC_MANTHR_MIN", 0.08, 0.0, 1.0, "norm",
+              "lowest collective thrust from the throttle in STABILIZED"),
     ParamSpec(
         "FT_BAT_ENDURANCE", 1200.0, 10.0, 36000.0, "s",
         "hover endurance that sizes the simulated battery (ft-sitl)",

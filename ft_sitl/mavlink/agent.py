@@ -97,7 +97,7 @@ SENSOR_BITS = {"gyro": mav.MAV_SYS_STATUS_SENSOR_3D_GYRO,
                "baro": mav.MAV_SYS_STATUS_SENSOR_ABSOLUTE_PRESSURE,
                "gps": mav.MAV_SYS_STATUS_SENSOR_GPS}
 #: what an injected MAVLink signal failure drops (commands still pass, so it can be undone)
-SIGNAL_LOSS_DROPS = ("HEARTBEAT", "SET_POSITION_TARGET_LOCAL_NED",
+SIGNAL_LOSS_DROPS = ("HEARTBEAT", "MANUAL_CONTROL", "SET_POSITION_TARGET_LOCAL_NED",
                      "SET_POSITION_TARGET_GLOBAL_INT", "SET_ATTITUDE_TARGET", "FOLLOW_TARGET")
 
 SENSORS = (
@@ -685,6 +685,17 @@ class VehicleAgent:
             self.fleet.time_us, pos, frames.ned_to_enu(np.array(vel)) if use_vel else None)
         return []
 
+    # manual control ------------------------------------------------------------------
+    def _on_manual_control(self, m, link, peer, wall_us):
+        """MANUAL_CONTROL as PX4's mavlink receiver reads it: x pitch, y roll, r yaw in
+        -1000..1000, z throttle in 0..1000, for target 0 or this system; values beyond
+        are clamped (the fields are int16, never NaN)."""
+        if m.target not in (0, self.sysid):
+            return []
+        self.fleet.manual_control(self.i, m.x / 1000.0, m.y / 1000.0, m.z / 1000.0,
+                                  m.r / 1000.0)
+        return []
+
     # offboard -----------------------------------------------------------------------
     def _offboard(self, sp: Setpoint) -> None:
         self.fleet.offboard_setpoint(self.i, sp)
@@ -1171,4 +1182,5 @@ _HANDLERS = {
     "TIMESYNC": VehicleAgent._on_timesync,
     "SERIAL_CONTROL": VehicleAgent._on_serial_control,
     "FOLLOW_TARGET": VehicleAgent._on_follow_target,
+    "MANUAL_CONTROL": VehicleAgent._on_manual_control,
 }

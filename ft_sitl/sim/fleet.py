@@ -185,6 +185,12 @@ class Fleet:
             self.sim.set_setpoint(i, cmd.update(self.sim.time_us, self.state(i),
                                                 self.sim.energy_j(i)))
 
+    def manual_control(self, i: int, x: float, y: float, z: float, r: float) -> bool:
+        """Stick positions for vehicle i (Commander.manual_control), stamped now."""
+        cmd = self.commanders[i]
+        cmd.time_us = self.sim.time_us
+        return cmd.manual_control(x, y, z, r)
+
     def _tick_all(self) -> None:
         if self._scheduled:
             self._inject_due()

@@ -52,7 +52,7 @@ def test_one_declaration_per_parameter_honoured_first():
     honoured = [n for n, s in PARAMS.items() if s.honoured]
     stored = [n for n, s in PARAMS.items() if not s.honoured]
     assert list(PARAMS) == honoured + stored  # PARAM_VALUE's index order
-    assert honoured == list(P.HONOURED) and len(honoured) == 68
+    assert honoured == list(P.HONOURED) and len(honoured) == 80
     assert stored == sorted(set(PX4_TABLE) - set(P.HONOURED))
     assert len(PARAMS) == len(set(PX4_TABLE) | set(P.HONOURED)) == 479
     assert all(len(n) <= 16 for n in PARAMS)  # MAVLink's param_id
@@ -82,14 +82,14 @@ def test_table_records_its_px4_release_and_matches_the_descriptions():
 
 
 @pytest.mark.parametrize("name,type_,default,lo,hi,unit", [
-    ("COM_RCL_EXCEPT", "INT32", 0, 0, 31, ""),
+    ("COM_RC_OVERRIDE", "INT32", 1, 0, 3, ""),
     ("NAV_DLL_ACT", "INT32", 0, 0, 6, ""),
-    ("NAV_RCL_ACT", "INT32", 2, 1, 6, ""),
+    ("COM_RC_ARM_HYST", "INT32", 1000, 100, 1500, "ms"),
     ("COM_OBL_RC_ACT", "INT32", 0, None, None, ""),
     ("GF_PREDICT", "INT32", 0, 0, 1, ""),  # a boolean: 0 or 1
     ("MPC_XY_TRAJ_P", "FLOAT", 0.5, 0.1, 1.0, ""),
     ("MPC_ACC_HOR", "FLOAT", 3.0, 2.0, 15.0, "m/s^2"),
-    ("COM_FAIL_ACT_T", "FLOAT", 5.0, 0.0, 25.0, "s"),
+    ("MPC_VEL_MAN_BACK", "FLOAT", -1.0, -1.0, 20.0, "m/s"),
     ("COM_DL_LOSS_T", "INT32", 10, 5, 300, "s"),
     ("MAV_SYS_ID", "INT32", 1, 1, 250, ""),
     ("MAV_0_CONFIG", "INT32", 101, None, None, ""),

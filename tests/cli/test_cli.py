@@ -85,11 +85,11 @@ def test_params_list_json():
     assert rows["MPC_XY_VEL_MAX"]["default"] == 4.0
     assert rows["MPC_TILTMAX_AIR"]["max"] == 89.0
     assert rows["MPC_XY_VEL_MAX"]["status"] == "honoured" and rows["MPC_XY_VEL_MAX"]["honoured"]
-    rcl = rows["COM_RCL_EXCEPT"]
+    rcl = rows["COM_RC_OVERRIDE"]
     assert (rcl["status"], rcl["honoured"], rcl["type"], rcl["default"], rcl["min"],
-            rcl["max"]) == ("stored", False, "INT32", 0, 0, 31)
+            rcl["max"]) == ("stored", False, "INT32", 1, 0, 3)
     assert rows["COM_OBL_RC_ACT"]["min"] is None  # PX4 publishes no range
-    assert sum(r["honoured"] for r in rows.values()) == 68 and len(rows) == 479
+    assert sum(r["honoured"] for r in rows.values()) == 80 and len(rows) == 479
 
 
 def test_params_filters_and_show(capsys):
@@ -102,12 +102,12 @@ def test_params_filters_and_show(capsys):
 
     honoured = json.loads(out("params", "list", "--json", "--honoured").out)
     stored = json.loads(out("params", "list", "--json", "--stored").out)
-    assert {r["status"] for r in honoured} == {"honoured"} and len(honoured) == 68
-    assert {r["status"] for r in stored} == {"stored"} and len(stored) == 479 - 68
+    assert {r["status"] for r in honoured} == {"honoured"} and len(honoured) == 80
+    assert {r["status"] for r in stored} == {"stored"} and len(stored) == 479 - 80
     lines = out("params", "list").out.splitlines()
     assert lines[0].split()[:3] == ["MPC_XY_VEL_MAX", "honoured", "4"]
-    rcl = next(ln for ln in lines if ln.startswith("COM_RCL_EXCEPT "))
-    assert rcl.split()[1:4] == ["stored", "0", "[0,"]
+    rcl = next(ln for ln in lines if ln.startswith("COM_RC_OVERRIDE "))
+    assert rcl.split()[1:4] == ["stored", "1", "[0,"]
     text = out("params", "show", "MPC_ACC_HOR_MAX").out
     assert "honoured" in text and "PX4 v1.15.2: default 5, range [2, 15] m/s^2" in text
     data = json.loads(out("params", "show", "MPC_XY_TRAJ_P", "--json").out)

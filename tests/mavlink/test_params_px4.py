@@ -1,4 +1,4 @@
-"""PX4's parameters over MAVLink (pymavlink, real sockets): the stored ones scripts set
+"""PX4's parameters over MAVLink (pymavlink, real sockets): the ones scripts set
 (COM_RCL_EXCEPT, NAV_DLL_ACT, ...) are accepted, echoed with their type and read back;
 out-of-range values are refused; PARAM_REQUEST_LIST streams every parameter."""
 

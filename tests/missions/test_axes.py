@@ -275,7 +275,7 @@ def test_the_estimator_is_an_axis_the_flight_judged_on_the_truth_and_reruns(yard
     ('params = [{FT_GAIN_MODE = 1}]', "params[0]: FT_GAIN_MODE is set by the trial protocol: "
                                       "use gains instead"),
     ('params = [{MPC_XY_P = 1}, {MPC_XY_P = 1.0}]', "params[1]: the same PX4 parameters twice"),
-    ('params = {COM_RCL_EXCEPT = 4}', "params: COM_RCL_EXCEPT is a stored PX4 parameter that "
+    ('params = {COM_RC_OVERRIDE = 2}', "params: COM_RC_OVERRIDE is a stored PX4 parameter that "
                                       "ft-sitl does not act on, so a trial cannot vary it"),
     ('gains = ["px4", "px4"]', "gains: must be one of 'bandwidth', 'px4'"),
     ('gains = ["px4", "PX4"]', "gains: must be one of 'bandwidth', 'px4'"),
