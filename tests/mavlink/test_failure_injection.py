@@ -21,10 +21,12 @@ from .mavsdk_util import connect, first
 from .sitl_harness import running_sitl
 from .test_pymavlink_and_robustness import ack_of, client, wait_msg
 
+INSTANCE = 61  # (ports of its own: a test's leftover client cannot starve the next)
+
 
 def test_a_motor_failed_mid_offboard_brings_the_vehicle_down():
     async def run():
-        m, drone = await connect()
+        m, drone = await connect(14540 + INSTANCE)
         failure, param = FailureAsync(drone), ParamAsync(drone)
         action, tel, off = ActionAsync(drone), TelemetryAsync(drone), OffboardAsync(drone)
         assert await param.get_param_int("SYS_FAILURE_EN") == 1
@@ -43,7 +45,8 @@ def test_a_motor_failed_mid_offboard_brings_the_vehicle_down():
         m.destroy()
         return low
 
-    with running_sitl(speed_factor=3.0, params=[ParamSet({"SYS_FAILURE_EN": 1})]) as server:
+    with running_sitl(speed_factor=3.0, params=[ParamSet({"SYS_FAILURE_EN": 1})],
+                      base_instance=INSTANCE) as server:
         asyncio.run(run())
         cmd = server.fleet.commanders[0]
         assert cmd.failures == {"motor": ("off", 1)}
@@ -52,8 +55,8 @@ def test_a_motor_failed_mid_offboard_brings_the_vehicle_down():
 
 
 def test_signal_and_gps_failures_over_pymavlink():
-    with running_sitl() as server:
-        c = client()
+    with running_sitl(base_instance=INSTANCE) as server:
+        c = client(14540 + INSTANCE)
 
         def inject(unit, ftype, instance=0):
             c.mav.command_long_send(1, 1, mav.MAV_CMD_INJECT_FAILURE, 0, unit, ftype,

@@ -22,6 +22,8 @@ from .mavsdk_util import connect, first
 from .sitl_harness import running_sitl
 from .test_pymavlink_and_robustness import client, wait_msg
 
+INSTANCE = 62  # (ports of its own: a test's leftover client cannot starve the next)
+
 LAT0, LON0 = 47.397742, 8.545594
 M_PER_DEG_LAT = 111195.0
 
@@ -37,7 +39,7 @@ def point(north_m, east_m):
 
 def test_fence_and_rally_round_trip_a_breach_returns_to_the_nearest_rally_point():
     async def run():
-        m, drone = await connect()
+        m, drone = await connect(14540 + INSTANCE)
         fence, raw, action = GeofenceAsync(drone), MissionRawAsync(drone), ActionAsync(drone)
         tel, param = TelemetryAsync(drone), ParamAsync(drone)
         square = Polygon([point(-15, -15), point(-15, 15), point(15, 15), point(15, -15)],
@@ -75,7 +77,7 @@ def test_fence_and_rally_round_trip_a_breach_returns_to_the_nearest_rally_point(
         m.destroy()
         return pos
 
-    with running_sitl(speed_factor=4.0) as server:
+    with running_sitl(speed_factor=4.0, base_instance=INSTANCE) as server:
         pos = asyncio.run(run())
         cmd = server.fleet.commanders[0]
         assert [(r, a) for _, r, a in cmd.fence_events] == [("outside the fence", "return")]
@@ -114,8 +116,8 @@ def _vertex(n, north, east, cmd=mav.MAV_CMD_NAV_FENCE_POLYGON_VERTEX_INCLUSION,
 
 
 def test_bad_fence_and_mission_items_get_a_mavlink_result_never_a_crash():
-    with running_sitl() as server:
-        c = client()
+    with running_sitl(base_instance=INSTANCE) as server:
+        c = client(14540 + INSTANCE)
         fence_t = mav.MAV_MISSION_TYPE_FENCE
         bowtie = [_vertex(4, 0, 0), _vertex(4, 10, 10), _vertex(4, 10, 0), _vertex(4, 0, 10)]
         assert _upload(c, bowtie, fence_t).type == mav.MAV_MISSION_INVALID

@@ -19,6 +19,8 @@ from .mavsdk_util import connect, first
 from .sitl_harness import running_sitl
 from .test_pymavlink_and_robustness import client, wait_msg
 
+INSTANCE = 63  # (ports of its own: a test's leftover client cannot starve the next)
+
 LAT0, LON0 = 47.397742, 8.545594
 M_PER_DEG_LAT = 111195.0
 
@@ -27,7 +29,7 @@ def test_do_orbit_circles_at_the_commanded_radius_and_speed():
     center_lat = LAT0 + 10.0 / M_PER_DEG_LAT  # 10 m north of home
 
     async def run(server):
-        m, drone = await connect()
+        m, drone = await connect(14540 + INSTANCE)
         action, tel = ActionAsync(drone), TelemetryAsync(drone)
         await first(tel.subscribe_health(), lambda h: h.is_armable)
         with pytest.raises(ActionError):  # on the ground: refused
@@ -52,7 +54,7 @@ def test_do_orbit_circles_at_the_commanded_radius_and_speed():
         m.destroy()
         return samples
 
-    with running_sitl(speed_factor=3.0) as server:
+    with running_sitl(speed_factor=3.0, base_instance=INSTANCE) as server:
         samples = asyncio.run(run(server))
         cmd = server.fleet.commanders[0]
         assert any(t.startswith("Orbit denied: not flying") for _, t in cmd.statustexts)
@@ -70,8 +72,8 @@ def test_do_orbit_circles_at_the_commanded_radius_and_speed():
 
 
 def test_orbit_status_and_refusals_over_pymavlink():
-    with running_sitl() as server:
-        c = client()
+    with running_sitl(base_instance=INSTANCE) as server:
+        c = client(14540 + INSTANCE)
         cmd = server.fleet.commanders[0]
         fleet = server.fleet
         c.mav.command_long_send(1, 1, mav.MAV_CMD_DO_ORBIT, 0, 3.0, 1.0, 0, 0, math.nan,
