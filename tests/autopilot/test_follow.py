@@ -10,24 +10,14 @@ import pytest
 from ft_sitl.autopilot import commander as cm
 from ft_sitl.autopilot.commander import Result
 from ft_sitl.autopilot.follow import TargetEstimator
-from ft_sitl.autopilot.params import ParamSet
 from ft_sitl.physics.catalog import catalog
 from ft_sitl.sim.fleet import Fleet
+from tests.autopilot.test_commander import _flying as airborne
+from tests.autopilot.test_commander import texts
 
 P = catalog()["0.98kg-EGO Planner DIY"]
 
 
-def texts(cmd):
-    return [t for _, t in cmd.statustexts]
-
-
-def airborne(params=None):
-    f = Fleet(P, params=[ParamSet(params or {})])
-    c = f.commanders[0]
-    c.arm()
-    c.takeoff()
-    assert f.run_until(lambda: c.mode_name == "AUTO.LOITER", 15)
-    return f, c
 
 
 def fly(f, c, seconds, target, vel, step=0.02, feed=True, with_vel=True):

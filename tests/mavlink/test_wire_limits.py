@@ -9,10 +9,11 @@ import math
 import time
 
 import pytest
-from pymavlink import mavutil
 from pymavlink.dialects.v20 import common as mav
 
 from .sitl_harness import running_sitl
+from .test_pymavlink_and_robustness import ack_of, wait_msg
+from .test_pymavlink_and_robustness import client as pymavlink_client
 
 INSTANCE = 30
 API_PORT = 14540 + INSTANCE  # where the vehicle's API link sends (MAVSDK's udpin port)
@@ -20,23 +21,7 @@ VEHICLE_PORT = 14580 + INSTANCE  # where it listens
 
 
 def client():
-    c = mavutil.mavlink_connection(f"udpin:127.0.0.1:{API_PORT}", source_system=246,
-                                   source_component=191)
-    assert c.wait_heartbeat(timeout=10) is not None
-    return c
-
-
-def wait_msg(c, type_, cond=lambda m: True, timeout=20.0):
-    end = time.time() + timeout
-    while time.time() < end:
-        m = c.recv_match(type=type_, blocking=True, timeout=0.5)
-        if m is not None and cond(m):
-            return m
-    raise AssertionError(f"no {type_} matching within {timeout} s")
-
-
-def ack_of(c, command, timeout=5.0):
-    return wait_msg(c, "COMMAND_ACK", lambda m: m.command == command, timeout)
+    return pymavlink_client(API_PORT)
 
 
 def texts_until(c, needle, timeout=10.0):
