@@ -325,7 +325,8 @@ def test_navigators_list_shows_plugins_and_broken_entry_points(capsys, plugins):
     (["campaign", "check", "{tmp}/bad.toml"],
      "{tmp}/bad.toml: unknown key(s) 'trails' (did you mean 'trials'?); allowed: name, trials, "
      "seed, scenario_seed, platforms, platform_files, scenarios, indices, physics_hz, protocol, "
-     "gains, algorithms, limits, weights, description, wind, params, actuators, perception"),
+     "gains, algorithms, limits, weights, description, wind, params, actuators, perception, "
+     "estimator, failures"),
     (["campaign", "report", "{tmp}"],
      "{tmp}: not a campaign result directory (no campaign.json)"),
     (["campaign", "report", "{tmp}/empty"], "{tmp}/empty: no finished trials yet"),
