@@ -18,6 +18,8 @@ from mavsdk.plugins.geofence import Circle, FenceType, GeofenceData, Point, Poly
 from mavsdk.plugins.mission_raw import MissionItem as RawItem
 from pymavlink.dialects.v20 import common as mav
 
+from ft_sitl.autopilot.params import ParamSet
+
 from .mavsdk_util import connect, first
 from .sitl_harness import running_sitl
 from .test_pymavlink_and_robustness import client, wait_msg
@@ -77,7 +79,9 @@ def test_fence_and_rally_round_trip_a_breach_returns_to_the_nearest_rally_point(
         m.destroy()
         return pos
 
-    with running_sitl(speed_factor=4.0, base_instance=INSTANCE) as server:
+    # (a low return altitude: the return's climb and descent are not what is tested)
+    with running_sitl(speed_factor=4.0, base_instance=INSTANCE,
+                      params=[ParamSet({"RTL_RETURN_ALT": 5.0})]) as server:
         pos = asyncio.run(run())
         cmd = server.fleet.commanders[0]
         assert [(r, a) for _, r, a in cmd.fence_events] == [("outside the fence", "return")]

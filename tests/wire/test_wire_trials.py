@@ -46,15 +46,15 @@ def test_inprocess_and_mavlink_transports_agree(tmp_path, navrl_checkpoint, monk
         name = "agree"
         trials = 1
         platforms = ["{AGILE}"]
-        scenarios = [{{family = "forest", indices = [1]}}, {{family = "urban", indices = [1]}}]
+        scenarios = [{{family = "forest", indices = [1]}}]
         algorithms = ["straight", "navrl", "ego"]
-        """))
+        """))  # (one family: the suite's time; docs/results/wire-agreement has the rest)
     c = load_campaign(p)
     run_campaign(c, tmp_path / "inproc", progress=False)
     run_campaign(c, tmp_path / "wire", progress=False,
                  transport=Transport("mavlink", speed_factor=2.0))
     a, b = _rows(tmp_path / "inproc"), _rows(tmp_path / "wire")
-    assert a.keys() == b.keys() and len(a) == 6
+    assert a.keys() == b.keys() and len(a) == 3
     for key in a:
         assert b[key]["nav_time_s"] > 0.0, (key, b[key]["detail"])
         assert b[key]["reason"] in REASONS
