@@ -16,6 +16,17 @@ from mavsdk.asyncio.plugins.telemetry import TelemetryAsync
 from mavsdk.plugins.offboard import PositionNedYaw, VelocityNedYaw
 
 
+async def arrived(telemetry: TelemetryAsync, north: float, east: float, down: float,
+                  within_m: float = 0.3) -> None:
+    """Wait until the vehicle is within `within_m` of the point and nearly still: waiting
+    on telemetry, not on a fixed sleep, works at any simulation speed factor."""
+    async for pv in telemetry.subscribe_position_velocity_ned():
+        p, v = pv.position, pv.velocity
+        off = ((p.north_m - north) ** 2 + (p.east_m - east) ** 2 + (p.down_m - down) ** 2) ** 0.5
+        if off < within_m and (v.north_m_s ** 2 + v.east_m_s ** 2) ** 0.5 < 0.3:
+            return
+
+
 async def main(url: str) -> None:
     mavsdk = Mavsdk(Configuration.create_with_component_type(ComponentType.GROUND_STATION))
     await mavsdk.add_any_connection(url)
@@ -36,7 +47,7 @@ async def main(url: str) -> None:
     for north, east, yaw in ((0, 0, 0), (5, 0, 0), (5, 5, 90), (0, 5, 180), (0, 0, 270)):
         print(f"-- go to {north} m north, {east} m east, 3 m up, yaw {yaw}")
         await offboard.set_position_ned(PositionNedYaw(north, east, -3.0, yaw))
-        await asyncio.sleep(5)
+        await arrived(telemetry, north, east, -3.0)
     print("-- climb at 1 m/s for 2 s")
     await offboard.set_velocity_ned(VelocityNedYaw(0.0, 0.0, -1.0, 0.0))
     await asyncio.sleep(2)

@@ -12,10 +12,10 @@ EXAMPLES = Path(__file__).resolve().parents[2] / "examples"
 
 
 @pytest.mark.parametrize("script, speed, expect", [
-    ("mavsdk_offboard.py", 3.0, "-- landed and disarmed"),
-    ("mavsdk_mission.py", 4.0, "-- landed and disarmed"),
+    ("mavsdk_offboard.py", 6.0, "-- landed and disarmed"),
+    ("mavsdk_mission.py", 8.0, "-- landed and disarmed"),
     ("pymavlink_takeoff_land.py", 2.0, "-- landed and disarmed"),
-    ("mavsdk_square_check.py", 3.0, "SQUARE OK"),
+    ("mavsdk_square_check.py", 6.0, "SQUARE OK"),
 ])
 def test_example_flies(script, speed, expect):
     with running_sitl(speed_factor=speed, params=None) as server:
