@@ -52,7 +52,7 @@ def test_inprocess_and_mavlink_transports_agree(tmp_path, navrl_checkpoint, monk
     c = load_campaign(p)
     run_campaign(c, tmp_path / "inproc", progress=False)
     run_campaign(c, tmp_path / "wire", progress=False,
-                 transport=Transport("mavlink", speed_factor=2.0))
+                 transport=Transport("mavlink", speed_factor=3.0))
     a, b = _rows(tmp_path / "inproc"), _rows(tmp_path / "wire")
     assert a.keys() == b.keys() and len(a) == 3
     for key in a:
