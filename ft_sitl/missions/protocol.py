@@ -37,7 +37,7 @@ import datetime
 import json
 import math
 import time
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from enum import Enum
 
 import numpy as np
@@ -60,6 +60,7 @@ from ft_sitl.navigation.base import STABLE_FOR_S, STABLE_POS_M, STABLE_SPEED_M_S
 from ft_sitl.navigation.registry import available
 from ft_sitl.physics.wind import Wind
 from ft_sitl.provenance import software
+from ft_sitl.scenarios.movers import NOT_STARTED
 from ft_sitl.schema import SchemaError
 from ft_sitl.sim.fleet import Fleet
 from ft_sitl.sim.guard import CollisionGuard, GuardEventKind
@@ -117,7 +118,18 @@ def identity_row(spec, platform, scenario) -> dict:
         if spec.estimator else "",
         "failures": json.dumps(spec.failures, sort_keys=True, separators=(",", ":"))
         if spec.failures else "",
+        **mover_columns(spec.movers, scenario.movers),
     }
+
+
+def mover_columns(settings: dict | None, movers) -> dict:
+    """The moving-obstacle columns of a row (results.AXES): how many were placed, their
+    speed, and every non-default setting as JSON (0, 0 and "" in a static world)."""
+    return {"mover_count": movers.count if movers is not None else 0,
+            "mover_speed_m_s": float(movers.settings["speed_m_s"])
+            if movers is not None and movers.count else 0.0,
+            "movers": json.dumps(settings, sort_keys=True, separators=(",", ":"))
+            if settings else ""}
 
 
 def wind_columns(wind: dict | None) -> dict:
@@ -167,6 +179,9 @@ def check_events(fleet, n_events: int, when: str) -> None:
         if ev.kind == GuardEventKind.COLLISION:
             speed = f" at {ev.speed_m_s:.1f} m/s" if not when else ""
             raise TrialFailure(Outcome.COLLISION, f"hit {ev.what}{speed}{when}")
+        if ev.kind == GuardEventKind.MOVER_COLLISION:
+            raise TrialFailure(Outcome.MOVER_COLLISION, f"hit {ev.what} (moving) at "
+                               f"{ev.speed_m_s:.1f} m/s relative{when}")
         if ev.kind == GuardEventKind.LEFT_VOLUME:
             raise TrialFailure(Outcome.OUT_OF_BOUNDS,
                                f"left the flight volume past the {ev.what}{when}"
@@ -380,6 +395,8 @@ class TrialReferee:
         self.judge = NavigationJudge(fleet, self.guard, self.spec, self.sc, self.metrics,
                                      self.traj if self.record else None)
         self.phase = Phase.NAVIGATION
+        if self.guard.movers is not None:  # the movers set off as navigation starts
+            self.guard.movers.start(fleet.time_us)
         if self.on_start is not None:
             self.on_start()
 
@@ -513,4 +530,6 @@ def trial_vehicle(spec, scenario, platform, resources: TrialResources = RESOURCE
         fleet.schedule_failure(0, fleet.time_us + round(f["at_s"] * 1e6),
                                failures.UNIT_CODES[f["unit"]], failures.TYPE_CODES[f["type"]],
                                f["instance"])
+    if scenario.movers is not None:  # waiting where they start until navigation starts
+        guard.set_movers(replace(scenario.movers, clock=np.array([NOT_STARTED])))
     return guard, fleet

@@ -12,17 +12,19 @@ from __future__ import annotations
 
 import fcntl
 import hashlib
+import json
 import os
 
 import numpy as np
 
 from ft_sitl.missions.durable import durable_replace
-from ft_sitl.missions.spec import TrialSpec
+from ft_sitl.missions.spec import TrialSpec, TrialSpecError, mover_seed
 from ft_sitl.scenarios.camera import DepthCamera
 from ft_sitl.scenarios.collision import CollisionWorld
 from ft_sitl.scenarios.distance_grid import DistanceGrid
 from ft_sitl.scenarios.families import build_scenario
 from ft_sitl.scenarios.io import load_scenario
+from ft_sitl.scenarios.movers import MoverError, with_movers
 
 #: entries kept per cache
 CACHE_MAX = 8
@@ -58,13 +60,25 @@ class TrialResources:
         return cache[key]
 
     def scenario(self, spec: TrialSpec):
-        """The spec's scenario: from its file, or built from (family, index, seed)."""
+        """The spec's scenario: from its file, or built from (family, index, seed); with
+        the spec's moving obstacles placed in it (scenarios.movers, for the trial's
+        mover seed: every algorithm and platform of a trial meets the same movers)."""
         if spec.scenario_file:
-            return self._cached(self._scenarios, ("file", spec.scenario_file),
-                                lambda: load_scenario(spec.scenario_file))
-        key = (spec.family, spec.scenario_index, spec.scenario_seed, None,
-               spec.scenario_version)
-        return self._cached(self._scenarios, key, lambda: build_scenario(*key))
+            sc = self._cached(self._scenarios, ("file", spec.scenario_file),
+                              lambda: load_scenario(spec.scenario_file))
+        else:
+            key = (spec.family, spec.scenario_index, spec.scenario_seed, None,
+                   spec.scenario_version)
+            sc = self._cached(self._scenarios, key, lambda: build_scenario(*key))
+        if spec.movers is None:
+            return sc
+        seed = mover_seed(spec)
+        mkey = (scenario_key(sc), json.dumps(spec.movers, sort_keys=True), seed)
+        try:
+            return self._cached(self._scenarios, mkey,
+                                lambda: with_movers(sc, spec.movers, seed))
+        except MoverError as exc:
+            raise TrialSpecError(str(exc)) from None
 
     def world_and_grid(self, scenario) -> tuple[CollisionWorld, DistanceGrid]:
         """The scenario's collision world and distance grid."""

@@ -22,9 +22,12 @@ default parameters for rows written before they existed)
     ft_sitl.missions.perception, as JSON; "" ideal); ``estimator`` (the flight
     controller's noisy, biased, late estimate, ft_sitl.autopilot.estimator, as JSON; ""
     the truth); ``failures`` (failures injected during the trial, autopilot.failures, as
-    JSON; "" none).
+    JSON; "" none); ``mover_count`` (moving obstacles placed, scenarios.movers),
+    ``mover_speed_m_s`` (their speed), ``movers`` (their non-default settings as JSON; 0,
+    0 and "" in a static world).
 outcome
-    ``success`` (bool), ``reason`` (an :class:`Outcome` value), ``detail`` (what was hit,
+    ``success`` (bool), ``reason`` (an :class:`Outcome` value; ``mover_collision`` is a
+    collision with a moving obstacle), ``detail`` (what was hit,
     which bound, the navigator's exception ...).
 metrics (navigation phase)
     ``time_to_goal_s`` (first entry into the goal sphere, from navigation start),
@@ -62,6 +65,7 @@ class Outcome(StrEnum):
 
     SUCCESS = "success"
     COLLISION = "collision"
+    MOVER_COLLISION = "mover_collision"
     OUT_OF_BOUNDS = "out_of_bounds"
     TIMEOUT = "timeout"
     UNSTABLE = "unstable"
@@ -97,7 +101,7 @@ IDENTITY = ("trial_id", "campaign", "algorithm", "algorithm_params", "platform",
             "family", "scenario_category", "scenario_index", "scenario_seed", "scenario",
             "trial", "seed")
 AXES = ("wind_speed_m_s", "turbulence", "gust_m_s", "wind", "params", "actuators",
-        "perception", "estimator", "failures")
+        "perception", "estimator", "failures", "mover_count", "mover_speed_m_s", "movers")
 OUTCOME = ("success", "reason", "detail")
 METRICS = ("time_to_goal_s", "nav_time_s", "path_length_m", "mean_speed_m_s",
            "max_speed_m_s", "min_clearance_m", "max_tilt_deg", "saturation_fraction",
@@ -109,9 +113,9 @@ COLUMNS = IDENTITY + AXES + OUTCOME + METRICS + RUN
 CATEGORICAL = ("campaign", "algorithm", "platform", "platform_category", "family",
                "scenario_category", "scenario", "reason", "gains", "turbulence")
 INTEGER = ("scenario_index", "scenario_seed", "trial", "seed", "replans", "planner_calls",
-           "protocol_version", "scenario_version")
+           "protocol_version", "scenario_version", "mover_count")
 FLOAT = ("mass_kg", "twr_max", "alpha_xy_max", "alpha_z_max", "wind_speed_m_s",
-         "gust_m_s") + tuple(
+         "gust_m_s", "mover_speed_m_s") + tuple(
     m for m in METRICS if m not in ("replans", "planner_calls")) + ("sim_time_s",
                                                                      "wall_time_s")
 
@@ -145,6 +149,10 @@ def to_frame(rows):
     df["perception"] = df["perception"].astype(object).fillna("")
     df["estimator"] = df["estimator"].astype(object).fillna("")
     df["failures"] = df["failures"].astype(object).fillna("")
+    # ... and in a static world
+    df["mover_count"] = df["mover_count"].fillna(0)
+    df["mover_speed_m_s"] = df["mover_speed_m_s"].fillna(0.0)
+    df["movers"] = df["movers"].astype(object).fillna("")
     for c in FLOAT:
         df[c] = pd.to_numeric(df[c], errors="coerce").astype("float64")
     df["success"] = df["success"].astype(bool)

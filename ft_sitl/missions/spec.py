@@ -27,6 +27,8 @@ from ft_sitl.physics.wind import SCHEMA as WIND_SCHEMA
 from ft_sitl.physics.wind import Wind
 from ft_sitl.scenarios.difficulty import FlightBudget
 from ft_sitl.scenarios.families import describe_family
+from ft_sitl.scenarios.movers import SCHEMA as MOVER_SCHEMA
+from ft_sitl.scenarios.movers import MoverSettings
 from ft_sitl.scenarios.scenario import ScenarioError
 from ft_sitl.schema import SchemaError
 
@@ -166,6 +168,9 @@ class TrialSpec:
     #: failures injected during the trial, PX4's way (autopilot.failures: at_s, unit, type,
     #: instance each), in time order; None: none
     failures: list | None = None
+    #: moving obstacles added to the scenario (scenarios.movers settings: count or
+    #: density, speed, shapes, paths; None: a static world), the non-default settings
+    movers: dict | None = None
 
     def __post_init__(self):
         for name in ("algorithm", "platform", "family"):
@@ -189,6 +194,7 @@ class TrialSpec:
         object.__setattr__(self, "perception", perception_settings(self.perception))
         object.__setattr__(self, "estimator", estimator_settings(self.estimator))
         object.__setattr__(self, "failures", failure_schedule(self.failures))
+        object.__setattr__(self, "movers", mover_settings(self.movers))
         if self.scenario_file is None:
             try:
                 fam = describe_family(self.family)
@@ -239,6 +245,8 @@ class TrialSpec:
             d["estimator"] = self.estimator
         if self.failures is not None:  # (likewise: no failures)
             d["failures"] = self.failures
+        if self.movers is not None:  # (likewise: a static world)
+            d["movers"] = self.movers
         return d
 
     @classmethod
@@ -314,6 +322,12 @@ def estimator_settings(values, owner: str = "estimator") -> dict | None:
     """A trial's flight-controller estimator as its canonical settings (those that differ
     from the defaults); None for the truth. TrialSpecError naming ``owner`` and the key."""
     return _non_default(values, owner, ESTIMATOR_SCHEMA, Estimator, "estimator settings")
+
+
+def mover_settings(values, owner: str = "movers") -> dict | None:
+    """A trial's moving obstacles as their canonical settings (those that differ from the
+    defaults); None for a static world. TrialSpecError naming ``owner`` and the key."""
+    return _non_default(values, owner, MOVER_SCHEMA, MoverSettings, "mover settings")
 
 
 def failure_setting(values, owner: str = "failures") -> dict | None:
@@ -398,6 +412,12 @@ def actuator_seed(spec: TrialSpec) -> int:
 def estimator_seed(spec: TrialSpec) -> int:
     """The seed of a trial's estimator noise (stream 5)."""
     return _stream_seed(spec, 5)
+
+
+def mover_seed(spec: TrialSpec) -> int:
+    """The seed of a trial's moving obstacles (stream 6): the same for every algorithm and
+    platform flying trial ``spec.trial`` of a campaign."""
+    return _stream_seed(spec, 6)
 
 
 def perception_rng(spec: TrialSpec):

@@ -175,8 +175,10 @@ class _Eyes:
         return frame
 
     def frame(self, fleet, t_us: int):
+        guard = fleet.sim.guard
         return self.camera.capture(t_us, fleet.sim.position(0), fleet.sim.attitude(0),
-                                   rng=self.rng)
+                                   rng=self.rng, movers=guard.movers if guard else None,
+                                   movers_time_us=fleet.time_us)
 
 
 def _observation(fleet, t_us: int, s, depth) -> Observation:

@@ -73,6 +73,7 @@ from numba import njit
 
 from ft_sitl.rotations import matrix_from_quat
 from ft_sitl.scenarios.embree_packets import packet_scene, plane_length
+from ft_sitl.scenarios.movers import image_first_hit, ray_first_hit
 
 __all__ = [
     "NOISE_K_DEFAULT",
@@ -470,9 +471,13 @@ class DepthCamera:
             return wrap.scene.run(org32, dirs32)
         return wrap.scene.run(org32, dirs32, dists=tfar32.copy())
 
-    def cast(self, origin_world: np.ndarray, dirs_world: np.ndarray) -> np.ndarray:
+    def cast(self, origin_world: np.ndarray, dirs_world: np.ndarray, *, movers=None,
+             movers_time_us: int | None = None,
+             movers_range_m: float = np.inf) -> np.ndarray:
         """Ray length to the first hit for unit ``dirs_world`` (N, 3) from one origin (3,);
-        inf where nothing is hit. float64, recomputed from the hit triangle's plane."""
+        inf where nothing is hit. float64, recomputed from the hit triangle's plane.
+        ``movers`` are hit where they are at ``movers_time_us`` (those farther than
+        ``movers_range_m`` are skipped)."""
         origin = np.ascontiguousarray(origin_world, dtype=np.float64).reshape(3)
         dirs = np.ascontiguousarray(dirs_world, dtype=np.float64)
         if dirs.ndim != 2 or dirs.shape[1] != 3:
@@ -480,7 +485,12 @@ class DepthCamera:
         dirs32, org32 = self._embree_rays(origin, dirs.shape[0])
         if dirs32 is not None:
             dirs32[:] = dirs
-        return self._lengths(origin, dirs, dirs32, org32)
+        out = self._lengths(origin, dirs, dirs32, org32)
+        if movers is not None and movers.count:
+            ray_first_hit(movers.kind, movers.dims, movers.bounding,
+                          movers.poses(movers_time_us), origin, dirs, out,
+                          float(movers_range_m))
+        return out
 
     def _embree_rays(self, origin: np.ndarray, n: int):
         wrap = self._embree()
@@ -498,10 +508,14 @@ class DepthCamera:
         return out
 
     def capture(self, t_us: int, p_world, q_world_body,
-                rng: np.random.Generator | None = None) -> DepthFrame:
+                rng: np.random.Generator | None = None, *, movers=None,
+                movers_time_us: int | None = None) -> DepthFrame:
         """Render one frame with the vehicle at ``p_world`` (3,), attitude ``q_world_body``.
 
-        ``rng`` is required when ``noise_k`` or ``dropout`` is non-zero. Updates the
+        ``rng`` is required when ``noise_k`` or ``dropout`` is non-zero. ``movers`` (a
+        :class:`~ft_sitl.scenarios.movers.Movers`) are rendered where they are at
+        simulation time ``movers_time_us``: exact ray-primitive hits in float64, tested
+        only on the pixels of each mover's projected bounding sphere. Updates the
         schedule used by ``due``.
         """
         cfg = self.config
@@ -537,6 +551,14 @@ class DepthCamera:
         else:
             np.matmul(self.dirs_optical, r_wo.T, out=dirs_world)
             z = self._lengths(origin, dirs_world, None, None) * self.cos_axis
+        if movers is not None and movers.count:
+            if movers_time_us is None:
+                raise ValueError("movers: pass movers_time_us, the simulation time to "
+                                 "render them at")
+            image_first_hit(movers.kind, movers.dims, movers.bounding,
+                            movers.poses(movers_time_us), origin, r_wo, self.rays_z1,
+                            cfg.width, cfg.height, cfg.fx, cfg.fy, cfg.cx, cfg.cy,
+                            float(cfg.min_range_m), float(cfg.max_range_m), z)
 
         if noisy:
             valid = np.isfinite(z)

@@ -86,6 +86,9 @@ class Scenario:
     #: e.g. "tree 7"; empty when the mesh's parts are not named (a user mesh)
     piece_first_face: np.ndarray = field(default_factory=lambda: np.zeros(0, dtype=np.int64))
     piece_names: tuple = ()
+    #: moving obstacles (:class:`~ft_sitl.scenarios.movers.Movers`; None: a static world):
+    #: added by :func:`~ft_sitl.scenarios.movers.with_movers`, not by the generators
+    movers: object = None
 
     def __post_init__(self):
         where = f"scenario {self.family!r} #{self.index}"
@@ -145,7 +148,8 @@ class Scenario:
 
     @property
     def name(self) -> str:
-        """``family-NN-sSEED``, e.g. ``forest-03-s0``; a user scenario's own name."""
+        """``family-NN-sSEED``, e.g. ``forest-03-s0``; a user scenario's own name (movers
+        do not change it: they are described by :meth:`summary`)."""
         if self.category == "user":
             return self.family
         return f"{self.family}-{self.index:02d}-s{self.seed}"
@@ -215,6 +219,8 @@ class Scenario:
             "goal": self.goal,
             "goal_radius_m": self.goal_radius_m,
             "obstacle_count": self.obstacle_count,
+            **({"movers": self.movers.describe(), "mover_settings": self.movers.settings}
+               if self.movers is not None else {}),
             "mesh": {
                 "vertices": len(self.mesh.vertices),
                 "faces": len(self.mesh.faces),

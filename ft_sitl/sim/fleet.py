@@ -84,7 +84,7 @@ class Fleet:
     def _on_guard_event(self, ev) -> None:
         cmd = self.commanders[ev.vehicle]
         cmd.time_us = ev.time_us
-        if ev.kind == GuardEventKind.COLLISION:
+        if ev.kind in (GuardEventKind.COLLISION, GuardEventKind.MOVER_COLLISION):
             cmd.crash(ev.what, ev.speed_m_s)
             self.sim.sp[ev.vehicle] = Setpoint.off().row  # motors off from the next step
         elif ev.kind == GuardEventKind.LEFT_VOLUME:

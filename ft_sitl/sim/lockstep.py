@@ -322,22 +322,34 @@ class Simulation:
             rec = self._no_rec
         k_done = self._k_done
         k_done[:] = 0
+        # moving obstacles: advance in chunks within which no vehicle can reach one, and
+        # check them after each (CollisionGuard.mover_horizon / check_movers)
+        movers = self.guard is not None and self.guard.movers is not None
+        target = min(n_steps, self.guard.mover_horizon(self, self.time_us)) if movers \
+            else n_steps
         while True:
             run_steps(
-                n_steps, self.dt, self.plant.x, self.sp, self.gains, self.mix, self.ctrl,
+                target, self.dt, self.plant.x, self.sp, self.gains, self.mix, self.ctrl,
                 self.plant.prm, self.plant.alloc, self.plant.env, self.plant.status,
                 self.w_cmd, rec, record_every, k_done, self._gd, self._grid, self._meta,
                 self.wind, self.act, self.est, self.est_hist, self.xe, self.steps,
             )
             trip = self._gd[:, G_TRIP]
-            if not trip.any():
+            if trip.any():
+                tripped = np.flatnonzero(trip != 0.0)
+                for i in tripped:  # the guard resolves each stopped vehicle, then all resume
+                    k = int(k_done[i])
+                    self.guard.resolve(self, int(i), self.time_us + k * self.dt_us)
+                    if record_every and k % record_every == 0:
+                        rec[k // record_every - 1, i, :] = self.plant.x[i]
+                continue
+            if not movers:
                 break
-            tripped = np.flatnonzero(trip != 0.0)
-            for i in tripped:  # the guard resolves each stopped vehicle, then all resume
-                k = int(k_done[i])
-                self.guard.resolve(self, int(i), self.time_us + k * self.dt_us)
-                if record_every and k % record_every == 0:
-                    rec[k // record_every - 1, i, :] = self.plant.x[i]
+            t_us = self.time_us + target * self.dt_us
+            self.guard.check_movers(self, t_us)
+            if target == n_steps:
+                break
+            target = min(n_steps, target + self.guard.mover_horizon(self, t_us))
         self.time_us += n_steps * self.dt_us
         self.steps += n_steps
         return rec if record_every else None

@@ -496,8 +496,8 @@ def test_a_navigator_that_gives_up_times_out(yard, where):
 
 
 def test_every_reason_is_a_known_category():
-    assert set(REASONS) == {"success", "collision", "out_of_bounds", "timeout", "unstable",
-                            "loss_of_control", "navigator_error"}
+    assert set(REASONS) == {"success", "collision", "mover_collision", "out_of_bounds",
+                            "timeout", "unstable", "loss_of_control", "navigator_error"}
 
 
 # --- the spec --------------------------------------------------------------------------------
@@ -509,7 +509,8 @@ FULL = TrialSpec(algorithm="straight", platform=PLATFORM, family="maze", scenari
                  params={"MPC_XY_P": 1.1}, actuators={"lag_s": 0.01},
                  perception={"latency_s": 0.05},
                  estimator={"position_bias_m": [0.1, 0.0, 0.0], "rate_latency_s": 0.004},
-                 failures=[{"at_s": 5.0, "unit": "gps", "type": "off", "instance": 0}])
+                 failures=[{"at_s": 5.0, "unit": "gps", "type": "off", "instance": 0}],
+                 movers={"count": 3, "speed_m_s": 2.0})
 
 
 def test_spec_round_trips_through_dict_and_json():
@@ -541,6 +542,7 @@ CHANGES = {
     "params": {"MPC_XY_P": 1.2}, "actuators": {"lag_s": 0.02},
     "perception": {"latency_s": 0.1}, "estimator": {"position_noise_m": 0.1},
     "failures": [{"at_s": 1.0, "unit": "battery", "type": "off", "instance": 0}],
+    "movers": {"count": 4},
 }
 # (protocol 2 here: FULL with protocol 3 would carry 3's acceleration limit, which 1 refuses)
 
