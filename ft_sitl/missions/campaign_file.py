@@ -66,6 +66,7 @@ from ft_sitl.missions.spec import (
     actuator_settings,
     estimator_settings,
     failure_setting,
+    mover_settings,
     perception_settings,
     px4_params,
     wind_settings,
@@ -82,7 +83,7 @@ PRESETS = ("quick", "paper", "gains")
 TOP_KEYS = ("name", "trials", "seed", "scenario_seed", "platforms", "platform_files",
             "scenarios", "indices", "physics_hz", "protocol", "gains", "algorithms", "limits",
             "weights", "description", "wind", "params", "actuators", "perception",
-            "estimator", "failures")
+            "estimator", "failures", "movers")
 LIMIT_KEYS = ("max_speed_m_s", "timeout_s", "goal_radius_m", "hold_s", "max_acc_m_s2")
 WEIGHT_KEYS = ("scenarios", "platforms", "beta")
 
@@ -139,6 +140,8 @@ class Campaign:
     estimators: list = field(default_factory=lambda: [None])
     #: the failure axis: every trial flies with each (None: no failure injected)
     failure_sets: list = field(default_factory=lambda: [None])
+    #: the moving-obstacle axis: every trial flies with each (None: a static world)
+    mover_sets: list = field(default_factory=lambda: [None])
 
     def spec_dict(self) -> dict:
         """The campaign as data: what resuming compares, what reports print."""
@@ -170,6 +173,8 @@ class Campaign:
                if self.estimators != [None] else {}),
             **({"failures": [f or {} for f in self.failure_sets]}
                if self.failure_sets != [None] else {}),
+            **({"movers": [m or {} for m in self.mover_sets]}
+               if self.mover_sets != [None] else {}),
         }
 
     def modes(self) -> list[str]:
@@ -197,11 +202,11 @@ class Campaign:
                             physics_hz=self.physics_hz, protocol=self.protocol,
                             gains=g, scenario_version=sc.version, wind=w, params=ps,
                             actuators=ac, perception=pe, estimator=es,
-                            failures=[fa] if fa else None)
+                            failures=[fa] if fa else None, movers=mo)
                             for g in self.modes() for ps in self.param_sets
                             for ac in self.actuator_sets for pe in self.perceptions
                             for es in self.estimators for fa in self.failure_sets
-                            for w in self.winds)
+                            for mo in self.mover_sets for w in self.winds)
         out.sort(key=lambda s: (s.scenario_file or "", s.family, s.scenario_index))
         return out
 
@@ -264,10 +269,11 @@ def parse_campaign(doc: dict, path: Path | None = None) -> Campaign:
     estimators = _table_axis(t, "estimator", "estimator settings", estimator_settings)
     failure_sets = _table_axis(t, "failures", "failure settings", failure_setting)
     _check_motors(t, failure_sets, platforms, "failures", ("instance",))
+    mover_sets = _table_axis(t, "movers", "mover settings", mover_settings)
     notes: list[str] = []
     return Campaign(winds=winds, gain_modes=gain_modes, param_sets=param_sets,
                     actuator_sets=actuator_sets, perceptions=perceptions,
-                    estimators=estimators, failure_sets=failure_sets,
+                    estimators=estimators, failure_sets=failure_sets, mover_sets=mover_sets,
         name=name, algorithms=parse_algorithms(where, doc["algorithms"], notes),
         platforms=platforms, scenarios=scenarios, trials=trials, seed=seed,
         scenario_seed=scenario_seed, limits=limits, weights=weights, physics_hz=physics_hz,

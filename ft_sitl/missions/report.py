@@ -251,10 +251,14 @@ def _setting(df: pd.DataFrame, column: str, key: str, default: float) -> pd.Seri
 
 def axis_values(df: pd.DataFrame) -> dict[str, pd.Series]:
     """The numeric axes the trials vary, by name (only those with more than one value):
-    mean wind speed, perception latency, and the weakest motor's efficiency."""
+    mean wind speed, perception latency, the weakest motor's efficiency, and the moving
+    obstacles' count and speed (0 in a static world)."""
     out = {}
     if "wind_speed_m_s" in df:
         out["wind"] = df["wind_speed_m_s"].astype(float)
+    for axis, col in (("movers", "mover_count"), ("mover_speed", "mover_speed_m_s")):
+        if col in df:
+            out[axis] = df[col].astype(float).fillna(0.0)
     out["latency"] = _setting(df, "perception", "latency_s", 0.0)
     eff = _setting(df, "actuators", "efficiency", 1.0)
     one = _setting(df, "actuators", "degraded_efficiency", 1.0)
@@ -270,6 +274,10 @@ AXIS_FIGURES = {
                 "the navigator's perception latency"),
     "efficiency": ("success_vs_efficiency", "weakest motor's thrust efficiency",
                    "the weakest motor's thrust efficiency"),
+    "movers": ("success_vs_movers", "moving obstacles placed",
+               "the number of moving obstacles"),
+    "mover_speed": ("success_vs_mover_speed", "moving obstacles' speed (m/s; 0: static)",
+                    "the moving obstacles' speed"),
 }
 
 

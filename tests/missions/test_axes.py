@@ -365,3 +365,59 @@ def test_a_failure_axis_injects_failures_at_their_times_and_rows_record_them(yar
     with pytest.raises(CampaignError, match=r"failures\[1\]: unit: must be 'motor' or"):
         load_campaign(campaign_file(yard.parent, "bad2.toml", FAILING.replace('"motor"',
                                                                            '"rotor"')))
+
+
+# --- the moving-obstacle axis --------------------------------------------------------------------
+MOVING = """\
+name = "moving"
+algorithms = ["straight"]
+platforms = ["1.00kg-SunnySky"]
+scenarios = [{file = "yard.yaml"}]
+trials = 1
+[[movers]]
+[[movers]]
+count = 6
+path = "crossing"
+crossing_s = [0.5, 2.0]
+keep_out_m = 1.0
+speed_m_s = 1.0
+[limits]
+timeout_s = 8.0
+"""
+
+
+def test_movers_are_an_axis_rows_record_them_the_report_plots_them_and_they_rerun(
+        yard, tmp_path, cli_env):
+    c = load_campaign(campaign_file(yard.parent, "moving.toml", MOVING))
+    specs = c.trial_specs()
+    assert [s.movers for s in specs] == [None, {"count": 6, "path": "crossing",
+                                                "crossing_s": [0.5, 2.0],
+                                                "keep_out_m": 1.0, "speed_m_s": 1.0}]
+    assert "movers" not in specs[0].to_dict() and specs[0].seed == specs[1].seed
+    summary = run_campaign(c, tmp_path / "out", progress=False)
+    assert (summary.ran, summary.errors) == (2, [])
+    rows = read_jsonl(tmp_path / "out" / "trials.jsonl")
+    static, moving = sorted(rows, key=lambda r: r["mover_count"])
+    assert (static["mover_count"], static["mover_speed_m_s"], static["movers"]) == (0, 0.0, "")
+    assert moving["mover_count"] > 0 and moving["mover_speed_m_s"] == 1.0
+    assert json.loads(moving["movers"])["path"] == "crossing"
+    page = write_report(to_frame(rows), tmp_path / "rep", campaign_spec={},
+                        meta={})["report.html"].read_text()
+    assert 'alt="success_vs_movers"' in page and 'alt="success_vs_mover_speed"' in page
+    proc = run_exe("trial", "rerun", tmp_path / "out", moving["trial_id"], env=cli_env)
+    assert proc.returncode == 0 and "identical" in proc.stdout, proc.stdout + proc.stderr
+
+
+@pytest.mark.parametrize("text, message", [
+    ("movers = {count = 100}", "movers: count: must be an integer 0..64"),
+    ("movers = [{}, {speed = 2}]", "movers[1] has no parameter 'speed'"),
+    ("movers = [{count = 2}, {count = 2}]", "movers[1]: the same mover settings twice"),
+    ("movers = {count = 2, density_per_1000m2 = 1}", "movers: give count or "
+                                                     "density_per_1000m2, not both"),
+])
+def test_bad_mover_axis_values_are_named(tmp_path, text, message):
+    body = f'algorithms = ["straight"]\nplatforms = ["1.00kg-SunnySky"]\n{text}\n'
+    path = campaign_file(tmp_path, "bad.toml", body)
+    with pytest.raises(CampaignError) as exc:
+        load_campaign(path)
+    assert str(exc.value).startswith(f"{path}: {message}"), str(exc.value)
