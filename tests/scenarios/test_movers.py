@@ -233,3 +233,10 @@ def test_a_trial_with_movers_reruns_identically_and_a_static_one_is_unchanged():
     assert (static["mover_count"], static["movers"]) == (0, "")
     assert {k: v for k, v in a.items() if k not in skip} == \
         {k: v for k, v in static.items() if k not in skip}
+
+
+def test_the_docs_table_is_the_schema():
+    from pathlib import Path
+    doc = (Path(__file__).resolve().parents[2] / "docs" / "scenarios.md").read_text()
+    assert (f"<!-- BEGIN generated: movers.SCHEMA.markdown() -->\n{mv.SCHEMA.markdown()}\n"
+            "<!-- END generated -->") in doc
