@@ -28,6 +28,9 @@ from ft_sitl.scenarios.movers import MoverError, with_movers
 
 #: entries kept per cache
 CACHE_MAX = 8
+#: mover placements kept (a few kB each): one per trial number of a configuration, which a
+#: campaign cycles through for every algorithm and platform
+MOVER_CACHE_MAX = 256
 #: shared grids kept on disk (the newest; up to ~30 MB each): a campaign's chunks come
 #: scenario by scenario, so an older grid is rarely asked for again (it is rebuilt if so)
 GRID_CACHE_KEEP = 8
@@ -46,15 +49,16 @@ class TrialResources:
         self._scenarios: dict = {}
         self._worlds: dict = {}
         self._cameras: dict = {}
+        self._movers: dict = {}
 
     def share_grids(self, path: str | None) -> None:
         """Share distance grids with other processes through ``path`` (None: build here)."""
         self.grid_dir = path
 
     @staticmethod
-    def _cached(cache: dict, key, make):
+    def _cached(cache: dict, key, make, size: int = CACHE_MAX):
         if key not in cache:
-            if len(cache) >= CACHE_MAX:
+            if len(cache) >= size:
                 cache.pop(next(iter(cache)))
             cache[key] = make()
         return cache[key]
@@ -75,8 +79,8 @@ class TrialResources:
         seed = mover_seed(spec)
         mkey = (scenario_key(sc), json.dumps(spec.movers, sort_keys=True), seed)
         try:
-            return self._cached(self._scenarios, mkey,
-                                lambda: with_movers(sc, spec.movers, seed))
+            return self._cached(self._movers, mkey, lambda: with_movers(sc, spec.movers, seed),
+                                MOVER_CACHE_MAX)
         except MoverError as exc:
             raise TrialSpecError(str(exc)) from None
 

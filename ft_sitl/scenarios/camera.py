@@ -556,9 +556,9 @@ class DepthCamera:
                 raise ValueError("movers: pass movers_time_us, the simulation time to "
                                  "render them at")
             image_first_hit(movers.kind, movers.dims, movers.bounding,
-                            movers.poses(movers_time_us), origin, r_wo, self.rays_z1,
-                            cfg.width, cfg.height, cfg.fx, cfg.fy, cfg.cx, cfg.cy,
-                            float(cfg.min_range_m), float(cfg.max_range_m), z)
+                            movers.poses(movers_time_us), origin, r_wo, dirs_world,
+                            self.cos_axis, cfg.width, cfg.height, cfg.fx, cfg.fy, cfg.cx,
+                            cfg.cy, float(cfg.min_range_m), float(cfg.max_range_m), z)
 
         if noisy:
             valid = np.isfinite(z)

@@ -356,45 +356,81 @@ def ray_first_hit(kind, dims, bounding, poses, origin, dirs, length, max_len):
 
 
 @njit(cache=True)
-def image_first_hit(kind, dims, bounding, poses, origin, r_wo, rays_z1, width, height,
-                    fx, fy, cx_px, cy_px, min_z, max_z, z):
-    """Lower the z-depths ``z`` (H*W,) of a pinhole image where a mover is nearer. Each
-    mover is tested only on the pixels of its bounding sphere's projection (the exact
-    bounding rectangle of a sphere in a pinhole image: tangent planes through the optical
-    centre); ``rays_z1`` (H*W, 3) are the optical-frame rays with unit z, ``r_wo`` the
-    optical-to-world rotation."""
-    for j in range(kind.shape[0]):
-        wx, wy, wz = poses[j, 0] - origin[0], poses[j, 1] - origin[1], poses[j, 2] - origin[2]
-        # the centre in the optical frame (x right, y down, z forward)
+def _project_rect(kind, dims, pose, origin, r_wo, width, height, fx, fy, cx_px, cy_px,
+                  R, min_z):
+    """The pixel rectangle (u0, u1, v0, v1) a mover can cover: the projected corners of
+    its bounding box when all lie in front of the camera, else the exact bounding
+    rectangle of its bounding sphere (tangent planes through the optical centre), else
+    the whole image. u0 > u1: nothing in view."""
+    if kind == CYLINDER:
+        ex, ey, ez = dims[0], dims[0], dims[1]
+    elif kind == BOX:
+        ex, ey, ez = dims[0], dims[1], dims[2]
+    else:
+        ex, ey, ez = dims[0], dims[0], dims[0]
+    ch, sh = math.cos(pose[3]), math.sin(pose[3])
+    u_lo, u_hi, v_lo, v_hi = np.inf, -np.inf, np.inf, -np.inf
+    front = True
+    for k in range(8):
+        lx = ex if k & 1 else -ex
+        ly = ey if k & 2 else -ey
+        lz = ez if k & 4 else -ez
+        wx = pose[0] + ch * lx - sh * ly - origin[0]
+        wy = pose[1] + sh * lx + ch * ly - origin[1]
+        wz = pose[2] + lz - origin[2]
         X = r_wo[0, 0] * wx + r_wo[1, 0] * wy + r_wo[2, 0] * wz
         Y = r_wo[0, 1] * wx + r_wo[1, 1] * wy + r_wo[2, 1] * wz
         Z = r_wo[0, 2] * wx + r_wo[1, 2] * wy + r_wo[2, 2] * wz
+        if Z < 0.5 * min_z:
+            front = False
+            break
+        u, v = cx_px + fx * X / Z, cy_px + fy * Y / Z
+        u_lo, u_hi = min(u_lo, u), max(u_hi, u)
+        v_lo, v_hi = min(v_lo, v), max(v_hi, v)
+    if front:
+        return (max(0, int(math.floor(u_lo))), min(width - 1, int(math.ceil(u_hi))),
+                max(0, int(math.floor(v_lo))), min(height - 1, int(math.ceil(v_hi))))
+    wx, wy, wz = pose[0] - origin[0], pose[1] - origin[1], pose[2] - origin[2]
+    X = r_wo[0, 0] * wx + r_wo[1, 0] * wy + r_wo[2, 0] * wz
+    Y = r_wo[0, 1] * wx + r_wo[1, 1] * wy + r_wo[2, 1] * wz
+    Z = r_wo[0, 2] * wx + r_wo[1, 2] * wy + r_wo[2, 2] * wz
+    u0, u1, v0, v1 = 0, width - 1, 0, height - 1
+    dxz, dyz = math.sqrt(X * X + Z * Z), math.sqrt(Y * Y + Z * Z)
+    if Z > 0.0 and dxz > R:
+        a, w = math.atan2(X, Z), math.asin(R / dxz)
+        if a - w > -0.5 * math.pi and a + w < 0.5 * math.pi:
+            u0 = max(u0, int(math.floor(cx_px + fx * math.tan(a - w))))
+            u1 = min(u1, int(math.ceil(cx_px + fx * math.tan(a + w))))
+    if Z > 0.0 and dyz > R:
+        a, w = math.atan2(Y, Z), math.asin(R / dyz)
+        if a - w > -0.5 * math.pi and a + w < 0.5 * math.pi:
+            v0 = max(v0, int(math.floor(cy_px + fy * math.tan(a - w))))
+            v1 = min(v1, int(math.ceil(cy_px + fy * math.tan(a + w))))
+    return u0, u1, v0, v1
+
+
+@njit(cache=True)
+def image_first_hit(kind, dims, bounding, poses, origin, r_wo, dirs_world, cos_axis, width,
+                    height, fx, fy, cx_px, cy_px, min_z, max_z, z):
+    """Lower the z-depths ``z`` (H*W,) of a pinhole image where a mover is nearer.
+    ``dirs_world`` (H*W, 3) are the pixels' unit rays in the world, ``cos_axis`` their
+    cosines to the optical axis, ``r_wo`` the optical-to-world rotation. Each mover is
+    tested only on the pixels of its projected bounding box (:func:`_project_rect`)."""
+    for j in range(kind.shape[0]):
+        wx, wy, wz = poses[j, 0] - origin[0], poses[j, 1] - origin[1], poses[j, 2] - origin[2]
+        Z = r_wo[0, 2] * wx + r_wo[1, 2] * wy + r_wo[2, 2] * wz  # depth of the centre
         R = bounding[j]
         if Z + R < min_z or Z - R > 2.0 * max_z:  # behind, or beyond the range
             continue
-        u0, u1, v0, v1 = 0, width - 1, 0, height - 1
-        dxz, dyz = math.sqrt(X * X + Z * Z), math.sqrt(Y * Y + Z * Z)
-        if Z > 0.0 and dxz > R:
-            a, w = math.atan2(X, Z), math.asin(R / dxz)
-            if a - w > -0.5 * math.pi and a + w < 0.5 * math.pi:
-                u0 = max(u0, int(math.floor(cx_px + fx * math.tan(a - w))))
-                u1 = min(u1, int(math.ceil(cx_px + fx * math.tan(a + w))))
-        if Z > 0.0 and dyz > R:
-            a, w = math.atan2(Y, Z), math.asin(R / dyz)
-            if a - w > -0.5 * math.pi and a + w < 0.5 * math.pi:
-                v0 = max(v0, int(math.floor(cy_px + fy * math.tan(a - w))))
-                v1 = min(v1, int(math.ceil(cy_px + fy * math.tan(a + w))))
+        u0, u1, v0, v1 = _project_rect(kind[j], dims[j], poses[j], origin, r_wo, width,
+                                       height, fx, fy, cx_px, cy_px, R, min_z)
         for v in range(v0, v1 + 1):
             for u in range(u0, u1 + 1):
                 k = v * width + u
-                qx, qy, qz = rays_z1[k, 0], rays_z1[k, 1], rays_z1[k, 2]
-                n = math.sqrt(qx * qx + qy * qy + qz * qz)
-                dx = (r_wo[0, 0] * qx + r_wo[0, 1] * qy + r_wo[0, 2] * qz) / n
-                dy = (r_wo[1, 0] * qx + r_wo[1, 1] * qy + r_wo[1, 2] * qz) / n
-                dz = (r_wo[2, 0] * qx + r_wo[2, 1] * qy + r_wo[2, 2] * qz) / n
                 t = ray_shape(kind[j], dims[j], poses[j, 0], poses[j, 1], poses[j, 2],
-                              poses[j, 3], origin[0], origin[1], origin[2], dx, dy, dz)
-                zt = t / n  # z-depth of the hit: length * cos(angle to the axis)
+                              poses[j, 3], origin[0], origin[1], origin[2],
+                              dirs_world[k, 0], dirs_world[k, 1], dirs_world[k, 2])
+                zt = t * cos_axis[k]  # z-depth of the hit
                 if zt < z[k] or not (z[k] == z[k]):
                     z[k] = zt
 
