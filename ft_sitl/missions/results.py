@@ -37,9 +37,9 @@ metrics (navigation phase)
     ``max_tilt_deg``, ``saturation_fraction`` (physics steps with any rotor at a limit),
     ``energy_j`` (motor mechanical energy), ``replans``, ``planner_time_s`` (navigator
     compute, wall clock), ``planner_calls``, ``fence_breaches`` (how often the vehicle
-    left the inside of its geofence, as the flight controller counts: each breach it acts
-    on; empty for rows written before it was recorded), ``fence_breach_s`` (the first
-    breach, from navigation start; NaN if none).
+    left the inside of its geofence, as the flight controller counts breaches; empty for
+    rows written before it was recorded), ``fence_breach_s`` (the first breach, from
+    navigation start; NaN if none).
 run
     ``sim_time_s``, ``wall_time_s``, ``code_version``, ``software`` (JSON: ft_sitl's
     version and code digest, Python's and the numeric libraries' versions,
