@@ -23,7 +23,7 @@ import numpy as np
 from ft_sitl import G
 from ft_sitl.autopilot import cascade as c
 from ft_sitl.autopilot.follow import FollowTask, TargetEstimator
-from ft_sitl.autopilot.geofence import Fence, nearest_safe_point
+from ft_sitl.autopilot.geofence import GF_ACTIONS, Fence, nearest_safe_point
 from ft_sitl.autopilot.params import ParamSet
 from ft_sitl.autopilot.setpoints import Setpoint
 from ft_sitl.physics.platform import Platform
@@ -103,8 +103,6 @@ class Severity(IntEnum):
 
 
 # MAV_CMD ids of the mission items the navigator executes
-#: GF_ACTION's values (PX4's geofence_result constants), by name
-GF_ACTIONS = {0: "none", 1: "warning", 2: "hold", 3: "return", 4: "terminate", 5: "land"}
 #: NAV_RCL_ACT's values (PX4's manual control loss actions), by name
 NAV_RCL_ACTIONS = {1: "hold", 2: "return", 3: "land", 5: "terminate", 6: "disarm"}
 #: the modes flown with the sticks (PX4 multicopters fly MANUAL as STABILIZED)

@@ -9,8 +9,10 @@ outside every exclusion area. Two parameters add PX4's simple fences around home
 home); 0 disables each.
 
 What a breach does is the commander's (``GF_ACTION``: 0 none, 1 warning, 2 hold, 3
-return, 4 terminate, 5 land, PX4's values); this module only answers whether and why a
-position breaches.
+return, 4 terminate, 5 land, PX4's values: :data:`GF_ACTIONS`); this module only answers
+whether and why a position breaches, and checks what makes a fence (:func:`polygon`,
+:func:`circle`, :func:`check_items`) for every way one arrives (a MAVLink upload, a trial
+spec's ``fence``).
 
 Rally points (``MAV_MISSION_TYPE_RALLY``) are positions RTL may return to instead of
 home: PX4 returns to the nearest of home and the rally points.
@@ -25,6 +27,11 @@ import numpy as np
 
 #: the most fence or rally items a vehicle stores (PX4's dataman holds a few hundred)
 MAX_ITEMS = 256
+#: GF_ACTION's values (PX4's geofence_result constants), by name
+GF_ACTIONS = {0: "none", 1: "warning", 2: "hold", 3: "return", 4: "terminate", 5: "land"}
+#: the actions by which the flight controller takes the vehicle from whoever flies it (a
+#: mode of its own, or termination); "none" and "warning" leave the flight as it was
+TAKEOVER_ACTIONS = ("hold", "return", "terminate", "land")
 
 
 class FenceError(ValueError):
@@ -71,6 +78,13 @@ class Fence:
     def empty(self) -> bool:
         return not self.areas
 
+    @property
+    def n_items(self) -> int:
+        """How many fence items it takes (MAV_MISSION_TYPE_FENCE): a polygon's vertices,
+        one per circle, one for the return point."""
+        return (sum(len(a.vertices) if isinstance(a, Polygon) else 1 for a in self.areas)
+                + (self.return_point is not None))
+
     def inside_areas(self, x: float, y: float) -> bool:
         """PX4's rule: inside an inclusion area (if any) and outside every exclusion."""
         had_inclusion = inside_inclusion = False
@@ -105,9 +119,45 @@ def _segments_cross(a, b, c, d) -> bool:
     return (d1 * d2 < 0) and (d3 * d4 < 0)
 
 
+def fits(n_items: int) -> bool:
+    """Whether ``n_items`` fence (or rally) items fit in the vehicle (:data:`MAX_ITEMS`)."""
+    return n_items <= MAX_ITEMS
+
+
+def check_items(n: int, where: str) -> None:
+    """FenceError unless ``n`` fence (or rally) items fit in the vehicle (:func:`fits`)."""
+    if not fits(n):
+        raise FenceError(f"{where}: {n} items, more than the {MAX_ITEMS} fence or rally items "
+                         f"a vehicle stores")
+
+
+def _numbers(values, where: str, what: str) -> np.ndarray:
+    """``values`` (a sequence of numbers, or of such sequences) as a float array; FenceError
+    naming ``what`` for anything else (a string, a flag, a ragged list)."""
+    def leaves(v):
+        if isinstance(v, (list, tuple, np.ndarray)):
+            for x in v:
+                yield from leaves(x)
+        else:
+            yield v
+    try:
+        flat = list(leaves(values))
+        ok = all(isinstance(x, (int, float, np.number)) and not isinstance(x, (bool, np.bool_))
+                 for x in flat)
+        array = np.asarray(values, dtype=float) if ok else None
+    except (TypeError, ValueError):
+        array = None
+    if array is None:
+        raise FenceError(f"{where}: {what} must be numbers (m), got {values!r}")
+    return array
+
+
 def polygon(vertices, inclusion: bool, where: str) -> Polygon:
-    """A checked polygon: at least 3 finite vertices, edges that do not cross."""
-    v = np.asarray(vertices, dtype=float).reshape(-1, 2)
+    """A checked polygon: at least 3 finite [x, y] vertices, edges that do not cross."""
+    v = _numbers(vertices, where, "the polygon's vertices")
+    if v.ndim != 2 or v.shape[1] != 2:
+        raise FenceError(f"{where}: the polygon's vertices must be [x, y] pairs (m), got "
+                         f"{vertices!r}")
     if len(v) < 3:
         raise FenceError(f"{where}: a polygon needs at least 3 vertices, got {len(v)}")
     if not np.all(np.isfinite(v)):
@@ -124,10 +174,14 @@ def polygon(vertices, inclusion: bool, where: str) -> Polygon:
 
 
 def circle(center, radius_m: float, inclusion: bool, where: str) -> Circle:
-    c = np.asarray(center, dtype=float).reshape(2)
+    """A checked circle: a finite [x, y] centre, a positive finite radius (m)."""
+    c = _numbers(center, where, "the circle's centre")
+    if c.shape != (2,):
+        raise FenceError(f"{where}: the circle's centre must be [x, y] (m), got {center!r}")
     if not np.all(np.isfinite(c)):
         raise FenceError(f"{where}: the circle's centre is not a finite position")
-    if not (math.isfinite(radius_m) and radius_m > 0):
+    if isinstance(radius_m, bool) or not isinstance(radius_m, (int, float, np.number)) or \
+            not (math.isfinite(radius_m) and radius_m > 0):
         raise FenceError(f"{where}: the circle's radius must be a positive number of "
                          f"metres, got {radius_m!r}")
     return Circle(c, float(radius_m), inclusion)

@@ -60,14 +60,15 @@ def cmd_campaign_check(args) -> int:
             "wind": [w or {} for w in c.winds], "gains": c.modes(),
             "params": [p or {} for p in c.param_sets],
             "actuators": [a or {} for a in c.actuator_sets],
-            "perception": [p or {} for p in c.perceptions], "notes": list(c.notes)}
+            "perception": [p or {} for p in c.perceptions],
+            "fence": [f or {} for f in c.fences], "notes": list(c.notes)}
     if args.json:
         print(json.dumps(info, indent=2))
         return 0
     axes = "".join(f" x {n} {what}" for n, what in (
         (len(c.winds), "winds"), (len(c.modes()), "gain modes"),
         (len(c.param_sets), "parameter sets"), (len(c.actuator_sets), "actuator settings"),
-        (len(c.perceptions), "perception settings")) if n > 1)
+        (len(c.perceptions), "perception settings"), (len(c.fences), "fences")) if n > 1)
     print(f"campaign {c.name!r}: {len(specs)} trials = {len(c.algorithms)} algorithms x "
           f"{len(c.platforms)} platforms x {len(c.scenarios)} scenario families x "
           f"{c.trials} trials{axes}")
@@ -87,12 +88,32 @@ def cmd_campaign_check(args) -> int:
             print(f"  {label + ':':11s} " + "; ".join(
                 ", ".join(f"{k} {v:g}" if isinstance(v, float) else f"{k} {v}"
                           for k, v in p.items()) if p else none for p in values))
+    if c.fences != [None]:
+        print("  fence:      " + "; ".join(_fence_summary(f) for f in c.fences))
     lim = c.limits
     print(f"  limits: {lim.max_speed_m_s:g} m/s, {lim.timeout_s:g} s, goal sphere "
           f"{lim.goal_radius_m:g} m held {lim.hold_s:g} s")
     for note in c.notes:
         print(f"  note: {note}")
     return 0
+
+
+def _fence_summary(fence: dict | None) -> str:
+    """A trial fence in a few words: "land: 1 inclusion polygon, 5 m from home"."""
+    if fence is None:
+        return "none"
+    parts = []
+    for key, what in (("polygons", "polygon"), ("circles", "circle")):
+        for kind in (True, False):
+            n = sum(a["inclusion"] is kind for a in fence[key])
+            if n:
+                parts.append(f"{n} {'inclusion' if kind else 'exclusion'} {what}"
+                             f"{'s' if n > 1 else ''}")
+    if fence["max_hor_dist_m"]:
+        parts.append(f"{fence['max_hor_dist_m']:g} m from home")
+    if fence["max_ver_dist_m"]:
+        parts.append(f"{fence['max_ver_dist_m']:g} m above home")
+    return f"{fence['action']}: {', '.join(parts)}"
 
 
 def cmd_campaign_run(args) -> int:

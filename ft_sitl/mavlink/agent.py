@@ -19,8 +19,7 @@ from pymavlink.dialects.v20 import common as mav
 from ft_sitl import frames
 from ft_sitl.autopilot import commander as cm
 from ft_sitl.autopilot.commander import MissionItem, Result
-from ft_sitl.autopilot.geofence import MAX_ITEMS as MAX_FENCE_ITEMS
-from ft_sitl.autopilot.geofence import Fence, FenceError, circle, polygon
+from ft_sitl.autopilot.geofence import Fence, FenceError, circle, fits, polygon
 from ft_sitl.autopilot.params import PARAMS, ParamError
 from ft_sitl.autopilot.setpoints import Setpoint, SetpointError
 from ft_sitl.mavlink.shell import Shell
@@ -899,8 +898,8 @@ class VehicleAgent:
         if m.count == 0:
             self._apply_upload(mtype, [])
             return [self._mission_ack(m, mav.MAV_MISSION_ACCEPTED, link, peer, mtype)]
-        limit = 10000 if mtype == mav.MAV_MISSION_TYPE_MISSION else MAX_FENCE_ITEMS
-        if m.count > limit:
+        full = m.count > 10000 if mtype == mav.MAV_MISSION_TYPE_MISSION else not fits(m.count)
+        if full:
             return [self._mission_ack(m, mav.MAV_MISSION_NO_SPACE, link, peer, mtype)]
         self._upload = _Transfer(m.count, link, peer, last_request_wall_us=wall_us,
                                  mission_type=mtype)

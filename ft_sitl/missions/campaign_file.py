@@ -19,6 +19,8 @@ A campaign file (TOML or YAML) names what to run; every key is optional except
     protocol = 1                     # the trial protocol's version (default: the newest)
     gains = "bandwidth"              # controller-gain mode: "bandwidth" (FT_GAIN_MODE 0,
                                      # default) or "px4" (1: PX4's normalised rate gains)
+    # axes, each one table or a list of them crossed with the matrix ({}: the default):
+    # wind, params, actuators, perception, estimator, failures, fence (docs/missions.md)
 
     [[algorithms]]                   # or: algorithms = "all" / ["straight", ...]
     name = "straight"                # a registered navigator
@@ -66,6 +68,7 @@ from ft_sitl.missions.spec import (
     actuator_settings,
     estimator_settings,
     failure_setting,
+    fence_setting,
     mover_settings,
     perception_settings,
     px4_params,
@@ -83,7 +86,7 @@ PRESETS = ("quick", "paper", "gains")
 TOP_KEYS = ("name", "trials", "seed", "scenario_seed", "platforms", "platform_files",
             "scenarios", "indices", "physics_hz", "protocol", "gains", "algorithms", "limits",
             "weights", "description", "wind", "params", "actuators", "perception",
-            "estimator", "failures", "movers")
+            "estimator", "failures", "movers", "fence")
 LIMIT_KEYS = ("max_speed_m_s", "timeout_s", "goal_radius_m", "hold_s", "max_acc_m_s2")
 WEIGHT_KEYS = ("scenarios", "platforms", "beta")
 
@@ -142,6 +145,8 @@ class Campaign:
     failure_sets: list = field(default_factory=lambda: [None])
     #: the moving-obstacle axis: every trial flies with each (None: a static world)
     mover_sets: list = field(default_factory=lambda: [None])
+    #: the geofence axis: every trial flies with each (None: no fence)
+    fences: list = field(default_factory=lambda: [None])
 
     def spec_dict(self) -> dict:
         """The campaign as data: what resuming compares, what reports print."""
@@ -175,6 +180,7 @@ class Campaign:
                if self.failure_sets != [None] else {}),
             **({"movers": [m or {} for m in self.mover_sets]}
                if self.mover_sets != [None] else {}),
+            **({"fence": [f or {} for f in self.fences]} if self.fences != [None] else {}),
         }
 
     def modes(self) -> list[str]:
@@ -202,11 +208,12 @@ class Campaign:
                             physics_hz=self.physics_hz, protocol=self.protocol,
                             gains=g, scenario_version=sc.version, wind=w, params=ps,
                             actuators=ac, perception=pe, estimator=es,
-                            failures=[fa] if fa else None, movers=mo)
+                            failures=[fa] if fa else None, movers=mo, fence=fe)
                             for g in self.modes() for ps in self.param_sets
                             for ac in self.actuator_sets for pe in self.perceptions
                             for es in self.estimators for fa in self.failure_sets
-                            for mo in self.mover_sets for w in self.winds)
+                            for mo in self.mover_sets for fe in self.fences
+                            for w in self.winds)
         out.sort(key=lambda s: (s.scenario_file or "", s.family, s.scenario_index))
         return out
 
@@ -270,10 +277,12 @@ def parse_campaign(doc: dict, path: Path | None = None) -> Campaign:
     failure_sets = _table_axis(t, "failures", "failure settings", failure_setting)
     _check_motors(t, failure_sets, platforms, "failures", ("instance",))
     mover_sets = _table_axis(t, "movers", "mover settings", mover_settings)
+    fences = _table_axis(t, "fence", "fence settings", fence_setting)
     notes: list[str] = []
     return Campaign(winds=winds, gain_modes=gain_modes, param_sets=param_sets,
                     actuator_sets=actuator_sets, perceptions=perceptions,
                     estimators=estimators, failure_sets=failure_sets, mover_sets=mover_sets,
+                    fences=fences,
         name=name, algorithms=parse_algorithms(where, doc["algorithms"], notes),
         platforms=platforms, scenarios=scenarios, trials=trials, seed=seed,
         scenario_seed=scenario_seed, limits=limits, weights=weights, physics_hz=physics_hz,

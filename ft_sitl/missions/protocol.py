@@ -15,7 +15,8 @@ Phases (``../shared/docs/benchmark-protocol.md``, paper Sec. IV-B):
    stable there -- within :data:`STABLE_POS_M` of it and slower than
    :data:`STABLE_SPEED_M_S` for :data:`STABLE_FOR_S` -- within :data:`APPROACH_TIMEOUT_S`
    of arming, else ``loss_of_control`` "could not reach the start". A collision, leaving
-   the flight volume, a tilt beyond 90 deg or a non-finite state end the trial here too.
+   the flight volume, a tilt beyond 90 deg, a non-finite state or a geofence breach the
+   flight controller acts on end the trial here too.
 2. *Navigation* (:class:`NavigationJudge`), from the moment the vehicle is stable. The
    outcome is the first of
 
@@ -23,6 +24,9 @@ Phases (``../shared/docs/benchmark-protocol.md``, paper Sec. IV-B):
    - ``out_of_bounds``: the centre left the flight volume (area sides, ceiling), or the
      vehicle touched the floor;
    - ``loss_of_control``: tilt beyond 90 deg or a non-finite state;
+   - ``geofence``: the vehicle breached the trial's geofence (``spec.fence``) and the
+     flight controller took it from the navigator (GF_ACTION hold, return, terminate,
+     land); a breach under "none" or "warning" is only counted (``fence_breaches``);
    - ``navigator_error``: the navigator failed (raised, returned no valid setpoint, its
      process died; decided by the transport);
    - ``timeout``: not in the goal sphere ``limits.timeout_s`` after navigation start, or
@@ -45,6 +49,7 @@ import numpy as np
 from ft_sitl import __version__
 from ft_sitl.autopilot import failures
 from ft_sitl.autopilot.cascade import C_SAT_STEPS
+from ft_sitl.autopilot.geofence import TAKEOVER_ACTIONS
 from ft_sitl.autopilot.params import GAIN_MODES, ParamSet
 from ft_sitl.missions.resources import RESOURCES, TrialResources
 from ft_sitl.missions.results import Outcome
@@ -53,6 +58,8 @@ from ft_sitl.missions.spec import (
     TrialSpecError,
     actuator_seed,
     estimator_seed,
+    fence_of,
+    fence_params,
     vehicle_half_span_m,
     wind_seed,
 )
@@ -118,6 +125,8 @@ def identity_row(spec, platform, scenario) -> dict:
         if spec.estimator else "",
         "failures": json.dumps(spec.failures, sort_keys=True, separators=(",", ":"))
         if spec.failures else "",
+        "fence": json.dumps(spec.fence, sort_keys=True, separators=(",", ":"))
+        if spec.fence else "",
         **mover_columns(spec.movers, scenario.movers),
     }
 
@@ -188,6 +197,16 @@ def check_events(fleet, n_events: int, when: str) -> None:
                                if ev.what != "ceiling" else f"climbed above the ceiling{when}")
 
 
+def check_fence(fleet, n_breaches: int, when: str) -> None:
+    """A geofence breach among the commander's ``fence_events`` since ``n_breaches`` on
+    which the flight controller took the vehicle (geofence.TAKEOVER_ACTIONS: hold, return,
+    terminate, land) ends the trial; ``when`` as in :func:`check_events`."""
+    for _, reason, action in fleet.commanders[0].fence_events[n_breaches:]:
+        if action in TAKEOVER_ACTIONS:
+            raise TrialFailure(Outcome.GEOFENCE,
+                               f"breached: {reason} (GF_ACTION {action}){when}")
+
+
 class Metrics:
     """The navigation phase's metrics, sampled after every advance of the simulation."""
 
@@ -237,6 +256,7 @@ class ApproachJudge:
     def __init__(self, fleet, scenario):
         self.fleet, self.sc = fleet, scenario
         self.n_events = len(fleet.events)
+        self.n_breaches = len(fleet.commanders[0].fence_events)
         self.start_us: int | None = None
         self.last_us: int | None = None
         self.stable_since_us: int | None = None
@@ -250,6 +270,7 @@ class ApproachJudge:
     def after_step(self) -> bool:
         fleet = self.fleet
         check_events(fleet, self.n_events, " before navigation started")
+        check_fence(fleet, self.n_breaches, " before navigation started")
         now = fleet.time_us
         if self.start_us is None:
             if not fleet.commanders[0].armed:
@@ -292,6 +313,7 @@ class NavigationJudge:
         self.fleet, self.guard, self.spec, self.sc = fleet, guard, spec, sc
         self.m = metrics
         self.n_events = len(fleet.events)
+        self.n_breaches = len(fleet.commanders[0].fence_events)
         self.traj = traj
         self.t_nav0_us = fleet.time_us
         self.t_sample_us = fleet.time_us
@@ -324,6 +346,7 @@ class NavigationJudge:
         if self.traj is not None:
             self.traj.append((t_nav_us * 1e-6, *s.position))
         check_flight(fleet, self.n_events, s)
+        check_fence(fleet, self.n_breaches, "")
         dist = norm(s.position - self.sc.goal)
         if dist <= spec.limits.goal_radius_m:
             if self.entered_us is None:
@@ -425,8 +448,15 @@ class TrialReferee:
             m.min_clear = 0.0  # it touched (the contact response leaves it 1 mm off)
         navigated = self.t_nav0_us is not None
         nav_steps = fleet.sim.steps - self._steps0 if navigated else 0
+        breaches = (fleet.commanders[0].fence_events[self.judge.n_breaches:]
+                    if navigated else [])
         row = identity_row(self.spec, platform, self.sc)
         row.update(m.row())
+        row.update({
+            "fence_breaches": len(breaches),
+            "fence_breach_s": (breaches[0][0] - self.t_nav0_us) * 1e-6 if breaches
+            else math.nan,
+        })
         row.update({
             "success": reason == Outcome.SUCCESS, "reason": reason.value, "detail": detail,
             "nav_time_s": self.nav_time_s(),
@@ -495,7 +525,8 @@ def navigator_params(spec) -> dict:
 def trial_vehicle(spec, scenario, platform, resources: TrialResources = RESOURCES):
     """The trial's collision guard and its one-vehicle Fleet, on the takeoff point facing
     the goal, the speed cap as MPC_XY_VEL_MAX, the spec's controller-gain mode as
-    FT_GAIN_MODE (in-process and over the wire alike)."""
+    FT_GAIN_MODE, its geofence as GF_* and the commander's fence (in-process and over the
+    wire alike)."""
     world, grid = resources.world_and_grid(scenario)
     rules = PROTOCOLS[spec.protocol]
     if rules.vehicle_body:
@@ -506,11 +537,14 @@ def trial_vehicle(spec, scenario, platform, resources: TrialResources = RESOURCE
         guard = CollisionGuard(world, [platform.collision_radius_m], grid=grid,
                                names=scenario.obstacle_name)
     params = ParamSet({**(spec.params or {}),
+                       **(fence_params(spec.fence) if spec.fence is not None else {}),
                        "MPC_XY_VEL_MAX": spec.limits.max_speed_m_s,
                        "FT_OFFB_ACC_LIM": int(rules.offboard_acc_clamp),
                        "FT_GAIN_MODE": GAIN_MODES[spec.gains]})
     fleet = Fleet([platform], params=[params], spawn=[scenario.takeoff],
                   spawn_yaw=[scenario.start_yaw], physics_hz=spec.physics_hz, guard=guard)
+    if spec.fence is not None:  # the flight controller's, from the start (PX4: uploaded)
+        fleet.commanders[0].set_fence(fence_of(spec.fence))
     if spec.wind is not None:  # from the trial's first step (the gust timed from it)
         fleet.sim.set_wind(0, spec.wind, seed=wind_seed(spec))
     if spec.actuators is not None:  # likewise (a failure timed from it)

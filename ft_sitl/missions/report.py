@@ -69,7 +69,7 @@ METRICS_SHOWN = {"time_to_goal_s": "time to goal (s)", "path_length_m": "path le
                  "replans": "replans", "planner_time_s": "planner time (s)"}
 
 REASON_COLOURS = {"success": "#2ca02c", "collision": "#d62728", "mover_collision": "#e377c2",
-                  "out_of_bounds": "#ff7f0e",
+                  "out_of_bounds": "#ff7f0e", "geofence": "#bcbd22",
                   "timeout": "#7f7f7f", "unstable": "#9467bd", "loss_of_control": "#8c564b",
                   "navigator_error": "#17becf"}
 _RC = {"svg.hashsalt": "ft-sitl-report", "svg.fonttype": "none", "font.size": 9,

@@ -24,7 +24,8 @@ default parameters for rows written before they existed)
     the truth); ``failures`` (failures injected during the trial, autopilot.failures, as
     JSON; "" none); ``mover_count`` (moving obstacles placed, scenarios.movers),
     ``mover_speed_m_s`` (their speed), ``movers`` (their non-default settings as JSON; 0,
-    0 and "" in a static world).
+    0 and "" in a static world); ``fence`` (the geofence the flight controller kept,
+    spec.fence_setting, as JSON; "" none).
 outcome
     ``success`` (bool), ``reason`` (an :class:`Outcome` value; ``mover_collision`` is a
     collision with a moving obstacle), ``detail`` (what was hit,
@@ -35,7 +36,10 @@ metrics (navigation phase)
     ``min_clearance_m`` (obstacle clearance of the collision sphere, sampled),
     ``max_tilt_deg``, ``saturation_fraction`` (physics steps with any rotor at a limit),
     ``energy_j`` (motor mechanical energy), ``replans``, ``planner_time_s`` (navigator
-    compute, wall clock), ``planner_calls``.
+    compute, wall clock), ``planner_calls``, ``fence_breaches`` (how often the vehicle
+    left the inside of its geofence, as the flight controller counts breaches; empty for
+    rows written before it was recorded), ``fence_breach_s`` (the first breach, from
+    navigation start; NaN if none).
 run
     ``sim_time_s``, ``wall_time_s``, ``code_version``, ``software`` (JSON: ft_sitl's
     version and code digest, Python's and the numeric libraries' versions,
@@ -67,6 +71,9 @@ class Outcome(StrEnum):
     COLLISION = "collision"
     MOVER_COLLISION = "mover_collision"
     OUT_OF_BOUNDS = "out_of_bounds"
+    #: the flight controller took the vehicle from the navigator on a geofence breach
+    #: (GF_ACTION hold, return, terminate or land; ft-sitl's, not the paper's)
+    GEOFENCE = "geofence"
     TIMEOUT = "timeout"
     UNSTABLE = "unstable"
     LOSS_OF_CONTROL = "loss_of_control"
@@ -101,11 +108,13 @@ IDENTITY = ("trial_id", "campaign", "algorithm", "algorithm_params", "platform",
             "family", "scenario_category", "scenario_index", "scenario_seed", "scenario",
             "trial", "seed")
 AXES = ("wind_speed_m_s", "turbulence", "gust_m_s", "wind", "params", "actuators",
-        "perception", "estimator", "failures", "mover_count", "mover_speed_m_s", "movers")
+        "perception", "estimator", "failures", "mover_count", "mover_speed_m_s", "movers",
+        "fence")
 OUTCOME = ("success", "reason", "detail")
 METRICS = ("time_to_goal_s", "nav_time_s", "path_length_m", "mean_speed_m_s",
            "max_speed_m_s", "min_clearance_m", "max_tilt_deg", "saturation_fraction",
-           "energy_j", "replans", "planner_time_s", "planner_calls")
+           "energy_j", "replans", "planner_time_s", "planner_calls", "fence_breaches",
+           "fence_breach_s")
 RUN = ("sim_time_s", "wall_time_s", "code_version", "software", "protocol_version", "gains",
        "scenario_version", "finished_utc", "spec")
 COLUMNS = IDENTITY + AXES + OUTCOME + METRICS + RUN
@@ -113,11 +122,10 @@ COLUMNS = IDENTITY + AXES + OUTCOME + METRICS + RUN
 CATEGORICAL = ("campaign", "algorithm", "platform", "platform_category", "family",
                "scenario_category", "scenario", "reason", "gains", "turbulence")
 INTEGER = ("scenario_index", "scenario_seed", "trial", "seed", "replans", "planner_calls",
-           "protocol_version", "scenario_version", "mover_count")
+           "fence_breaches", "protocol_version", "scenario_version", "mover_count")
 FLOAT = ("mass_kg", "twr_max", "alpha_xy_max", "alpha_z_max", "wind_speed_m_s",
-         "gust_m_s", "mover_speed_m_s") + tuple(
-    m for m in METRICS if m not in ("replans", "planner_calls")) + ("sim_time_s",
-                                                                     "wall_time_s")
+         "gust_m_s", "mover_speed_m_s") + tuple(m for m in METRICS if m not in INTEGER) + (
+             "sim_time_s", "wall_time_s")
 
 
 def to_frame(rows):
@@ -149,6 +157,7 @@ def to_frame(rows):
     df["perception"] = df["perception"].astype(object).fillna("")
     df["estimator"] = df["estimator"].astype(object).fillna("")
     df["failures"] = df["failures"].astype(object).fillna("")
+    df["fence"] = df["fence"].astype(object).fillna("")
     # ... and in a static world
     df["mover_count"] = df["mover_count"].fillna(0)
     df["mover_speed_m_s"] = df["mover_speed_m_s"].fillna(0.0)

@@ -12,10 +12,12 @@ import hashlib
 import json
 from dataclasses import dataclass, field, replace
 
+from ft_sitl.autopilot import geofence
 from ft_sitl.autopilot.estimator import SCHEMA as ESTIMATOR_SCHEMA
 from ft_sitl.autopilot.estimator import Estimator
 from ft_sitl.autopilot.failures import SCHEDULE_SCHEMA as FAILURE_SCHEMA
 from ft_sitl.autopilot.params import DEFAULT_GAINS, GAIN_MODES, PARAMS, ParamError, ParamSet
+from ft_sitl.config import Table
 from ft_sitl.missions.perception import SCHEMA as PERCEPTION_SCHEMA
 from ft_sitl.missions.perception import Perception
 from ft_sitl.navigation.base import Limits
@@ -171,6 +173,10 @@ class TrialSpec:
     #: moving obstacles added to the scenario (scenarios.movers settings: count or
     #: density, speed, shapes, paths; None: a static world), the non-default settings
     movers: dict | None = None
+    #: the geofence the trial's flight controller keeps (:func:`fence_setting`: action,
+    #: max_hor_dist_m, max_ver_dist_m, polygons, circles; the scenario's ENU frame, m), every
+    #: key kept; None: none
+    fence: dict | None = None
 
     def __post_init__(self):
         for name in ("algorithm", "platform", "family"):
@@ -195,6 +201,7 @@ class TrialSpec:
         object.__setattr__(self, "estimator", estimator_settings(self.estimator))
         object.__setattr__(self, "failures", failure_schedule(self.failures))
         object.__setattr__(self, "movers", mover_settings(self.movers))
+        object.__setattr__(self, "fence", fence_setting(self.fence))
         if self.scenario_file is None:
             try:
                 fam = describe_family(self.family)
@@ -247,6 +254,8 @@ class TrialSpec:
             d["failures"] = self.failures
         if self.movers is not None:  # (likewise: a static world)
             d["movers"] = self.movers
+        if self.fence is not None:  # (likewise: no fence)
+            d["fence"] = self.fence
         return d
 
     @classmethod
@@ -360,6 +369,112 @@ def failure_schedule(values, owner: str = "failures") -> list | None:
     return sorted(out, key=lambda f: f["at_s"]) or None
 
 
+#: a trial fence's keys; the ones that are a PX4 parameter, and which (its unit the key's)
+FENCE_KEYS = ("action", "max_hor_dist_m", "max_ver_dist_m", "polygons", "circles")
+FENCE_PARAMS = {"action": "GF_ACTION", "max_hor_dist_m": "GF_MAX_HOR_DIST",
+                "max_ver_dist_m": "GF_MAX_VER_DIST"}
+POLYGON_KEYS = ("inclusion", "vertices")
+CIRCLE_KEYS = ("inclusion", "center", "radius_m")
+
+
+def fence_setting(values, owner: str = "fence") -> dict | None:
+    """A trial's geofence as its canonical table; None for an empty table (no fence).
+
+    ``action`` (GF_ACTION: a name of ``geofence.GF_ACTIONS`` or its number; default PX4's,
+    hold), ``max_hor_dist_m`` / ``max_ver_dist_m`` (GF_MAX_HOR_DIST / GF_MAX_VER_DIST,
+    from home; 0, the default, is off), ``polygons`` (``{inclusion, vertices}``, vertices
+    ``[x, y]``) and ``circles`` (``{inclusion, center, radius_m}``), in the scenario's
+    local ENU frame (m). The areas are checked by the geofence's own rules (vertex counts,
+    crossing edges, finite positions, radii, the item limit) and the numbers by the
+    parameter table; the canonical table keeps every key, the action by name and numbers
+    as floats. TrialSpecError naming ``owner`` and the key."""
+    if values is None or values == {}:
+        return None
+    if not isinstance(values, dict):
+        raise TrialSpecError(f"{owner}: must be a table of fence settings "
+                             f"({', '.join(FENCE_KEYS)}), got {values!r}")
+    t = Table(values, owner, error=TrialSpecError)
+    t.check_keys(FENCE_KEYS)
+    out: dict = {"action": fence_action(t.get("action", PARAMS["GF_ACTION"].default),
+                                        f"{owner}: action")}
+    for key in ("max_hor_dist_m", "max_ver_dist_m"):
+        name = FENCE_PARAMS[key]
+        v = t.get(key, PARAMS[name].default)
+        try:
+            ParamSet({name: v})
+        except ParamError as exc:
+            raise t.fail(key, str(exc)) from None
+        out[key] = float(v)
+    areas = []
+    for key, keys, build in (("polygons", POLYGON_KEYS,
+                              lambda a, w: geofence.polygon(a["vertices"], a["inclusion"], w)),
+                             ("circles", CIRCLE_KEYS,
+                              lambda a, w: geofence.circle(a["center"], a["radius_m"],
+                                                           a["inclusion"], w))):
+        items = t.get(key, [])
+        if not isinstance(items, list):
+            raise t.fail(key, f"must be a list of tables ({', '.join(keys)}), got {items!r}")
+        for k, item in enumerate(items):
+            where = f"{owner}.{key}[{k}]"
+            if not isinstance(item, dict):
+                raise TrialSpecError(f"{where}: must be a table ({', '.join(keys)}), got "
+                                     f"{item!r}")
+            a = Table(item, where, error=TrialSpecError)
+            a.check_keys(keys)
+            a.require(keys)
+            if not isinstance(item["inclusion"], bool):
+                raise a.fail("inclusion", f"must be true (keep inside) or false (keep out), "
+                                          f"got {item['inclusion']!r}")
+            try:
+                areas.append(build(item, where))
+            except geofence.FenceError as exc:
+                raise TrialSpecError(str(exc)) from None
+    fence = geofence.Fence(areas)
+    try:
+        geofence.check_items(fence.n_items, owner)
+    except geofence.FenceError as exc:
+        raise TrialSpecError(str(exc)) from None
+    if fence.empty and not (out["max_hor_dist_m"] or out["max_ver_dist_m"]):
+        raise TrialSpecError(f"{owner}: fences nothing (no polygon, no circle, no maximum "
+                             f"distance); leave it out (or {{}}) for no fence")
+    out["polygons"] = [{"inclusion": a.inclusion, "vertices": a.vertices.tolist()}
+                       for a in fence.areas if isinstance(a, geofence.Polygon)]
+    out["circles"] = [{"inclusion": a.inclusion, "center": a.center.tolist(),
+                       "radius_m": a.radius_m}
+                      for a in fence.areas if isinstance(a, geofence.Circle)]
+    return out
+
+
+def fence_action(v, owner: str = "fence: action") -> str:
+    """A GF_ACTION given by name or number, as its name; TrialSpecError naming ``owner``."""
+    names = geofence.GF_ACTIONS
+    if isinstance(v, str) and v in names.values():
+        return v
+    if not isinstance(v, bool) and isinstance(v, int) and v in names:
+        return names[v]
+    known = ", ".join(f"{name!r} ({code})" for code, name in names.items())
+    raise TrialSpecError(f"{owner}: must be a GF_ACTION, by name or number: {known}; "
+                         f"got {v!r}")
+
+
+def fence_of(setting: dict) -> geofence.Fence:
+    """The :class:`~ft_sitl.autopilot.geofence.Fence` of a canonical fence table (its areas;
+    the action and the distances are parameters: :func:`fence_params`)."""
+    return geofence.Fence(
+        [geofence.polygon(p["vertices"], p["inclusion"], "fence") for p in setting["polygons"]]
+        + [geofence.circle(c["center"], c["radius_m"], c["inclusion"], "fence")
+           for c in setting["circles"]])
+
+
+def fence_params(setting: dict) -> dict:
+    """The PX4 parameters of a canonical fence table: GF_ACTION, GF_MAX_HOR_DIST,
+    GF_MAX_VER_DIST."""
+    codes = {name: code for code, name in geofence.GF_ACTIONS.items()}
+    return {"GF_ACTION": codes[setting["action"]],
+            "GF_MAX_HOR_DIST": setting["max_hor_dist_m"],
+            "GF_MAX_VER_DIST": setting["max_ver_dist_m"]}
+
+
 def wind_settings(values, owner: str = "wind") -> dict | None:
     """A trial's wind as its canonical settings: those that differ from the defaults, in
     declaration order; None for calm air (no settings, or only defaults). TrialSpecError
@@ -370,7 +485,8 @@ def wind_settings(values, owner: str = "wind") -> dict | None:
 #: parameters the trial protocol sets itself, and the campaign key that sets each
 PROTOCOL_PARAMS = {"MPC_XY_VEL_MAX": "limits.max_speed_m_s",
                    "FT_OFFB_ACC_LIM": "protocol (its version decides it)",
-                   "FT_GAIN_MODE": "gains"}
+                   "FT_GAIN_MODE": "gains",
+                   **{name: f"fence.{key}" for key, name in FENCE_PARAMS.items()}}
 
 
 def px4_params(values, owner: str = "params") -> dict | None:

@@ -361,15 +361,18 @@ def test_failure_breakdown_counts_every_reason():
     rows = [_row("a", "forest", "R", True), _row("a", "forest", "R", False, reason="timeout"),
             _row("a", "maze", "R", False, reason="timeout"),
             _row("a", "maze", "V", False, reason="unstable"),
-            _row("b", "maze", "V", False, reason="navigator_error")]
+            _row("b", "maze", "V", False, reason="navigator_error"),
+            _row("b", "maze", "R", False, reason="geofence")]
     df = to_frame(rows)
     fb = scoring.failure_breakdown(df)
     assert list(fb.columns) == ["algorithm", "reason", "count", "n", "fraction"]
     assert len(fb) == 2 * len(REASONS)
     a = fb[fb["algorithm"] == "a"].set_index("reason")
-    assert a["count"].to_dict() == {"success": 1, "collision": 0, "out_of_bounds": 0,
-                                    "timeout": 2, "unstable": 1, "loss_of_control": 0,
-                                    "navigator_error": 0}
+    assert a["count"].to_dict() == {"success": 1, "collision": 0, "mover_collision": 0,
+                                    "out_of_bounds": 0, "geofence": 0, "timeout": 2,
+                                    "unstable": 1, "loss_of_control": 0, "navigator_error": 0}
+    b = fb[fb["algorithm"] == "b"].set_index("reason")
+    assert (b.loc["geofence", "count"], b.loc["navigator_error", "count"]) == (1, 1)
     assert (a["n"] == 4).all() and a["fraction"].sum() == pytest.approx(1.0)
     by_fam = scoring.failure_breakdown(df, by=("algorithm", "family"))
     assert set(zip(by_fam["algorithm"], by_fam["family"])) == {("a", "forest"), ("a", "maze"),

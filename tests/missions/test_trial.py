@@ -497,7 +497,8 @@ def test_a_navigator_that_gives_up_times_out(yard, where):
 
 def test_every_reason_is_a_known_category():
     assert set(REASONS) == {"success", "collision", "mover_collision", "out_of_bounds",
-                            "timeout", "unstable", "loss_of_control", "navigator_error"}
+                            "geofence", "timeout", "unstable", "loss_of_control",
+                            "navigator_error"}
 
 
 # --- the spec --------------------------------------------------------------------------------
@@ -510,7 +511,9 @@ FULL = TrialSpec(algorithm="straight", platform=PLATFORM, family="maze", scenari
                  perception={"latency_s": 0.05},
                  estimator={"position_bias_m": [0.1, 0.0, 0.0], "rate_latency_s": 0.004},
                  failures=[{"at_s": 5.0, "unit": "gps", "type": "off", "instance": 0}],
-                 movers={"count": 3, "speed_m_s": 2.0})
+                 movers={"count": 3, "speed_m_s": 2.0},
+                 fence={"action": "land", "max_ver_dist_m": 3.5,
+                        "circles": [{"inclusion": True, "center": [0, 0], "radius_m": 50}]})
 
 
 def test_spec_round_trips_through_dict_and_json():
@@ -543,6 +546,8 @@ CHANGES = {
     "perception": {"latency_s": 0.1}, "estimator": {"position_noise_m": 0.1},
     "failures": [{"at_s": 1.0, "unit": "battery", "type": "off", "instance": 0}],
     "movers": {"count": 4},
+    "fence": {"action": "hold", "max_ver_dist_m": 3.5,
+              "circles": [{"inclusion": True, "center": [0, 0], "radius_m": 50}]},
 }
 # (protocol 2 here: FULL with protocol 3 would carry 3's acceleration limit, which 1 refuses)
 
