@@ -262,9 +262,15 @@ class CollisionGuard:
 
     @classmethod
     def for_scenario(cls, scenario, radii: Sequence[float], **kw) -> CollisionGuard:
+        """A guard for ``scenario``: its mesh, bounds and obstacle names, and its moving
+        obstacles (``scenario.movers``, on their own clock: a field placed by
+        :func:`~ft_sitl.scenarios.movers.with_movers` starts at simulation time 0). The
+        one place a guard is built from a scenario (the Fleet's, a bridge's)."""
         world = CollisionWorld(scenario.mesh, scenario.bounds_min, scenario.bounds_max)
         grid = DistanceGrid.build(scenario.mesh, scenario.bounds_min, scenario.bounds_max)
-        return cls(world, radii, grid=grid, names=scenario.obstacle_name, **kw)
+        guard = cls(world, radii, grid=grid, names=scenario.obstacle_name, **kw)
+        guard.set_movers(scenario.movers)
+        return guard
 
     @classmethod
     def for_platforms(cls, scenario, platforms, *, body: bool = True, **kw) -> CollisionGuard:
