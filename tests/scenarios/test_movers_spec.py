@@ -177,3 +177,20 @@ def test_cli_bad_dynamic_suffix_is_one_line(tmp_path):
     assert bad.returncode == 2, bad.stderr
     assert bad.stderr.strip() == ("ft-sitl: error: scenario 'forest:3+dynamic(count=99)': "
                                   "dynamic: count: must be an integer 0..64, got 99")
+
+
+def test_a_trial_takes_movers_from_its_spec_or_its_scenario_file_not_both(tmp_path):
+    from ft_sitl.missions.resources import TrialResources
+    from ft_sitl.missions.spec import TrialSpec, TrialSpecError
+
+    res = TrialResources()
+    own = _yard(tmp_path / "own", "[movers]\ncount = 2\n")
+    spec = TrialSpec("straight", PLATFORM, "yard", scenario_file=str(own))
+    assert res.scenario(spec).movers.count == 2  # the file's own
+    with pytest.raises(TrialSpecError, match="has movers of its own; give them in the file "
+                                             "or in the trial's movers, not both"):
+        res.scenario(TrialSpec("straight", PLATFORM, "yard", scenario_file=str(own),
+                               movers={"count": 3}))
+    plain = _yard(tmp_path / "plain", "")
+    assert res.scenario(TrialSpec("straight", PLATFORM, "yard", scenario_file=str(plain),
+                                  movers={"count": 3})).movers.count == 3
