@@ -163,10 +163,11 @@ def cmd_sitl(args) -> int:
                 kinds = {}
                 for d in m.describe():
                     kinds[d["shape"]] = kinds.get(d["shape"], 0) + 1
-                print(f"movers: {m.count} ({', '.join(f'{n} {k}' for k, n in kinds.items())}"
-                      f"{', none placed' if not m.count else ''}), moving from simulated "
-                      "time 0; their state on the bus (topic ft-sitl/v1/<vehicle>/movers) "
-                      "and as ADSB_VEHICLE", flush=True)
+                shown = ", ".join(f"{n} x {k}" for k, n in kinds.items()) or "none placed"
+                where = "on the bus (topic ft-sitl/v1/<vehicle>/movers) and " if buses \
+                    else ""
+                print(f"movers: {m.count} ({shown}), moving from simulated time 0; their "
+                      f"state {where}as ADSB_VEHICLE", flush=True)
         print("Ctrl-C stops.", flush=True)
 
     async def main():

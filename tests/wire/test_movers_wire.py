@@ -84,7 +84,8 @@ def test_sitl_publishes_movers_and_its_depth_frames_see_them_move(tmp_path):
             sitl.terminate()
         out, err = sitl.communicate(timeout=30)
         broker.kill()
-    assert "movers: 1 (1 person), moving from simulated time 0" in out, out + err
+    assert ("movers: 1 (1 x person), moving from simulated time 0; their state on the bus "
+            "(topic ft-sitl/v1/<vehicle>/movers) and as ADSB_VEHICLE") in out, out + err
     # the bus: the person where its path puts it, at every sample's simulated time
     assert len(states) > 20
     for s in states:
