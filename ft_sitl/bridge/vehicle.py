@@ -13,7 +13,8 @@ plant for one vehicle, without our own commander or controller:
 - truth for the sensor models: position/velocity (ENU and NED), attitude, body rates,
   and the specific force over the last step (what an accelerometer measures: at rest on
   the ground it reads 1 g up, i.e. -g on body z in FRD);
-- a collision with the scenario crashes the vehicle: its motors are forced off from then
+- a collision with the scenario, or with one of its moving obstacles (``scenario.movers``,
+  moving from simulation time 0), crashes the vehicle: its motors are forced off from then
   on and ``crash`` says what was hit at what speed (the autopilot sees the fall in its
   sensors).
 
@@ -91,7 +92,8 @@ class BridgeVehicle:
 
     def _on_guard_event(self, ev) -> None:
         self.events.append(ev)
-        if ev.kind == GuardEventKind.COLLISION and self.crash is None:
+        if ev.kind in (GuardEventKind.COLLISION, GuardEventKind.MOVER_COLLISION) and \
+                self.crash is None:
             self.crash = Crash(int(ev.time_us), str(ev.what), float(ev.speed_m_s))
             self.sim.set_setpoint(0, Setpoint.motors(np.zeros(self.n_motors)))
 

@@ -1,7 +1,7 @@
 """ft_sitl.bus: MQTT publishing of telemetry, events and sensor frames (reference:
 docs/mqtt.md).
 
-Topic tree ``ft-sitl/v1/<vehicle>/{telemetry,events,depth,points,status,config}``
+Topic tree ``ft-sitl/v1/<vehicle>/{telemetry,events,depth,points,movers,status,config}``
 (``topics``); payloads: compact JSON with ``"v": 1`` and a little-endian binary layout for
 depth images and point clouds (``codec``); broker URLs ``mqtt://`` / ``mqtts://``
 (``options``); the simulator's non-blocking, self-reconnecting ``BusPublisher``
@@ -25,6 +25,8 @@ from ft_sitl.bus.codec import (
     BusPayloadError,
     Event,
     EventType,
+    MoverState,
+    MoverStates,
     OfflineReason,
     SensorFrame,
     Status,
@@ -33,11 +35,13 @@ from ft_sitl.bus.codec import (
     decode_config,
     decode_event,
     decode_frame,
+    decode_movers,
     decode_status,
     decode_telemetry,
     encode_config,
     encode_depth,
     encode_event,
+    encode_movers,
     encode_points,
     encode_status,
     encode_telemetry,
@@ -66,6 +70,8 @@ __all__ = [
     "EmbeddedBroker",
     "Event",
     "EventType",
+    "MoverState",
+    "MoverStates",
     "OfflineReason",
     "RateGate",
     "SensorFrame",
@@ -76,11 +82,13 @@ __all__ = [
     "decode_config",
     "decode_event",
     "decode_frame",
+    "decode_movers",
     "decode_status",
     "decode_telemetry",
     "encode_config",
     "encode_depth",
     "encode_event",
+    "encode_movers",
     "encode_points",
     "encode_status",
     "encode_telemetry",

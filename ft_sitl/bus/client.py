@@ -11,7 +11,14 @@
 
 ``vehicle`` None subscribes to every vehicle (``msg.vehicle`` says which). Messages are
 decoded according to their topic: ``Telemetry``, ``Event``, ``SensorFrame`` (depth and
-points) and ``Status``. A malformed message is logged (logger ``ft_sitl.bus``), counted in
+points), ``MoverStates`` (movers: the moving obstacles of the vehicle's world) and
+``Status``. ``kinds=("movers",)`` follows the moving obstacles::
+
+    async with BusClient(url, "0", kinds=("movers",)) as bus:
+        async for msg in bus:
+            for m in msg.data.movers:
+                print(msg.data.t, m.name, m.shape, m.p_world_m, m.v_world_m_s)
+ A malformed message is logged (logger ``ft_sitl.bus``), counted in
 ``rejected`` and skipped; it never ends the iteration. Losing the connection does
 (aiomqtt.MqttError): the client does not reconnect by itself; enter a new one.
 """
@@ -26,7 +33,14 @@ from dataclasses import dataclass
 from typing import Any
 
 from ft_sitl.bus import codec
-from ft_sitl.bus.codec import BusPayloadError, Event, SensorFrame, Status, Telemetry
+from ft_sitl.bus.codec import (
+    BusPayloadError,
+    Event,
+    MoverStates,
+    SensorFrame,
+    Status,
+    Telemetry,
+)
 from ft_sitl.bus.options import BrokerOptions, TlsOptions, parse_broker_url
 from ft_sitl.bus.publisher import QOS, close_socket, mqtt_log
 from ft_sitl.bus.topics import PUBLISHED_KINDS, check_vehicle, parse_topic, topic, topic_filter
@@ -43,6 +57,7 @@ _DECODERS = {
     "events": codec.decode_event,
     "depth": lambda payload: codec.decode_frame(payload, expect_kind="depth"),
     "points": lambda payload: codec.decode_frame(payload, expect_kind="points"),
+    "movers": codec.decode_movers,
     "status": codec.decode_status,
 }
 
@@ -54,7 +69,7 @@ class BusMessage:
 
     vehicle: str
     kind: str
-    data: Telemetry | Event | SensorFrame | Status
+    data: Telemetry | Event | SensorFrame | MoverStates | Status
     retained: bool
     topic: str
 
@@ -63,7 +78,7 @@ class BusClient:
     """Subscribe to one vehicle's (or, ``vehicle`` None, every vehicle's) ``kinds`` and send
     config requests. An async context manager and an async iterator of ``BusMessage``.
 
-    ``kinds``: any of telemetry, events, depth, points, status. ``queue_size``: incoming
+    ``kinds``: any of telemetry, events, depth, points, movers, status. ``queue_size``: incoming
     messages buffered before aiomqtt discards new ones (with a warning).
     """
 

@@ -11,10 +11,14 @@ JSON (UTF-8, compact, no NaN/Infinity, ``"v": 1`` = ``SCHEMA_VERSION``)
                FLU (rad/s), motor outputs 0..1 in PX4 motor order.
     events     ``{"v", "type", "t", "time_usec", ...type-specific fields}``.
     status     ``{"v", "vehicle", "status": "online"|"offline"[, "reason"]}``.
+    movers     ``{"v", "t", "time_usec", "movers": [{"name", "shape", "p_world_m",
+               "heading_rad", "v_world_m_s", sizes ...}, ...]}``: the moving obstacles of
+               the vehicle's world (scenarios.movers), centre and velocity in world ENU.
     config     ``{["v",] "telemetry_rate_hz", "depth", "points"}`` (any non-empty subset).
 
 Each JSON payload is declared once as a ``msgspec.Struct`` (``TelemetryPayload``,
-``EventHeader`` and the known events' ``*Fields``, ``StatusPayload``, ``ConfigPayload``):
+``EventHeader`` and the known events' ``*Fields``, ``StatusPayload``, ``MoversPayload``
+and its ``MoverState``, ``ConfigPayload``):
 field, type, range (``msgspec.Meta``) and a one-line description. Decoding is
 ``msgspec.json`` against that declaration, and the values given to ``Telemetry``, ``Event``
 and ``validate_config`` are checked against the same declaration with ``msgspec.convert``;
@@ -50,6 +54,8 @@ from msgspec import UNSET, Meta, Struct, UnsetType
 from ft_sitl.bus.topics import check_vehicle
 from ft_sitl.rotations import matrix_from_quat, quat_from_matrix
 from ft_sitl.scenarios.camera import DepthFrame
+from ft_sitl.scenarios.movers import SCHEMA as MOVER_SCHEMA
+from ft_sitl.scenarios.movers import SHAPES as MOVER_SHAPES
 
 if TYPE_CHECKING:  # the camera module pulls in trimesh; import it only when needed
     from ft_sitl.scenarios.camera import CameraConfig, DepthFrame
@@ -70,6 +76,9 @@ __all__ = [
     "FrameKind",
     "FrameName",
     "ModeFields",
+    "MoverState",
+    "MoverStates",
+    "MoversPayload",
     "NoFields",
     "OfflineReason",
     "SensorFrame",
@@ -82,11 +91,13 @@ __all__ = [
     "decode_config",
     "decode_event",
     "decode_frame",
+    "decode_movers",
     "decode_status",
     "decode_telemetry",
     "encode_config",
     "encode_depth",
     "encode_event",
+    "encode_movers",
     "encode_points",
     "encode_status",
     "encode_telemetry",
@@ -131,6 +142,7 @@ class EventType(enum.StrEnum):
     DISARMED = "disarmed"
     MODE = "mode"
     COLLISION = "collision"
+    MOVER_COLLISION = "mover_collision"
     TRIAL_START = "trial_start"
     TRIAL_END = "trial_end"
     GEOFENCE = "geofence"
@@ -452,9 +464,10 @@ class ModeFields(Struct, frozen=True):
 
 
 class CollisionFields(Struct, frozen=True):
-    """``collision``: the vehicle hit an obstacle."""
+    """``collision``: the vehicle hit an obstacle; ``mover_collision``: a moving obstacle
+    (scenarios.movers; ``object`` is its name, ``speed_m_s`` the speed relative to it)."""
 
-    #: obstacle piece name
+    #: obstacle piece name (a mover's name)
     object: NonEmptyStr
     #: impact speed, m/s
     speed_m_s: Annotated[float, Meta(ge=0.0, description="impact speed, m/s")]
@@ -486,6 +499,7 @@ EVENT_TYPES: dict[EventType, type[Struct]] = {
     EventType.DISARMED: NoFields,
     EventType.MODE: ModeFields,
     EventType.COLLISION: CollisionFields,
+    EventType.MOVER_COLLISION: CollisionFields,
     EventType.TRIAL_START: NoFields,
     EventType.TRIAL_END: TrialEndFields,
     EventType.GEOFENCE: GeofenceFields,
@@ -663,6 +677,142 @@ def decode_status(payload) -> Status:
     """A Status from a JSON payload; BusPayloadError naming what was wrong."""
     p = _decode(_STATUS_DECODER, payload, "status")
     return Status(vehicle=p.vehicle, online=p.status is StatusValue.ONLINE, reason=p.reason)
+
+
+# --- movers ---------------------------------------------------------------------------------
+#: Most movers in one payload (scenarios.movers: a field holds at most 64).
+MAX_MOVERS = int(MOVER_SCHEMA["count"].range[1])
+#: The size fields each shape carries (m): as ``scenarios.movers.Movers.describe``.
+MOVER_SIZES = {"person": ("radius_m", "height_m"), "box": ("length_m", "width_m", "height_m"),
+               "sphere": ("radius_m",)}
+#: Decimal places kept in a movers payload: 0.1 mm, 0.1 mm/s, 1 urad, 0.1 mm.
+_MOVER_DECIMALS = {"p_world_m": 4, "v_world_m_s": 4, "heading_rad": 6, "size": 4}
+MoverShape = Annotated[str, Meta(pattern=f"^({'|'.join(MOVER_SHAPES)})$",
+                                 description=" | ".join(MOVER_SHAPES))]
+Size = Annotated[float, Meta(gt=0.0, le=1000.0, description="m")]
+Heading = Annotated[float, Meta(ge=-3.141593, le=3.141593,
+                                description="rad, ENU: 0 east, pi/2 north")]
+
+
+class MoverState(Struct, frozen=True, forbid_unknown_fields=True, omit_defaults=True):
+    """One moving obstacle at one instant. ``shape`` is person (a standing cylinder: radius,
+    height), box (length along its heading, width, height) or sphere (radius); exactly its
+    sizes are present."""
+
+    #: its name in the scenario, e.g. "person 2"; collisions name it so
+    name: Annotated[str, Meta(min_length=1, max_length=64)]
+    shape: MoverShape
+    #: the shape's centre, world ENU, m (a person's or a box's at half its height)
+    p_world_m: Vec3
+    #: its direction of travel, ENU, rad in [-pi, pi] (0 east, pi/2 north)
+    heading_rad: Heading
+    #: velocity, world ENU, m/s (zero before its field starts moving)
+    v_world_m_s: Vec3
+    radius_m: Size | UnsetType = UNSET
+    height_m: Size | UnsetType = UNSET
+    length_m: Size | UnsetType = UNSET
+    width_m: Size | UnsetType = UNSET
+
+    def __post_init__(self):
+        what = f"movers: {self.name!r}"
+        sizes = MOVER_SIZES[self.shape]
+        for key in ("radius_m", "height_m", "length_m", "width_m"):
+            given = getattr(self, key) is not UNSET
+            if given != (key in sizes):
+                raise ValueError(f"{what}: a {self.shape} has {', '.join(sizes)}; "
+                                 f"{key} is {'not allowed' if given else 'missing'}")
+
+
+class MoversPayload(Struct, frozen=True, forbid_unknown_fields=True):
+    """The movers JSON object: every mover of the vehicle's world at ``time_usec``."""
+
+    v: SchemaVersion
+    t: Seconds
+    time_usec: TimeUsec
+    movers: Annotated[tuple[MoverState, ...], Meta(max_length=MAX_MOVERS)]
+
+    def __post_init__(self):
+        _check_version(self.v, "movers")
+        _check_t(self.t, self.time_usec, "movers")
+        names = [m.name for m in self.movers]
+        if len(set(names)) != len(names):
+            dup = next(n for n in names if names.count(n) > 1)
+            raise ValueError(f"movers: name {dup!r} is given twice")
+
+
+_MOVERS_DECODER = msgspec.json.Decoder(MoversPayload)
+
+
+@dataclass(frozen=True)
+class MoverStates:
+    """The moving obstacles of a vehicle's world at simulated time ``time_usec``: a tuple
+    of :class:`MoverState` (given as MoverStates or mappings of their fields), validated on
+    construction against ``MoversPayload`` (BusPayloadError naming the mover and the
+    field). ``by_name`` looks one up."""
+
+    time_usec: int
+    movers: tuple = ()
+
+    def __post_init__(self):
+        what = "movers"
+        time_usec = _plain(self.time_usec, what, "time_usec")
+        items = []
+        for m in self.movers:
+            if isinstance(m, MoverState):
+                m = msgspec.structs.asdict(m)
+            elif not isinstance(m, Mapping):
+                raise BusPayloadError(f"{what}: each mover must be a MoverState or a mapping, "
+                                      f"got {type(m).__name__}")
+            items.append({k: _plain(v, what, str(k)) for k, v in m.items() if v is not UNSET})
+        t = time_usec * 1e-6 if type(time_usec) is int else 0.0
+        checked = _convert({"v": SCHEMA_VERSION, "t": t, "time_usec": time_usec,
+                            "movers": items}, MoversPayload, what)
+        for j, m in enumerate(checked.movers):  # (NaN fails the ranges, not a bare float)
+            _check_finite(m.p_world_m, what, f"movers[{j}].p_world_m")
+            _check_finite(m.v_world_m_s, what, f"movers[{j}].v_world_m_s")
+        object.__setattr__(self, "time_usec", checked.time_usec)
+        object.__setattr__(self, "movers", checked.movers)
+
+    @classmethod
+    def _from_payload(cls, p: MoversPayload) -> MoverStates:
+        self = object.__new__(cls)
+        object.__setattr__(self, "time_usec", p.time_usec)
+        object.__setattr__(self, "movers", p.movers)
+        return self
+
+    @property
+    def t(self) -> float:
+        """Simulated time in seconds."""
+        return self.time_usec * 1e-6
+
+    def by_name(self, name: str) -> MoverState:
+        for m in self.movers:
+            if m.name == name:
+                return m
+        raise KeyError(f"no mover named {name!r} (movers: "
+                       f"{', '.join(m.name for m in self.movers) or 'none'})")
+
+
+def encode_movers(states: MoverStates) -> bytes:
+    """Compact JSON of the movers (values rounded: 0.1 mm, 0.1 mm/s, 1 urad, sizes 0.1
+    mm)."""
+    if not isinstance(states, MoverStates):
+        raise BusPayloadError(f"movers: expected a MoverStates, got {type(states).__name__}")
+    dec = _MOVER_DECIMALS
+    movers = []
+    for m in states.movers:
+        sizes = {k: round(getattr(m, k), dec["size"]) for k in MOVER_SIZES[m.shape]}
+        movers.append(msgspec.structs.replace(
+            m, p_world_m=_round(m.p_world_m, dec["p_world_m"]),
+            v_world_m_s=_round(m.v_world_m_s, dec["v_world_m_s"]),
+            heading_rad=round(m.heading_rad, dec["heading_rad"]) + 0.0, **sizes))
+    return _ENCODER.encode(MoversPayload(SCHEMA_VERSION, states.t, states.time_usec,
+                                         tuple(movers)))
+
+
+def decode_movers(payload) -> MoverStates:
+    """MoverStates from a JSON payload; BusPayloadError naming what was wrong."""
+    return MoverStates._from_payload(_decode(_MOVERS_DECODER, payload, "movers"))
 
 
 # --- config ---------------------------------------------------------------------------------

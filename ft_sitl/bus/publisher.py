@@ -8,6 +8,7 @@
         publisher.publish_telemetry(Telemetry(t_us, p, v, q, w, motors))
     publisher.publish_event("collision", t_us, object="tree_3", speed_m_s=2.1)
     publisher.publish_depth(frame, camera.config)
+    publisher.publish_movers(MoverStates(t_us, movers))   # a world with moving obstacles
     ...
     publisher.close()
 
@@ -20,7 +21,8 @@ never wait for the network. A message is dropped, and counted in ``stats().dropp
 * its kind's queue is full (the broker or the network is slower than the producer),
 * the connection is lost while it is queued, or its publish fails or times out.
 
-The sender serves the queues in priority order events > telemetry > depth > points. It
+The sender serves the queues in priority order events > telemetry > movers > depth >
+points. It
 reconnects by itself with exponential backoff (``reconnect_min_s`` doubling to
 ``reconnect_max_s``, +-20 % jitter) whether the broker is absent at start, killed, or
 restarted.
@@ -48,7 +50,14 @@ from dataclasses import dataclass
 from typing import TYPE_CHECKING, Any
 
 from ft_sitl.bus import codec
-from ft_sitl.bus.codec import BusPayloadError, Event, OfflineReason, Status, Telemetry
+from ft_sitl.bus.codec import (
+    BusPayloadError,
+    Event,
+    MoverStates,
+    OfflineReason,
+    Status,
+    Telemetry,
+)
 from ft_sitl.bus.options import BrokerOptions, TlsOptions, parse_broker_url
 from ft_sitl.bus.topics import check_vehicle, topic
 
@@ -62,17 +71,19 @@ log = logging.getLogger("ft_sitl.bus")
 mqtt_log = logging.getLogger("ft_sitl.bus.mqtt")
 
 #: The kinds a publisher sends, in the sender's priority order.
-DATA_KINDS = ("events", "telemetry", "depth", "points")
-#: QoS per topic kind: telemetry and frames are streams (a lost sample is replaced by the
-#: next), events are rare and matter (at least once); status and config use QoS 1 too.
-QOS = {"telemetry": 0, "events": 1, "depth": 0, "points": 0, "status": 1, "config": 1}
+DATA_KINDS = ("events", "telemetry", "movers", "depth", "points")
+#: QoS per topic kind: telemetry, movers and frames are streams (a lost sample is replaced
+#: by the next), events are rare and matter (at least once); status and config use QoS 1.
+QOS = {"telemetry": 0, "events": 1, "movers": 0, "depth": 0, "points": 0, "status": 1,
+       "config": 1}
 
 
 @dataclass(frozen=True)
 class BusStats:
     """A snapshot of a publisher's counters (``BusPublisher.stats()``).
 
-    ``sent`` / ``dropped`` / ``queued``: per kind (events, telemetry, depth, points).
+    ``sent`` / ``dropped`` / ``queued``: per kind (events, telemetry, movers, depth,
+    points).
     ``connects``: successful connections; ``reconnects``: those after the first;
     ``connect_failures``: failed attempts; ``config_accepted`` / ``config_rejected``: config
     requests handed to the callback / rejected as malformed; ``callback_errors``: exceptions
@@ -104,8 +115,9 @@ class BusPublisher:
 
     ``url``: ``mqtt://[user[:password]@]host[:port]`` or ``mqtts://...`` (or a
     ``BrokerOptions``); ``tls``: TLS options for ``mqtts://``. ``vehicle``: the instance
-    name in the topics (e.g. "0"). ``queue_size``: per-kind queue length for events and
-    telemetry; ``frame_queue_size``: for depth and points (large, and stale quickly).
+    name in the topics (e.g. "0"). ``queue_size``: per-kind queue length for events,
+    telemetry and movers; ``frame_queue_size``: for depth and points (large, and stale
+    quickly).
     ``on_config(dict)``: receives validated config requests. Nothing happens until
     ``start()``; the constructor only validates.
     """
@@ -146,7 +158,8 @@ class BusPublisher:
         self.topics = {kind: topic(vehicle, kind) for kind in (*DATA_KINDS, "status",
                                                                "config")}
         self._capacity = {"events": queue_size, "telemetry": queue_size,
-                          "depth": frame_queue_size, "points": frame_queue_size}
+                          "movers": queue_size, "depth": frame_queue_size,
+                          "points": frame_queue_size}
         self._on_config = on_config
         self._keepalive_s = keepalive_s
         self._reconnect_min_s = float(reconnect_min_s)
@@ -263,6 +276,16 @@ class BusPublisher:
         if not self._accepting("telemetry"):
             return False
         return self._offer("telemetry", codec.encode_telemetry(sample))
+
+    def publish_movers(self, states: MoverStates) -> bool:
+        """Queue the state of the world's moving obstacles (QoS 0). True if queued, False
+        if dropped."""
+        if not isinstance(states, MoverStates):
+            raise BusPayloadError(f"publish_movers needs a MoverStates, got "
+                                  f"{type(states).__name__}")
+        if not self._accepting("movers"):
+            return False
+        return self._offer("movers", codec.encode_movers(states))
 
     def publish_event(self, event_type: str, time_usec: int, /, **fields) -> bool:
         """Queue an event (QoS 1), e.g. ``publish_event("trial_end", t_us,

@@ -9,6 +9,7 @@ telemetry     JSON ``Telemetry``                           simulator -> clients
 events        JSON ``Event``                               simulator -> clients
 depth         binary depth frame (``SensorFrame``)         simulator -> clients
 points        binary point cloud (``SensorFrame``)         simulator -> clients
+movers        JSON ``MoverStates`` (moving obstacles)      simulator -> clients
 status        JSON ``Status``, retained, last will         simulator -> clients
 config        JSON config request                          clients -> simulator
 ============  ==========================================  =======================
@@ -40,9 +41,9 @@ PREFIX = "ft-sitl"
 #: Second level: the topic-tree version.
 TREE_VERSION = "v1"
 #: Every kind of topic under a vehicle.
-KINDS = ("telemetry", "events", "depth", "points", "status", "config")
+KINDS = ("telemetry", "events", "depth", "points", "movers", "status", "config")
 #: The kinds the simulator publishes (``config`` is the one it subscribes to).
-PUBLISHED_KINDS = ("telemetry", "events", "depth", "points", "status")
+PUBLISHED_KINDS = ("telemetry", "events", "depth", "points", "movers", "status")
 
 _VEHICLE_RE = re.compile(r"[A-Za-z0-9_-]{1,64}")
 

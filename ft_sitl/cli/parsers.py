@@ -115,8 +115,9 @@ def build_parser() -> argparse.ArgumentParser:
     sitl.add_argument("--duration", type=number("--duration", above=0), metavar="S",
                       help="stop after S wall seconds, S > 0 (default: run until Ctrl-C)")
     sitl.add_argument("--scenario", metavar="FAMILY:INDEX[:SEED]|SPEC",
-                      help="fly in a scenario world (e.g. forest:3, or a .yaml/.toml spec): "
-                           "spawn at its takeoff point, crash on collision")
+                      help="fly in a scenario world (e.g. forest:3, or a .yaml/.toml spec; "
+                           "+dynamic(count=8,speed=1.5) adds moving obstacles): spawn at its "
+                           "takeoff point, crash on collision")
     sitl.add_argument("--json", action="store_true", help="print the vehicle URLs as JSON")
     sitl.add_argument("--wind", metavar="SETTINGS",
                       help="wind as KEY=VALUE,... (speed_m_s, from_deg, vertical_m_s, "
@@ -300,7 +301,8 @@ def _bridge_options(p) -> None:
     p.add_argument("--platform-file", action="append", metavar="FILE",
                    help="extra platform definitions")
     p.add_argument("--scenario", metavar="FAMILY:INDEX[:SEED]|SPEC",
-                   help="fly in a scenario world (collisions crash the vehicle)")
+                   help="fly in a scenario world (collisions crash the vehicle; "
+                        "+dynamic(...) adds moving obstacles)")
     p.add_argument("--bind", default="127.0.0.1", help="address to listen on")
     p.add_argument("--wind", metavar="SETTINGS",
                    help="wind as KEY=VALUE,... (speed_m_s, from_deg, vertical_m_s, "

@@ -158,6 +158,16 @@ def cmd_sitl(args) -> int:
                   f"takeoff point) start {_ned(enu_to_ned(scenario.start - o))}, goal "
                   f"{_ned(enu_to_ned(scenario.goal - o))}, start heading "
                   f"{_heading_deg(scenario.start_yaw):.1f} deg", flush=True)
+            if scenario.movers is not None:
+                m = scenario.movers
+                kinds = {}
+                for d in m.describe():
+                    kinds[d["shape"]] = kinds.get(d["shape"], 0) + 1
+                shown = ", ".join(f"{n} x {k}" for k, n in kinds.items()) or "none placed"
+                where = "on the bus (topic ft-sitl/v1/<vehicle>/movers) and " if buses \
+                    else ""
+                print(f"movers: {m.count} ({shown}), moving from simulated time 0; their "
+                      f"state {where}as ADSB_VEHICLE", flush=True)
         print("Ctrl-C stops.", flush=True)
 
     async def main():

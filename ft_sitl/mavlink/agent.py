@@ -55,6 +55,24 @@ CAPABILITIES = (
     | mav.MAV_PROTOCOL_CAPABILITY_MAVLINK2
 )
 
+#: ADSB_VEHICLE, one per moving obstacle of the world (scenarios.movers), Hz: an ADS-B Out
+#: transmitter's airborne position rate (two squitters a second). PX4 forwards each traffic
+#: report its receiver gets, on every link ("unlimited" ADSB_VEHICLE stream); we play the
+#: receiver, hearing every mover at this rate. Nothing is sent in a world without movers.
+TRAFFIC_HZ = 2.0
+#: the ICAO address of mover j is this + j + 1 (an arbitrary block: ADSB_FLAGS_SIMULATED
+#: marks them as not real aircraft)
+TRAFFIC_ICAO_BASE = 0xFE0000
+#: the ADS-B emitter category of each mover shape (scenarios.movers.SHAPES): a person has
+#: none of its own (POINT_OBSTACLE), a box is a cart or a car (SERVICE_SURFACE), a sphere a
+#: balloon or another drone (UAV)
+TRAFFIC_EMITTER = {"person": mav.ADSB_EMITTER_TYPE_POINT_OBSTACLE,
+                   "box": mav.ADSB_EMITTER_TYPE_SERVICE_SURFACE,
+                   "sphere": mav.ADSB_EMITTER_TYPE_UAV}
+TRAFFIC_FLAGS = (mav.ADSB_FLAGS_VALID_COORDS | mav.ADSB_FLAGS_VALID_ALTITUDE
+                 | mav.ADSB_FLAGS_VALID_HEADING | mav.ADSB_FLAGS_VALID_VELOCITY
+                 | mav.ADSB_FLAGS_VALID_CALLSIGN | mav.ADSB_FLAGS_SIMULATED)
+
 # PX4 stream rates (Hz) per link mode; SET_MESSAGE_INTERVAL overrides per link.
 ONBOARD_RATES = {
     mav.MAVLINK_MSG_ID_HEARTBEAT: 1.0,
@@ -72,6 +90,7 @@ ONBOARD_RATES = {
     mav.MAVLINK_MSG_ID_BATTERY_STATUS: 0.5,
     mav.MAVLINK_MSG_ID_GPS_RAW_INT: 5.0,
     mav.MAVLINK_MSG_ID_MISSION_CURRENT: 1.0,
+    mav.MAVLINK_MSG_ID_ADSB_VEHICLE: TRAFFIC_HZ,
 }
 NORMAL_RATES = {
     mav.MAVLINK_MSG_ID_HEARTBEAT: 1.0,
@@ -87,6 +106,7 @@ NORMAL_RATES = {
     mav.MAVLINK_MSG_ID_BATTERY_STATUS: 0.5,
     mav.MAVLINK_MSG_ID_GPS_RAW_INT: 1.0,
     mav.MAVLINK_MSG_ID_MISSION_CURRENT: 1.0,
+    mav.MAVLINK_MSG_ID_ADSB_VEHICLE: TRAFFIC_HZ,
 }
 
 #: the SYS_STATUS health bit of each sensor failure injection can turn off
@@ -431,9 +451,38 @@ class VehicleAgent:
                 continue
             period = int(1e6 / hz)
             due[msg_id] = max(due[msg_id] + period, now)
+            if msg_id == mav.MAVLINK_MSG_ID_ADSB_VEHICLE:
+                out.extend(Outgoing(m, link) for m in self.traffic())
+                continue
             m = self.build(msg_id)
             if m is not None:
                 out.append(Outgoing(m, link))
+        return out
+
+    def traffic(self) -> list:
+        """One ADSB_VEHICLE per moving obstacle of the vehicle's world (the collision
+        guard's movers, where they are now), as a traffic receiver reports them: position
+        (degE7) and altitude AMSL (mm) of the shape's centre, course over ground (cdeg from
+        north) and horizontal speed (cm/s), the mover's name as the callsign ("PERSON2"),
+        an emitter type by shape (TRAFFIC_EMITTER), flagged simulated. Empty without
+        movers."""
+        guard = self.fleet.guard
+        movers = guard.movers if guard is not None else None
+        if movers is None:
+            return []
+        t_us = self.fleet.time_us
+        poses, vel = movers.poses(t_us), movers.velocities(t_us)
+        out = []
+        for j, info in enumerate(movers.describe()):
+            lat, lon, alt = self.geo.to_global(poses[j, :3])
+            course = math.degrees(frames.yaw_enu_to_ned(float(poses[j, 3]))) % 360.0
+            speed = math.hypot(vel[j, 0], vel[j, 1])
+            callsign = info["name"].replace(" ", "").upper()[:8].encode("ascii")
+            out.append(mav.MAVLink_adsb_vehicle_message(
+                TRAFFIC_ICAO_BASE + j + 1, int(round(lat * 1e7)), int(round(lon * 1e7)),
+                mav.ADSB_ALTITUDE_TYPE_GEOMETRIC, int(round(alt * 1000)),
+                int(round(course * 100)) % 36000, min(int(round(speed * 100)), 65535), 0,
+                callsign, TRAFFIC_EMITTER[info["shape"]], 0, TRAFFIC_FLAGS, 0))
         return out
 
     def events(self) -> list[Outgoing]:
@@ -626,7 +675,9 @@ class VehicleAgent:
         if not math.isfinite(msg_id):
             return Result.DENIED
         msg_id = int(round(msg_id))  # PX4: (int)(param1 + 0.5f)
-        if not math.isfinite(interval_us) or self.build_probe(msg_id) is None:
+        streamable = msg_id == mav.MAVLINK_MSG_ID_ADSB_VEHICLE or \
+            self.build_probe(msg_id) is not None  # (traffic: one message per mover)
+        if not math.isfinite(interval_us) or not streamable:
             return Result.DENIED
         if interval_us == 0:
             hz = (ONBOARD_RATES if link == 0 else NORMAL_RATES).get(msg_id, 0.0)

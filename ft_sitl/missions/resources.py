@@ -66,7 +66,8 @@ class TrialResources:
     def scenario(self, spec: TrialSpec):
         """The spec's scenario: from its file, or built from (family, index, seed); with
         the spec's moving obstacles placed in it (scenarios.movers, for the trial's
-        mover seed: every algorithm and platform of a trial meets the same movers)."""
+        mover seed: every algorithm and platform of a trial meets the same movers), or a
+        scenario file's own (its ``movers`` table or list)."""
         if spec.scenario_file:
             sc = self._cached(self._scenarios, ("file", spec.scenario_file),
                               lambda: load_scenario(spec.scenario_file))
@@ -75,7 +76,11 @@ class TrialResources:
                    spec.scenario_version)
             sc = self._cached(self._scenarios, key, lambda: build_scenario(*key))
         if spec.movers is None:
-            return sc
+            return sc  # (a scenario file's own movers, if it has any)
+        if sc.movers is not None:
+            raise TrialSpecError(f"movers: the scenario file {spec.scenario_file} has movers "
+                                 "of its own; give them in the file or in the trial's "
+                                 "movers, not both")
         seed = mover_seed(spec)
         mkey = (scenario_key(sc), json.dumps(spec.movers, sort_keys=True), seed)
         try:

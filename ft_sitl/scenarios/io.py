@@ -37,15 +37,34 @@ Import
     start_yaw_deg = 90.0             # optional; default: facing the goal
     goal_radius_m = 2.0              # optional
 
+    [movers]                         # optional moving obstacles, placed for seed 0
+    count = 4                        # (scenarios.movers.SCHEMA: count or density, speed,
+    speed_m_s = 1.2                  #  shape, path, sizes ...)
+
+    # ... or each mover given (scenarios.movers.movers_from_list), as an array of tables:
+    [[movers]]
+    shape = "person"
+    radius_m = 0.3
+    height_m = 1.8
+    points = [[10.0, 4.0], [10.0, 20.0]]   # the centre's path, walked back and forth
+    speed_m_s = 1.5
+
 Without bounds, the area is the mesh's xy extent grown to hold takeoff, start and goal,
 with no margin: give bounds when start or goal lie outside the obstacles' extent. The
-floor is z = 0. Every problem raises :class:`ScenarioError` naming the file and the key.
+floor is z = 0. The movers' clock starts at simulation time 0 (a trial restarts it when
+navigation starts). Every problem raises :class:`ScenarioError` naming the file and the
+key.
+
+On a command line a scenario is :func:`scenario_from_spec`: ``FAMILY:INDEX[:SEED]`` or a
+spec file, either followed by ``+dynamic(KEY=VALUE, ...)`` to add movers placed for the
+scenario's seed (``forest:3+dynamic(count=8, speed=1.5)``).
 :func:`write_scenario_spec` writes such a spec for a scenario, so that export and import
 round-trip.
 """
 
 from __future__ import annotations
 
+import dataclasses
 import hashlib
 import itertools
 import json
@@ -61,6 +80,7 @@ import trimesh
 from ft_sitl import __version__
 from ft_sitl.config import SUFFIXES, Table, read_document
 from ft_sitl.scenarios.families import build_scenario
+from ft_sitl.scenarios.movers import MoverError, movers_from_list, split_dynamic, with_movers
 from ft_sitl.scenarios.scenario import GOAL_RADIUS_M, Scenario, ScenarioError
 
 EXPORT_FORMATS = ("ply", "pcd", "obj", "dae", "sdf")
@@ -83,7 +103,7 @@ _GROUND_RGBA = (0.8, 0.8, 0.8, 1.0)
 
 _SPEC_REQUIRED = ("mesh", "start", "goal")
 _SPEC_OPTIONAL = ("name", "takeoff", "bounds", "bounds_min", "bounds_max", "ceiling",
-                  "start_yaw_deg", "goal_radius_m")
+                  "start_yaw_deg", "goal_radius_m", "movers")
 _NAME_RE = re.compile(r"[A-Za-z0-9_.-]+")
 _COLLADA_NS = "http://www.collada.org/2005/11/COLLADASchema"
 
@@ -749,35 +769,64 @@ def load_scenario(spec_path) -> Scenario:
         "seed": 0,
         "index": 1,
     }
+    movers = doc.get("movers")
+    if movers is not None and not isinstance(movers, (dict, list)):
+        raise ScenarioError(f"{w}: movers: must be a table of mover settings or a list of "
+                            f"movers (tables), got {movers!r}")
     try:
-        return Scenario(family=name, index=1, seed=0, category=USER_CATEGORY, mesh=mesh,
-                        bounds_min=lo, bounds_max=hi, takeoff=takeoff, start=start,
-                        start_yaw=start_yaw, goal=goal, goal_radius_m=goal_radius,
-                        provenance=provenance)
+        sc = Scenario(family=name, index=1, seed=0, category=USER_CATEGORY, mesh=mesh,
+                      bounds_min=lo, bounds_max=hi, takeoff=takeoff, start=start,
+                      start_yaw=start_yaw, goal=goal, goal_radius_m=goal_radius,
+                      provenance=provenance)
     except ScenarioError as exc:  # every field was checked above; name the file regardless
         raise ScenarioError(f"{w}: {exc}") from None
+    try:
+        if isinstance(movers, dict):  # settings: placed for the scenario's seed
+            return with_movers(sc, movers, sc.seed, owner=f"{w}: movers")
+        if isinstance(movers, list):  # each mover given
+            return dataclasses.replace(sc, movers=movers_from_list(movers, f"{w}: movers"))
+    except MoverError as exc:
+        raise ScenarioError(str(exc)) from None
+    return sc
 
 
 def scenario_from_spec(spec):
     """A scenario named on a command line: ``FAMILY:INDEX[:SEED]`` (e.g. ``forest:3``) or a
-    scenario spec file (.yaml, .yml, .toml); None and Scenario objects pass through.
+    scenario spec file (.yaml, .yml, .toml), optionally followed by ``+dynamic(KEY=VALUE,
+    ...)``: moving obstacles (scenarios.movers settings, short keys such as ``speed``
+    allowed) placed for the scenario's seed, e.g. ``forest:3+dynamic(count=8, speed=1.5)``;
+    their clock starts at simulation time 0. None and Scenario objects pass through.
     ValueError names what is wrong."""
     if spec is None or isinstance(spec, Scenario):
         return spec
     if not isinstance(spec, str):
         raise ValueError(f"scenario: {spec!r} is not FAMILY:INDEX[:SEED] or a spec file")
 
+    try:  # (a spec file whose path holds a '+' is taken whole)
+        head, dynamic = (spec, None) if Path(spec).is_file() else split_dynamic(spec)
+    except MoverError as exc:  # (its message names the spec)
+        raise ValueError(str(exc)) from None
+    head = head.strip()
     try:
-        if Path(spec).suffix.lower() in (".yaml", ".yml", ".toml"):
-            return load_scenario(Path(spec))
-        parts = spec.split(":")
-        if len(parts) not in (2, 3):
-            raise ValueError(f"scenario {spec!r}: expected FAMILY:INDEX[:SEED] (e.g. "
-                             "forest:3) or a scenario spec file (.yaml, .toml)")
-        try:
-            index, seed = int(parts[1]), int(parts[2]) if len(parts) == 3 else 0
-        except ValueError:
-            raise ValueError(f"scenario {spec!r}: INDEX and SEED must be integers") from None
-        return build_scenario(parts[0], index, seed)
-    except ScenarioError as exc:
+        if Path(head).suffix.lower() in (".yaml", ".yml", ".toml"):
+            sc = load_scenario(Path(head))
+        else:
+            parts = head.split(":")
+            if len(parts) not in (2, 3):
+                raise ValueError(f"scenario {spec!r}: expected FAMILY:INDEX[:SEED] (e.g. "
+                                 "forest:3) or a scenario spec file (.yaml, .toml), "
+                                 "optionally followed by +dynamic(KEY=VALUE, ...)")
+            try:
+                index, seed = int(parts[1]), int(parts[2]) if len(parts) == 3 else 0
+            except ValueError:
+                raise ValueError(f"scenario {spec!r}: INDEX and SEED must be integers") \
+                    from None
+            sc = build_scenario(parts[0], index, seed)
+        if dynamic is None:
+            return sc
+        if sc.movers is not None:
+            raise ValueError(f"scenario {spec!r}: {head} has movers of its own; give them "
+                             "in the spec file or in +dynamic(...), not both")
+        return with_movers(sc, dynamic, sc.seed, owner="dynamic")
+    except (ScenarioError, MoverError) as exc:
         raise ValueError(f"scenario {spec!r}: {exc}") from None

@@ -9,9 +9,14 @@ simulation time. What it publishes (docs/mqtt.md):
   config request): world ENU pose and velocity, attitude, body rates, motor outputs
   (rotor speed / maximum);
 * events: armed / disarmed, mode changes (PX4 names), collisions with what was hit and the
-  speed, and what its owner adds (trial start and end);
+  speed (``mover_collision`` for a moving obstacle), and what its owner adds (trial start
+  and end);
+* the moving obstacles of the vehicle's world (the collision guard's movers, as the guard
+  checks them: scenarios.movers), with every telemetry sample: name, shape, size, centre,
+  heading and velocity;
 * depth frames from the vehicle's depth camera at the camera's rate, once a client asked
-  for them (config ``{"depth": true}``), rendered from the scenario mesh.
+  for them (config ``{"depth": true}``), rendered from the scenario mesh and the movers
+  where they are at the frame's simulated time.
 """
 
 from __future__ import annotations
@@ -21,7 +26,7 @@ import threading
 
 import numpy as np
 
-from ft_sitl.bus.codec import EventType, Telemetry
+from ft_sitl.bus.codec import MOVER_SIZES, EventType, MoverStates, Telemetry
 from ft_sitl.bus.publisher import BusPublisher
 from ft_sitl.bus.ratelimit import RateGate
 from ft_sitl.navigation.common import camera_config
@@ -53,6 +58,8 @@ class SitlBus:
         self._mode = None
         self._events_seen = 0
         self._fence_seen = 0
+        self._movers = None  # the movers described in _mover_static
+        self._mover_static: list[dict] = []
         self.frames_rendered = 0
         self.pub = publisher_factory(self._on_config)
         self.pub.start()
@@ -93,14 +100,20 @@ class SitlBus:
         self._fence_seen = len(breaches)
         events = fleet.events
         for ev in events[self._events_seen:]:
-            if ev.vehicle == i and ev.kind == GuardEventKind.COLLISION:
-                self.event(EventType.COLLISION, object=str(ev.what),
-                           speed_m_s=float(ev.speed_m_s))
+            if ev.vehicle == i and ev.kind in (GuardEventKind.COLLISION,
+                                               GuardEventKind.MOVER_COLLISION):
+                self.event(EventType.MOVER_COLLISION if ev.kind ==
+                           GuardEventKind.MOVER_COLLISION else EventType.COLLISION,
+                           object=str(ev.what), speed_m_s=float(ev.speed_m_s))
         self._events_seen = len(events)
         with self._lock:
             gate = self._gate
             want_frames = self._want_depth or self._want_points
+        guard = fleet.guard
+        movers = guard.movers if guard is not None else None
         if gate.take(t_us):
+            if movers is not None:
+                self.pub.publish_movers(self.mover_states(movers, t_us))
             x = fleet.sim.x[i]
             w = fleet.sim.rotor_speeds(i) / fleet.sim.platforms[i].rotor_speed_max_rad_s
             self.pub.publish_telemetry(Telemetry(
@@ -114,12 +127,23 @@ class SitlBus:
             period = round(1e6 / self.camera_config.rate_hz)
             self._next_frame_us = (t_us // period + 1) * period
             frame = self.camera.capture(t_us, fleet.sim.position(i), fleet.sim.attitude(i),
-                                        rng=self._rng)
+                                        rng=self._rng, movers=movers, movers_time_us=t_us)
             self.frames_rendered += 1
             if self._want_depth:
                 self.pub.publish_depth(frame, self.camera_config)
             if self._want_points:
                 self.pub.publish_points(frame, self.camera_config)
+
+    def mover_states(self, movers, t_us: int) -> MoverStates:
+        """The bus payload of ``movers`` (scenarios.movers.Movers) at simulated time t_us."""
+        if movers is not self._movers:  # names, shapes and sizes: once per field
+            self._movers = movers
+            self._mover_static = [{k: d[k] for k in ("name", "shape", *MOVER_SIZES[d["shape"]])}
+                                  for d in movers.describe()]
+        poses, vel = movers.poses(t_us), movers.velocities(t_us)
+        return MoverStates(t_us, [
+            {**st, "p_world_m": tuple(poses[j, :3].tolist()), "heading_rad": float(poses[j, 3]),
+             "v_world_m_s": tuple(vel[j].tolist())} for j, st in enumerate(self._mover_static)])
 
     def stats(self):
         return self.pub.stats()

@@ -13,11 +13,13 @@ import sys
 import numpy as np
 import pytest
 
-from ft_sitl.bus import BusClient, BusPublisher, TlsOptions
+from ft_sitl.bus import BusClient, BusPublisher, MoverState, MoverStates, TlsOptions
 
 from .busutil import DEADLINE_S, receive_until, telemetry, wait_until
 
-ALL_KINDS = ("telemetry", "events", "depth", "points", "status")
+MOVER = {"name": "box 2", "shape": "box", "p_world_m": (4.5, -2.0, 0.8), "heading_rad": 1.25,
+         "v_world_m_s": (0.5, 1.5, 0.0), "length_m": 3.0, "width_m": 1.5, "height_m": 1.6}
+ALL_KINDS = ("telemetry", "events", "depth", "points", "movers", "status")
 
 
 @pytest.fixture
@@ -43,15 +45,16 @@ def test_round_trip_every_kind(broker_url, vehicle, depth_sample):
                                          speed_m_s=1.25)
                 assert pub.publish_depth(frame, config)
                 assert pub.publish_points(frame, config, "body")
+                assert pub.publish_movers(MoverStates(1_300_000, [MOVER]))
                 got = {k: [] for k in ALL_KINDS}
 
                 def complete(msg):
                     got[msg.kind].append(msg)
                     return (len(got["telemetry"]) == 5 and got["events"] and got["depth"]
-                            and got["points"])
+                            and got["points"] and got["movers"])
 
                 await receive_until(client, complete, "5 telemetry, 1 event, 1 depth frame, "
-                                                      "1 point cloud")
+                                                      "1 point cloud, 1 movers state")
                 return samples, got
 
         samples, got = asyncio.run(scenario())
@@ -69,8 +72,11 @@ def test_round_trip_every_kind(broker_url, vehicle, depth_sample):
     points = got["points"][0].data
     assert points.frame == "body"
     np.testing.assert_allclose(points.points, frame.points_body, rtol=1e-6, atol=1e-5)
-    assert stats.sent == {"events": 1, "telemetry": 5, "depth": 1, "points": 1}
-    assert stats.dropped == {"events": 0, "telemetry": 0, "depth": 0, "points": 0}
+    movers = got["movers"][0].data
+    assert movers.time_usec == 1_300_000 and movers.movers == (MoverState(**MOVER),)
+    assert stats.sent == {"events": 1, "telemetry": 5, "movers": 1, "depth": 1, "points": 1}
+    assert stats.dropped == {"events": 0, "telemetry": 0, "movers": 0, "depth": 0,
+                             "points": 0}
     assert stats.connects == 1 and stats.reconnects == 0 and stats.last_error is None
 
 
@@ -186,10 +192,13 @@ def test_client_skips_malformed_messages(broker_url, vehicle, caplog):
     caplog.set_level(logging.WARNING, logger="ft_sitl.bus")
 
     async def scenario():
-        async with BusClient(broker_url, vehicle, kinds=("telemetry", "depth")) as client:
+        async with BusClient(broker_url, vehicle, kinds=("telemetry", "depth", "movers")) \
+                as client:
             async with BusClient(broker_url, vehicle, kinds=("status",)) as sender:
                 await sender.publish_raw("telemetry", b'{"v": 1}')
                 await sender.publish_raw("depth", b"FTSF\x01")
+                await sender.publish_raw("movers", b'{"v":1,"t":0,"time_usec":0,'
+                                                   b'"movers":[{"name":"x"}]}')
                 from ft_sitl.bus import encode_telemetry
 
                 await sender.publish_raw("telemetry", encode_telemetry(telemetry(3)))
@@ -197,10 +206,12 @@ def test_client_skips_malformed_messages(broker_url, vehicle, caplog):
             return msg, client.rejected
 
     msg, rejected = asyncio.run(scenario())
-    assert msg.data.time_usec == telemetry(3).time_usec and rejected == 2
+    assert msg.data.time_usec == telemetry(3).time_usec and rejected == 3
     lines = [r.getMessage() for r in caplog.records if "skipped malformed" in r.getMessage()]
     assert any("Object missing required field `t`" in s for s in lines)
     assert any("truncated: 5 bytes" in s for s in lines)
+    assert any("on ft-sitl/v1/" in s and "/movers: movers: Object missing required field "
+               "`shape` - at `$.movers[0]`" in s for s in lines), lines
 
 
 def test_publish_before_start_is_an_error():

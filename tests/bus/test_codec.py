@@ -3,6 +3,7 @@ malformed input."""
 
 import json
 import math
+import re
 import struct
 
 import numpy as np
@@ -12,16 +13,20 @@ from ft_sitl.bus.codec import (
     HEADER_SIZE,
     BusPayloadError,
     Event,
+    MoverState,
+    MoverStates,
     Status,
     Telemetry,
     decode_config,
     decode_event,
     decode_frame,
+    decode_movers,
     decode_status,
     decode_telemetry,
     encode_config,
     encode_depth,
     encode_event,
+    encode_movers,
     encode_points,
     encode_status,
     encode_telemetry,
@@ -456,3 +461,87 @@ def test_quaternion_matrix_conversions_agree():
         q = -q if q[0] < 0 else q
         r = matrix_from_quat(q)
         np.testing.assert_allclose(quat_from_matrix(r), q, atol=1e-12)
+
+
+# --- movers -----------------------------------------------------------------------------------
+def sample_movers() -> MoverStates:
+    return MoverStates(2_500_000, [
+        {"name": "person 1", "shape": "person", "p_world_m": (10.123456789, 9.0, 0.9),
+         "heading_rad": math.pi, "v_world_m_s": (-1.5, 0.0, 0.0), "radius_m": 0.35,
+         "height_m": 1.8},
+        MoverState(name="box 1", shape="box", p_world_m=(3.0, 4.0, 0.8), heading_rad=0.5,
+                   v_world_m_s=(0.0, 2.0, 0.0), length_m=3.0, width_m=1.5, height_m=1.6),
+        {"name": "ball 1", "shape": "sphere", "p_world_m": np.array([1.0, 2.0, 2.5]),
+         "heading_rad": np.float64(-0.25), "v_world_m_s": np.zeros(3), "radius_m": 0.4},
+    ])
+
+
+def test_movers_round_trip():
+    s = sample_movers()
+    back = decode_movers(encode_movers(s))
+    assert back.time_usec == 2_500_000 and back.t == 2.5
+    assert [m.name for m in back.movers] == ["person 1", "box 1", "ball 1"]
+    person = back.by_name("person 1")
+    assert person.p_world_m == (10.1235, 9.0, 0.9)  # rounded to 0.1 mm
+    assert person.heading_rad == 3.141593 and person.v_world_m_s == (-1.5, 0.0, 0.0)
+    assert (person.radius_m, person.height_m) == (0.35, 1.8)
+    box = back.by_name("box 1")
+    assert (box.length_m, box.width_m, box.height_m) == (3.0, 1.5, 1.6)
+    assert back.by_name("ball 1").radius_m == 0.4
+    obj = json.loads(encode_movers(s))
+    assert set(obj["movers"][2]) == {"name", "shape", "p_world_m", "heading_rad",
+                                     "v_world_m_s", "radius_m"}  # only its own sizes
+    with pytest.raises(KeyError, match="no mover named 'cart 1'"):
+        back.by_name("cart 1")
+    assert decode_movers(encode_movers(MoverStates(0, []))).movers == ()
+
+
+def _movers_obj(**mover) -> dict:
+    m = {"name": "person 1", "shape": "person", "p_world_m": [1.0, 2.0, 0.9],
+         "heading_rad": 0.0, "v_world_m_s": [1.0, 0.0, 0.0], "radius_m": 0.3,
+         "height_m": 1.8}
+    m.update(mover)
+    return {"v": 1, "t": 1.0, "time_usec": 1_000_000,
+            "movers": [{k: v for k, v in m.items() if v is not None}]}
+
+
+@pytest.mark.parametrize("obj, message", [
+    (_movers_obj(radius_m=None), "movers: 'person 1': a person has radius_m, height_m; "
+                                 "radius_m is missing"),
+    (_movers_obj(width_m=1.0), "a person has radius_m, height_m; width_m is not allowed"),
+    (_movers_obj(shape="car"), "Expected `str` matching regex '^(person|box|sphere)$' - at "
+                               "`$.movers[0].shape`, got 'car'"),
+    (_movers_obj(radius_m=0.0), "Expected `float` > 0.0 - at `$.movers[0].radius_m`, got 0.0"),
+    (_movers_obj(heading_rad=4.0), "Expected `float` <= 3.141593 - at "
+                                   "`$.movers[0].heading_rad`, got 4.0"),
+    (_movers_obj(p_world_m=[1.0, 2.0]), "Expected `array` of length 3"),
+    (_movers_obj(name=""), "Expected `str` of length >= 1"),
+    (_movers_obj(extra=1), "Object contains unknown field `extra`"),
+    ({**_movers_obj(), "v": 2}, "movers: unsupported schema version v=2"),
+    ({**_movers_obj(), "t": 2.0}, "movers: t = 2.0 s disagrees with time_usec = 1000000"),
+    ({**_movers_obj(), "movers": _movers_obj()["movers"] * 2},
+     "movers: name 'person 1' is given twice"),
+    ({**_movers_obj(), "movers": _movers_obj()["movers"] * 65}, "length <= 64"),
+    ({k: v for k, v in _movers_obj().items() if k != "movers"},
+     "Object missing required field `movers`"),
+])
+def test_movers_decoder_rejects(obj, message):
+    with pytest.raises(BusPayloadError) as err:
+        decode_movers(dumps(obj))
+    assert str(err.value).startswith("movers: ") and message in str(err.value), err.value
+
+
+@pytest.mark.parametrize("mover, message", [
+    ({"p_world_m": (math.nan, 0.0, 0.0)}, "movers: movers[0].p_world_m[0] must be finite"),
+    ({"v_world_m_s": (0.0, math.inf, 0.0)}, "movers: movers[0].v_world_m_s[1] must be finite"),
+    ({"heading_rad": math.nan}, "`$.movers[0].heading_rad`"),
+    ({"radius_m": math.inf}, "`$.movers[0].radius_m`"),
+])
+def test_movers_reject_non_finite_values(mover, message):
+    m = {**_movers_obj()["movers"][0], **mover}
+    with pytest.raises(BusPayloadError, match=re.escape(message)):
+        MoverStates(1_000_000, [m])
+    with pytest.raises(BusPayloadError, match="each mover must be a MoverState or a mapping"):
+        MoverStates(0, [42])
+    with pytest.raises(BusPayloadError, match="expected a MoverStates"):
+        encode_movers({"movers": []})
