@@ -633,7 +633,8 @@ def movers_from_list(items, owner: str = "movers") -> Movers:
             pts, cum = np.vstack([pts, pts]), np.zeros(2)
         rows.append((kind, dims, pts, cum, length, LOOP if loop else PINGPONG,
                      num("start_m", 0.0, 0.0), bound, "given", num("speed_m_s", 0.0)))
-    m = _pack([r[:9] for r in rows], {**SCHEMA.defaults(), "count": len(rows)})
+    m = _pack([r[:9] for r in rows], {**SCHEMA.defaults(), "count": len(rows),
+                                      "speed_m_s": max((r[9] for r in rows), default=0.0)})
     if rows:
         m.speed[:] = [r[9] for r in rows]
     return m
