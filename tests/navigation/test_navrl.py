@@ -1,6 +1,7 @@
 """NavRL: the checkpoint reader, the numpy policy, the lidar, the ORCA shield, the navigator's
 deployment logic and real trials with the authors' released weights."""
 
+import dataclasses
 import json
 import math
 import os
@@ -11,12 +12,15 @@ import zipfile
 from pathlib import Path
 
 import numpy as np
+import pandas as pd
 import pytest
 import trimesh
 from scipy.signal import correlate
 
 from ft_sitl.autopilot.cascade import SP_POS, SP_VEL, SP_YAW
+from ft_sitl.cli.missions import differences
 from ft_sitl.missions.campaign_file import load_campaign
+from ft_sitl.missions.protocol import navigator_params
 from ft_sitl.missions.trial import TrialSpec, run_trial
 from ft_sitl.navigation.base import Limits, Observation, ObstacleStates, Task
 from ft_sitl.navigation.navrl import (
@@ -517,3 +521,40 @@ def test_trial_with_movers_ends_by_the_protocol_with_each_option(with_checkpoint
     assert row["mover_count"] == 40 and row["planner_calls"] > 0
     assert (nav.dynamic_steps > 20) == (mode != "off")
 
+
+V6 = REPO / "docs" / "results" / "paper-slice-v6" / "trials.parquet"
+#: a stored protocol-6 NavRL trial (the Maze, 4.50kg-T-MOTOR: a collision after 3.3 s)
+V6_TRIAL = "65af5f4189332b4c"
+
+
+def _stored(trial_id: str) -> tuple[TrialSpec, dict]:
+    df = pd.read_parquet(V6)
+    stored = df[df.trial_id == trial_id].iloc[0].to_dict()
+    return TrialSpec.from_dict(json.loads(stored["spec"])), stored
+
+
+def test_rows_of_earlier_protocols_fly_as_they_were_stored(with_checkpoint):
+    """Before protocol 7 NavRL saw no moving obstacles: its trials fly with
+    dynamic_obstacles = "off" (pinned by their protocol) and give the stored row bit for
+    bit."""
+    spec, stored = _stored(V6_TRIAL)
+    assert spec.protocol == 6 and "dynamic_obstacles" not in spec.algorithm_params
+    assert navigator_params(spec)["dynamic_obstacles"] == "off"
+    assert differences(run_trial(spec).row, stored) == []
+
+
+def test_in_a_static_world_the_detector_changes_nothing(with_checkpoint):
+    """The same trial under protocol 7 ("tracked" by default): in a static world the
+    detector reports nothing, so the flight and its row are those of "off"."""
+    spec, _ = _stored(V6_TRIAL)
+    spec = dataclasses.replace(spec, protocol=7)
+    assert "dynamic_obstacles" not in navigator_params(spec)
+    nav = create("navrl", navigator_params(spec))
+    assert nav.dynamic_mode == "tracked"
+    tracked = run_trial(spec, navigator=nav).row
+    off = run_trial(dataclasses.replace(
+        spec, algorithm_params={"dynamic_obstacles": "off"})).row
+    keys = [k for k in tracked if k not in ("trial_id", "algorithm_params", "spec",
+                                             "wall_time_s", "planner_time_s", "finished_utc")]
+    assert {k: tracked[k] for k in keys} == {k: off[k] for k in keys}
+    assert nav.tracker.frames > 50 and nav.dynamic_steps == 0
