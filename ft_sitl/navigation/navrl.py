@@ -112,7 +112,7 @@ APPROACH_SPEED_M_S = 0.5
 #: the policy gets the moving obstacles within this horizontal distance (the deployment's
 #: ``distance_range``), the nearest DYN_OBS of them
 DYNAMIC_RANGE_M = 4.0
-#: the obstacle width category's bin (m) and the robot radius the deployment adds twice
+#: the bin (m) of the obstacle width category (the width plus the robot's diameter)
 WIDTH_BIN_M = 0.25
 #: an obstacle taller than this (m) is "2-D": only its horizontal offset is given
 TALL_M = 1.0
