@@ -511,14 +511,18 @@ def footprint_m(spec, platform) -> float | None:
 def navigator_params(spec) -> dict:
     """The navigator's parameters in this trial: the spec's, plus what the trial's protocol
     version fixed that the navigator's defaults have changed since (versions 1 and 2 flew
-    the benchmark camera at 15 Hz)."""
+    the benchmark camera at 15 Hz; before 7 NavRL saw no moving obstacles)."""
     params = dict(spec.algorithm_params)
-    rate = PROTOCOLS[spec.protocol].benchmark_camera_hz
+    rules = PROTOCOLS[spec.protocol]
     cls = available().get(spec.algorithm)
-    if rate is not None and not isinstance(cls, (str, type(None))) and \
-            "camera_rate_hz" in cls.schema.names() and "camera_rate_hz" not in params and \
-            params.get("camera", "benchmark") == "benchmark":
+    names = () if isinstance(cls, (str, type(None))) else cls.schema.names()
+    rate = rules.benchmark_camera_hz
+    if rate is not None and "camera_rate_hz" in names and "camera_rate_hz" not in params \
+            and params.get("camera", "benchmark") == "benchmark":
         params["camera_rate_hz"] = rate
+    if not rules.moving_obstacles and "dynamic_obstacles" in names and \
+            "dynamic_obstacles" not in params:
+        params["dynamic_obstacles"] = "off"
     return params
 
 

@@ -67,6 +67,10 @@ class ProtocolRules:
     #: originals' grid maps do on their 0.05 s update timer; frames no update takes are not
     #: rendered (None: every frame goes to the navigator as it is captured)
     map_fusion_hz: float | None = None
+    #: navigators perceive moving obstacles as their deployments do (NavRL: its detector
+    #: and tracker feed its dynamic-obstacle input, its shield and its map's free regions,
+    #: ``dynamic_obstacles = "tracked"``); before, NavRL flew with that input off
+    moving_obstacles: bool = False
 
 
 #: the versions of the trial protocol this code flies; a trial's spec names its version
@@ -104,6 +108,13 @@ PROTOCOLS = {
                      offboard_acc_clamp=False, benchmark_camera_hz=None,
                      observe_approach=True, max_acc_m_s2=3.0, footprint_inflation=True,
                      vehicle_body=True, map_fusion_hz=20.0),
+    7: ProtocolRules(7, "navigators perceive moving obstacles as their deployments do: "
+                        "NavRL's depth detector and tracker feed its dynamic-obstacle input, "
+                        "its shield and its map's free regions (before, that input was "
+                        "zero); the rest as in 6",
+                     offboard_acc_clamp=False, benchmark_camera_hz=None,
+                     observe_approach=True, max_acc_m_s2=3.0, footprint_inflation=True,
+                     vehicle_body=True, map_fusion_hz=20.0, moving_obstacles=True),
 }
 #: the version new trials and campaigns fly unless they name another
 PROTOCOL_VERSION = max(PROTOCOLS)

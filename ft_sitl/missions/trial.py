@@ -53,7 +53,7 @@ from ft_sitl.missions.spec import (
     platform_for,
 )
 from ft_sitl.missions.watchdog import TRIAL_WALL_BUDGET_S, WallBudgetExceeded, WallWatchdog
-from ft_sitl.navigation.base import GiveUp, Observation
+from ft_sitl.navigation.base import GiveUp, Observation, ObstacleStates
 from ft_sitl.navigation.registry import create
 from ft_sitl.physics import dynamics as d
 
@@ -181,14 +181,26 @@ class _Eyes:
                                    movers_time_us=fleet.time_us)
 
 
-def _observation(fleet, t_us: int, s, depth) -> Observation:
-    """What the navigator is told at ``t_us`` (its clock) with state ``s``: the flight
-    controller's estimate (the truth without an estimator), as PX4 publishes it."""
+def _observation(fleet, t_us: int, s, depth, nav) -> Observation:
+    """What the navigator ``nav`` is told at ``t_us`` (its clock) with state ``s``: the
+    flight controller's estimate (the truth without an estimator), as PX4 publishes it;
+    the moving obstacles' ground truth too when the navigator asks for it."""
     x = fleet.sim.estimated(0)
     return Observation(time_s=t_us * 1e-6, position=s.position, velocity=s.velocity,
                        yaw=s.yaw, attitude=x[d.X_QUAT:d.X_QUAT + 4].copy(),
                        angular_velocity=x[d.X_OMEGA:d.X_OMEGA + 3].copy(),
-                       depth=depth)
+                       depth=depth, movers=_mover_truth(fleet) if getattr(
+                           nav, "needs_mover_truth", False) else None)
+
+
+def _mover_truth(fleet) -> ObstacleStates:
+    """The moving obstacles now (simulation time): their boxes and velocities (empty in a
+    static world)."""
+    guard = fleet.sim.guard
+    movers = guard.movers if guard is not None else None
+    if movers is None or movers.count == 0:
+        return ObstacleStates.empty()
+    return ObstacleStates(*movers.boxes(fleet.time_us))
 
 
 def _approach(fleet, sc, ref: TrialReferee, observer, eyes: _Eyes) -> None:
@@ -216,7 +228,7 @@ def _approach(fleet, sc, ref: TrialReferee, observer, eyes: _Eyes) -> None:
             t_us = fleet.time_us - t_arm_us
             frame = eyes.due(fleet, t_us)
             if frame is not None:
-                obs = _observation(fleet, t_us, fleet.state(0), frame)
+                obs = _observation(fleet, t_us, fleet.state(0), frame, observer)
                 _call(observer.observe, obs, "observe", ref.metrics)
         fleet.run_us(tick_end_us - fleet.time_us)
         if not repositioned and abs(fleet.state(0).position[2] - sc.start[2]) < STABLE_POS_M:
@@ -248,13 +260,14 @@ def _navigate(nav, fleet, sc, platform, spec: TrialSpec, ref: TrialReferee,
             # (the judge's state is the truth: with an estimator, the estimate instead)
             s = fleet.state(0) if fleet.sim.estimating(0) else judge.state_at(now)
             depth = eyes.due(fleet, t_nav_us)
-            obs = _observation(fleet, t_nav_us, s, depth)
+            obs = _observation(fleet, t_nav_us, s, depth, nav)
             if spec.perception is not None:
                 (p, v, yaw, att, rates), depth = seen.pass_through(
                     t_nav_us, (obs.position, obs.velocity, obs.yaw, obs.attitude,
                                obs.angular_velocity), depth)
                 obs = Observation(time_s=obs.time_s, position=p, velocity=v, yaw=yaw,
-                                  attitude=att, angular_velocity=rates, depth=depth)
+                                  attitude=att, angular_velocity=rates, depth=depth,
+                                  movers=obs.movers)
             sp = _ask(nav, obs, m)
             fleet.offboard_setpoint(0, sp)
             if cmd.main_mode != MAIN_OFFBOARD:  # PX4: a setpoint first, then the mode

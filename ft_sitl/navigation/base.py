@@ -11,7 +11,9 @@ PX4 offboard setpoint: exactly what a MAVSDK/MAVLink navigator does over the wir
 A navigator that needs depth images sets ``camera`` to a
 :class:`~ft_sitl.scenarios.camera.CameraConfig`; it then gets a fresh
 :class:`~ft_sitl.scenarios.camera.DepthFrame` in ``Observation.depth`` whenever one is due
-at the camera's rate (else None).
+at the camera's rate (else None). A navigator that sets ``needs_mover_truth`` gets the
+moving obstacles' ground truth (:class:`ObstacleStates`) in ``Observation.movers`` at every
+step: from the in-process trial driver only (a navigator flown over the wire gets None).
 
 A navigator that cannot go on (no path) raises :class:`GiveUp`; the trial then fails as a
 timeout with the navigator's reason (the protocol counts "no plan" as a timeout). Any other
@@ -111,6 +113,41 @@ class Task:
 
 
 @dataclass(frozen=True, eq=False)
+class ObstacleStates:
+    """Moving obstacles as boxes, world ENU: ``position`` (M, 3) box centres (m),
+    ``velocity`` (M, 3) (m/s), ``size`` (M, 3) full edge lengths of the axis-aligned
+    boxes (m). What a detector reports, or the simulator's ground truth."""
+
+    position: np.ndarray
+    velocity: np.ndarray
+    size: np.ndarray
+
+    def __post_init__(self):
+        for name in ("position", "velocity", "size"):
+            a = np.asarray(getattr(self, name), dtype=np.float64)
+            if a.ndim != 2 or a.shape[1] != 3 or not np.all(np.isfinite(a)):
+                raise ValueError(f"ObstacleStates.{name} must be a finite (M, 3) array, got "
+                                 f"shape {a.shape}")
+            object.__setattr__(self, name, a)
+        if not len(self.position) == len(self.velocity) == len(self.size):
+            raise ValueError("ObstacleStates: position, velocity and size need one row per "
+                             "obstacle each")
+
+    @property
+    def count(self) -> int:
+        return len(self.position)
+
+    @classmethod
+    def empty(cls) -> ObstacleStates:
+        z = np.zeros((0, 3))
+        return cls(z, z, z)
+
+    def take(self, index) -> ObstacleStates:
+        """The obstacles at ``index`` (an index array or a mask), in that order."""
+        return ObstacleStates(self.position[index], self.velocity[index], self.size[index])
+
+
+@dataclass(frozen=True, eq=False)
 class Observation:
     """The vehicle's state as the flight controller estimates it, at ``time_s`` seconds
     after navigation start (simulated time)."""
@@ -122,6 +159,10 @@ class Observation:
     attitude: np.ndarray  # quaternion w, x, y, z (ENU / FLU)
     angular_velocity: np.ndarray  # body rates (FLU), rad/s
     depth: object | None = None  # a DepthFrame when one is due
+    #: the moving obstacles' ground truth now (an ObstacleStates; empty in a static
+    #: world), given only to a navigator whose ``needs_mover_truth`` is True, and only by
+    #: the in-process trial driver (None otherwise)
+    movers: ObstacleStates | None = None
 
 
 class Navigator:
@@ -139,6 +180,9 @@ class Navigator:
     name: str = ""
     rate_hz: float = 20.0
     camera = None  # a CameraConfig to receive depth frames
+    #: True: the trial driver puts the moving obstacles' ground truth in every
+    #: Observation (``movers``); a navigator sets it when a parameter asks for the truth
+    needs_mover_truth: bool = False
     schema: Schema = Schema()
 
     def __init__(self, **params):

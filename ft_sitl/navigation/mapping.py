@@ -103,6 +103,13 @@ window (Forest: 130 x 130 x 41 voxels) takes ~16 ms on one core, a 10 m ceiling 
 ``update_esdf(half_extent_m=...)`` computes a local box instead (Fast-Planner's choice:
 exact only with respect to what lies inside the box).
 
+Moving obstacles: a voxel is freed by misses only where a traced ray crosses it, so with
+the early stop a hovering camera keeps part of a passer-by's trail occupied (measured in
+tests/navigation/test_mapping.py); as the originals, the planners' maps have no other
+remedy. NavRL's map (its deployment's ``map_manager``) removes the boxes of the moving
+obstacles its detector tracks: :meth:`LocalMap.fuse` leaves out the end points in given
+boxes (``exclude_boxes``) and :meth:`LocalMap.set_free` makes the voxels of boxes free.
+
 All kernels are numba ``@njit(cache=True)`` and live in this module.
 """
 
@@ -525,6 +532,50 @@ def _add_inflation(infl, nx, ny, nz, idx, radius, delta):
             base = (x * ny + y) * nz
             for z in range(max(z0 - radius, 0), min(z0 + radius + 1, nz)):
                 infl[base + z] += delta
+
+
+@njit(cache=True)
+def _drop_in_boxes(pts, hit, n, lo, hi):
+    """Compact the first n end points (and their hit flags) in place, leaving out those
+    inside any box lo[b] <= p <= hi[b] (world, m); returns how many are left."""
+    m = 0
+    for k in range(n):
+        inside = False
+        for b in range(lo.shape[0]):
+            if lo[b, 0] <= pts[k, 0] <= hi[b, 0] and lo[b, 1] <= pts[k, 1] <= hi[b, 1] \
+                    and lo[b, 2] <= pts[k, 2] <= hi[b, 2]:
+                inside = True
+                break
+        if not inside:
+            pts[m, 0], pts[m, 1], pts[m, 2] = pts[k, 0], pts[k, 1], pts[k, 2]
+            hit[m] = hit[k]
+            m += 1
+    return m
+
+
+@njit(cache=True)
+def _set_free(lo, hi, inv_res, origin, logodds, infl, dims, l_min, l_occ, infl_r):
+    """Set every voxel of the window from the one holding lo[b] to the one holding hi[b]
+    (world, m; both included) to log-odds l_min; returns (change in occupied count,
+    voxels that were occupied)."""
+    nx, ny, nz = dims[0], dims[1], dims[2]
+    lm = np.float32(l_min)
+    d_occ = 0
+    for b in range(lo.shape[0]):
+        i0 = np.empty(3, np.int64)
+        i1 = np.empty(3, np.int64)
+        for a in range(3):
+            i0[a] = max(int(math.floor(lo[b, a] * inv_res)) - origin[a], 0)
+            i1[a] = min(int(math.floor(hi[b, a] * inv_res)) - origin[a], dims[a] - 1)
+        for x in range(i0[0], i1[0] + 1):
+            for y in range(i0[1], i1[1] + 1):
+                for z in range(i0[2], i1[2] + 1):
+                    idx = (x * ny + y) * nz + z
+                    if logodds[idx] > l_occ:
+                        d_occ -= 1
+                        _add_inflation(infl, nx, ny, nz, idx, infl_r, -1)
+                    logodds[idx] = lm
+    return d_occ, -d_occ
 
 
 @njit(cache=True)
@@ -1113,14 +1164,21 @@ class LocalMap:
                         cfg.max_depth_m, cfg.max_ray_length_m, cfg.free_ray_depth_m,
                         self._pts, self._hit)
 
-    def fuse(self, frame: DepthFrame, *, early_stop: bool = True) -> FuseStats:
+    def fuse(self, frame: DepthFrame, *, early_stop: bool = True,
+             exclude_boxes=None) -> FuseStats:
         """Integrate one depth frame (re-centring the window first if the camera moved
         more than ``recentre_distance_m`` from the window centre, per axis).
         ``early_stop=False`` traces every ray in full: the same hits, more free voxels
-        observed, ~40x slower (see the module docstring)."""
+        observed, ~40x slower (see the module docstring). ``exclude_boxes`` (a pair of
+        (K, 3) arrays of lower and upper corners, world m): end points inside any of these
+        boxes are left out, neither hits nor rays (NavRL's map does this in the boxes of
+        the moving obstacles its detector tracks)."""
         depth, p, r = self._check_frame(frame)
+        boxes = None if exclude_boxes is None else self._boxes(exclude_boxes)
         shifted = self._recentre(p)
         n = self._project(frame)
+        if boxes is not None and len(boxes[0]):
+            n = _drop_in_boxes(self._pts, self._hit, n, boxes[0], boxes[1])
         dims = np.array(self.shape, np.int64)
         lo = np.maximum((p - self._range) * self._inv_res - self._origin, 0.0)
         hi = np.minimum((p + self._range) * self._inv_res - self._origin,
@@ -1139,6 +1197,36 @@ class LocalMap:
         self.last_camera_m = p.copy()
         return FuseStats(rays=int(n), hit_rays=int(n_hit), voxels_updated=int(nt),
                          shifted=shifted)
+
+    @staticmethod
+    def _boxes(boxes) -> tuple[np.ndarray, np.ndarray]:
+        try:
+            lo, hi = (np.ascontiguousarray(np.asarray(b, dtype=np.float64).reshape(-1, 3))
+                      for b in boxes)
+        except (TypeError, ValueError):
+            raise ValueError("boxes must be a pair (lower corners, upper corners) of (K, 3) "
+                             "arrays") from None
+        if lo.shape != hi.shape or not (np.all(np.isfinite(lo)) and np.all(np.isfinite(hi))):
+            raise ValueError("boxes: lower and upper corners must be finite and as many")
+        return lo, hi
+
+    def set_free(self, boxes) -> int:
+        """Make every voxel of the window from the one holding a box's lower corner to the
+        one holding its upper corner known free (log-odds at the lower clamp), for each of
+        ``boxes`` (a pair of (K, 3) arrays of lower and upper corners, world m), as the
+        original NavRL map's ``freeRegions`` does for the moving obstacles its detector
+        reports. Returns how many occupied voxels it freed."""
+        lo, hi = self._boxes(boxes)
+        if not len(lo):
+            return 0
+        d_occ, freed = _set_free(lo, hi, self._inv_res, self._origin, self._logodds.reshape(-1),
+                                 self._infl.reshape(-1), np.array(self.shape, np.int64),
+                                 self._l["l_min"], self._l["l_occ"],
+                                 self.config.inflation_voxels)
+        self._occupied_count += int(d_occ)
+        if freed:
+            self._revision += 1
+        return int(freed)
 
     def clear(self) -> None:
         """Forget everything (all voxels unknown); the window stays where it is."""

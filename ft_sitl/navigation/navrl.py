@@ -21,14 +21,23 @@ What it does, as the authors' ROS deployment does (control at 20 Hz, simulated t
    inflation, unknown = free). Each control step casts the 36 x 4 "lidar" into the inflated
    map from the vehicle: 10 deg horizontal steps counter-clockwise from the start -> goal
    direction, elevations -10, 0, 10, 20 deg, 4 m range; the policy sees 4 m minus the hit
-   distance.
+   distance. Moving obstacles (``dynamic_obstacles``): "tracked" (default) runs the
+   deployment's detector and tracker on every frame the navigator gets
+   (:mod:`ft_sitl.navigation.navrl_detector`), "truth" takes the simulator's ground truth
+   (``Observation.movers``, as the original's simulation launch takes Gazebo's through its
+   ``fake_detector``), "off" none. As the deployment's map does, the boxes of those within
+   5 m of the camera (grown by 0.3 m, not below z = 0) are set free after each update, and
+   the depth points in the boxes of the last 6 updates are left out of it.
 2. **Heading.** It first yaws in place toward the goal direction (until within 0.1 rad),
    waits 10 control periods, then holds that yaw.
 3. **Policy.** If anything is within ~3.8 m in the half-space toward the goal (the original's
    check of the first and last quarter of the beams, ignoring the -10 deg row), the policy
-   runs: state = unit vector to the goal and velocity in the goal frame, horizontal and
-   vertical distance; dynamic obstacles are zeros (the scenarios are static); the action is
-   ``(2 mean - 1) L`` per goal-frame axis with the Beta mean, rotated to the world.
+   runs, and also whenever a moving obstacle is in its dynamic input: state = unit vector
+   to the goal and velocity in the goal frame, horizontal and vertical distance; dynamic
+   obstacles = the nearest 5 moving obstacles within 4 m horizontally, each as the
+   deployment encodes it (:func:`dynamic_obstacle_input`; zeros with "off" or none near);
+   the action is ``(2 mean - 1) L`` per goal-frame axis with the Beta mean, rotated to the
+   world.
    Otherwise it flies straight at the goal at ``L``. ``L`` = ``action_limit_m_s`` = 1.0 m/s,
    the released deployment's value (why the paper saw NavRL capped near 1 m/s).
 4. **Safety shield.** The ray end points are clustered (DBSCAN, eps 0.2 m, 2 points); each
@@ -36,7 +45,9 @@ What it does, as the authors' ROS deployment does (control at 20 Hz, simulated t
    from the vehicle); ORCA half-spaces with a 2 s horizon (0.05 s inside an obstacle) are
    built around the command, and only if the command lies in a velocity obstacle the
    closest velocity satisfying all of them (speed <= sqrt(3) L) replaces it; when none
-   does, the one violating them least.
+   does, the one violating them least. The moving obstacles of the dynamic input are
+   there too, each a column of spheres moving with its velocity (:func:`dynamic_spheres`),
+   kept the vehicle's radius plus 0.3 m away.
 5. **Goal approach.** Within 3 m of the goal the command is rescaled to 0.5 m/s.
 6. **Output.** PX4 offboard: horizontal velocity, the start altitude as a position, yaw
    toward the goal (altitude is held: the deployment's ``height_control`` is off).
@@ -55,14 +66,21 @@ import functools
 import math
 import os
 import time
+from collections import deque
 from pathlib import Path
 
 import numpy as np
-from numba import njit
 from scipy.optimize import minimize
 
 from ft_sitl.autopilot.setpoints import Setpoint
-from ft_sitl.navigation.base import Navigator, Observation, Task, local_map_for
+from ft_sitl.navigation import navrl_detector
+from ft_sitl.navigation.base import (
+    Navigator,
+    Observation,
+    ObstacleStates,
+    Task,
+    local_map_for,
+)
 from ft_sitl.navigation.common import (
     CAMERA_PARAMS,
     LATENCY,
@@ -70,7 +88,8 @@ from ft_sitl.navigation.common import (
     camera_config,
     wrap_angle,
 )
-from ft_sitl.navigation.navrl_policy import CheckpointError, NavRLPolicy
+from ft_sitl.navigation.navrl_detector import DynamicObstacleTracker, in_range
+from ft_sitl.navigation.navrl_policy import DYN_DIM, DYN_OBS, CheckpointError, NavRLPolicy
 from ft_sitl.schema import Param, Schema
 
 ENV_VAR = "FT_SITL_NAVRL_CHECKPOINT"
@@ -90,6 +109,22 @@ YAW_TOLERANCE_RAD = 0.1
 SETTLE_PERIODS = 10
 APPROACH_RADIUS_M = 3.0
 APPROACH_SPEED_M_S = 0.5
+#: the policy gets the moving obstacles within this horizontal distance (the deployment's
+#: ``distance_range``), the nearest DYN_OBS of them
+DYNAMIC_RANGE_M = 4.0
+#: the bin (m) of the obstacle width category (the width plus the robot's diameter)
+WIDTH_BIN_M = 0.25
+#: an obstacle taller than this (m) is "2-D": only its horizontal offset is given
+TALL_M = 1.0
+#: the shield's extra distance to moving obstacles (``safety_distance``)
+SHIELD_SAFETY_DISTANCE_M = 0.3
+#: NavRL's map frees the boxes of the moving obstacles within this horizontal distance of
+#: the camera (its ``raycast_max_length``), grown by FREE_MARGIN_M, and keeps leaving out
+#: the points in those of the last FREE_HISTORY updates
+MAP_FREE_RANGE_M = 5.0
+FREE_MARGIN_M = 0.3
+FREE_HISTORY = 6
+DYNAMIC_MODES = ("tracked", "truth", "off")
 
 
 def data_dir() -> Path:
@@ -175,54 +210,12 @@ def obstacle_in_range(lidar_deficit: np.ndarray) -> bool:
 
 # --- the safety shield ---------------------------------------------------------------------
 
-@njit(cache=True)
-def _dbscan_labels(points, eps2, min_points):
-    """Cluster label per point (-1: noise), clusters numbered in order of their lowest core
-    point, grown depth-first with neighbours in index order."""
-    n = points.shape[0]
-    near = np.zeros((n, n), np.bool_)
-    count = np.zeros(n, np.int64)
-    for i in range(n):
-        for j in range(n):
-            d2 = 0.0
-            for a in range(3):
-                t = points[i, a] - points[j, a]
-                d2 += t * t
-            if d2 <= eps2:
-                near[i, j] = True
-                count[i] += 1
-    label = np.full(n, -1, np.int64)
-    stack = np.empty(n + 1, np.int64)
-    n_clusters = 0
-    for i in range(n):
-        if count[i] < min_points or label[i] != -1:
-            continue
-        label[i] = n_clusters
-        stack[0] = i
-        top = 1
-        while top > 0:
-            top -= 1
-            j = stack[top]
-            if count[j] < min_points:
-                continue
-            for k in range(n):
-                if near[j, k] and label[k] == -1:
-                    label[k] = n_clusters
-                    stack[top] = k
-                    top += 1
-        n_clusters += 1
-    return label, n_clusters
-
-
 def dbscan(points: np.ndarray, eps: float = DBSCAN_EPS_M,
            min_points: int = DBSCAN_MIN_POINTS) -> list[np.ndarray]:
-    """Clusters of ``points`` (N, 3) as sorted index arrays; noise is left out. A point's
-    neighbourhood includes itself."""
-    pts = np.ascontiguousarray(points, dtype=np.float64).reshape(-1, 3)
-    if len(pts) == 0:
-        return []
-    label, k = _dbscan_labels(pts, float(eps) * float(eps), int(min_points))
-    return [np.flatnonzero(label == c) for c in range(k)]
+    """The shield's clustering of the ray end points (N, 3): sorted index arrays of the
+    clusters, noise left out (:func:`ft_sitl.navigation.navrl_detector.dbscan`, the
+    detector's DBSCAN with the shield's eps and minimum)."""
+    return navrl_detector.dbscan(points, eps, min_points)
 
 
 def cluster_spheres(points: np.ndarray, position: np.ndarray) -> list[tuple[np.ndarray, float]]:
@@ -333,13 +326,37 @@ def safe_velocity(preferred: np.ndarray, planes, max_speed: float) -> np.ndarray
     return v if np.all(np.isfinite(v)) else np.zeros(3)
 
 
-def shield(position, preferred, ray_points, max_speed, agent_radius: float = 0.0):
-    """NavRL's safe action for the static ray hits; returns (velocity, whether it solved).
-    ``agent_radius``: the vehicle's radius in the velocity obstacles (m)."""
+def dynamic_spheres(obstacles: ObstacleStates) -> list[tuple[np.ndarray, np.ndarray, float]]:
+    """The shield's moving obstacles: each box as a column of spheres (centre, velocity,
+    radius) as the original's ``getSafeAction`` builds it: radius half the box's
+    horizontal diagonal, ceil(height / side) spheres a side apart (side: the larger
+    horizontal edge), the lowest one half the remainder above the box's bottom."""
+    out = []
+    for c, v, s in zip(obstacles.position, obstacles.velocity, obstacles.size):
+        side = max(s[0], s[1])
+        if side <= 0.0 or s[2] <= 0.0:
+            continue
+        n = math.ceil(s[2] / side)
+        z0 = c[2] - s[2] / 2 + (s[2] - (n - 1) * side) / 2
+        r = 0.5 * math.hypot(s[0], s[1])
+        out += [(np.array([c[0], c[1], z0 + k * side]), v, r) for k in range(n)]
+    return out
+
+
+def shield(position, preferred, ray_points, max_speed, agent_radius: float = 0.0,
+           dynamic: ObstacleStates | None = None, dynamic_radius: float = 0.0):
+    """NavRL's safe action for the static ray hits and the moving obstacles ``dynamic``;
+    returns (velocity, whether it solved). ``agent_radius``: the vehicle's radius in the
+    static velocity obstacles (m); ``dynamic_radius``: in the moving ones (the original's
+    robot size plus its safety distance)."""
     planes = []
     need = False
-    for centre, radius in cluster_spheres(ray_points, position):
-        pl = orca_plane(position, preferred, agent_radius, centre, np.zeros(3), radius)
+    obstacles = [] if dynamic is None else [
+        (c, v, r, dynamic_radius) for c, v, r in dynamic_spheres(dynamic)]
+    obstacles += [(c, np.zeros(3), r, agent_radius)
+                  for c, r in cluster_spheres(ray_points, position)]
+    for centre, vel, radius, mine in obstacles:
+        pl = orca_plane(position, preferred, mine, centre, vel, radius)
         if pl is None:
             continue
         planes.append(pl)
@@ -347,6 +364,47 @@ def shield(position, preferred, ray_points, max_speed, agent_radius: float = 0.0
     if not need:
         return preferred, False
     return safe_velocity(preferred, planes, max_speed), True
+
+
+def dynamic_obstacle_input(obstacles: ObstacleStates, position, frame: np.ndarray,
+                           robot_radius: float = ROBOT_RADIUS_M) -> np.ndarray:
+    """The policy's dynamic-obstacle input (DYN_OBS x DYN_DIM) from the first DYN_OBS of
+    ``obstacles`` (nearest first), as the released deployment computes it (``get_action``
+    of navigation.py): per obstacle the unit vector to it in the goal frame, its horizontal
+    and vertical distance, its velocity in the goal frame, its width category
+    ceil((max(x, y size) + 2 robot_radius) / 0.25) - 1 clipped to 0..3, and 1 if it is at
+    most 1 m tall, else 0 (a tall obstacle's vertical offset is zeroed); rows without an
+    obstacle, and the position terms of one without height, are zeros."""
+    out = np.zeros((DYN_OBS, DYN_DIM))
+    n = min(obstacles.count, DYN_OBS)
+    if n == 0:
+        return out
+    size = obstacles.size[:n]
+    rpos = obstacles.position[:n] - np.asarray(position, dtype=float).reshape(3)
+    flat = size[:, 2] == 0.0
+    rpos[flat] = 0.0
+    rpos[size[:, 2] > TALL_M, 2] = 0.0
+    rg = rpos @ frame.T
+    dist = np.linalg.norm(rpos, axis=1)
+    out[:n, 0:3] = rg / np.maximum(dist, 1e-6)[:, None]
+    out[:n, 3] = np.hypot(rg[:, 0], rg[:, 1])
+    out[:n, 4] = rg[:, 2]
+    out[:n, 5:8] = obstacles.velocity[:n] @ frame.T
+    width = np.maximum(size[:, 0], size[:, 1]) + 2.0 * robot_radius
+    out[:n, 8] = np.where(flat, 0.0, np.clip(np.ceil(width / WIDTH_BIN_M) - 1.0, 0.0,
+                                             1.0 / WIDTH_BIN_M - 1.0))
+    out[:n, 9] = np.where((size[:, 2] <= TALL_M) & ~flat, 1.0, 0.0)
+    return out
+
+
+def free_boxes(obstacles: ObstacleStates, camera_position) -> tuple[np.ndarray, np.ndarray]:
+    """The boxes NavRL's map frees for the moving obstacles: those within MAP_FREE_RANGE_M
+    of the camera horizontally, grown by FREE_MARGIN_M on every side but not below z = 0
+    (lower corners, upper corners)."""
+    near = in_range(obstacles, camera_position, MAP_FREE_RANGE_M)
+    lo = near.position - near.size / 2 - FREE_MARGIN_M
+    lo[:, 2] = np.maximum(lo[:, 2], 0.0)
+    return lo, near.position + near.size / 2 + FREE_MARGIN_M
 
 
 class NavRL(Navigator):
@@ -363,6 +421,11 @@ class NavRL(Navigator):
         LATENCY,
         MEASURED_LATENCY,
         Param("use_shield", True, doc="correct the policy's action with the ORCA safety shield"),
+        Param("dynamic_obstacles", "tracked", choices=DYNAMIC_MODES,
+              doc="moving obstacles for the policy's dynamic input, the shield and the map's "
+                  "free regions: 'tracked' by the deployment's depth detector and tracker, "
+                  "'truth' the simulator's ground truth (in-process trials only), 'off' "
+                  "none (the input stays zero; what trials before protocol 7 fly)"),
         *CAMERA_PARAMS,
     )).with_defaults(latency_s=DEFAULT_LATENCY_S)
 
@@ -385,6 +448,8 @@ class NavRL(Navigator):
         self.latency = float(p["latency_s"])
         self.measured_latency = bool(p["measured_latency"])
         self.use_shield = bool(p["use_shield"])
+        self.dynamic_mode = p["dynamic_obstacles"]
+        self.needs_mover_truth = self.dynamic_mode == "truth"
         self.camera = camera_config(p["camera"], p["camera_width"], p["camera_height"],
                                     p["camera_rate_hz"])
 
@@ -400,15 +465,27 @@ class NavRL(Navigator):
         super().reset(task)
         self.map = local_map_for(task, self.camera)
         # the shield's agent radius: the platform's footprint (protocol 4 on; the
-        # original's deployment uses 0.3 m), else 0 as before
+        # original's deployment uses 0.3 m), else 0 as before; toward moving obstacles
+        # the deployment's robot size (0.3 m) plus its safety distance, the footprint
+        # taking the robot size's place when there is one
         self.agent_radius = task.footprint_m if task.footprint_m is not None else 0.0
+        self.dynamic_radius = (task.footprint_m if task.footprint_m is not None
+                               else ROBOT_RADIUS_M) + SHIELD_SAFETY_DISTANCE_M
         self.hold_z = float(task.start[2])
         self.goal = np.array([task.goal[0], task.goal[1], self.hold_z])
         direction = self.goal - task.start
         self.frame = goal_frame(direction)
         self.goal_yaw = math.atan2(direction[1], direction[0])
         self.rays = lidar_directions(self.goal_yaw)
-        self.dynamic = np.zeros((5, 10))
+        # the moving obstacles: the detector (tracked), the policy's last dynamic input,
+        # the obstacles the shield last saw, and the map's free regions of the last updates
+        self.tracker = (DynamicObstacleTracker(self.camera) if self.dynamic_mode == "tracked"
+                        else None)
+        self.dynamic = np.zeros((DYN_OBS, DYN_DIM))
+        self.dynamic_seen = ObstacleStates.empty()
+        self.free_history: deque = deque(maxlen=FREE_HISTORY)
+        self.clock_offset_us = 0
+        self.perception_s: list[float] = []  # wall-clock time of each frame's perception
         self.next_control = 0.0
         self.settled = 0
         self.current: Setpoint | None = None
@@ -416,6 +493,7 @@ class NavRL(Navigator):
         self.compute_s: list[float] = []
         self.policy_calls = 0
         self.shield_solves = 0
+        self.dynamic_steps = 0  # control periods with a moving obstacle in the input
 
     def state_vector(self, position, velocity) -> np.ndarray:
         rpos = self.goal - position
@@ -434,7 +512,12 @@ class NavRL(Navigator):
         dist = self.map.first_occupied(pos, self.rays, RAY_STEP_M, LIDAR_RANGE_M)
         deficit = LIDAR_RANGE_M - dist
         vel = np.asarray(obs.velocity, dtype=float)
-        if obstacle_in_range(deficit):
+        if self.dynamic_mode != "off":
+            near = in_range(self._moving(obs), pos, DYNAMIC_RANGE_M)
+            self.dynamic_seen = near.take(slice(0, DYN_OBS))
+            self.dynamic = dynamic_obstacle_input(self.dynamic_seen, pos, self.frame)
+            self.dynamic_steps += int(self.dynamic_seen.count > 0)
+        if obstacle_in_range(deficit) or np.any(self.dynamic != 0.0):
             mean = self.policy.mean_action(self.state_vector(pos, vel), deficit, self.dynamic)
             cmd = self.frame.T @ ((2.0 * mean - 1.0) * self.limit)
             self.policy_calls += 1
@@ -445,7 +528,7 @@ class NavRL(Navigator):
         if self.use_shield:
             ends = pos + self.rays * dist[..., None]
             cmd, solved = shield(pos, cmd, ends.reshape(-1, 3), math.sqrt(3.0) * self.limit,
-                                 self.agent_radius)
+                                 self.agent_radius, self.dynamic_seen, self.dynamic_radius)
             self.shield_solves += int(solved)
         goal_dist = float(np.linalg.norm(pos - self.goal))
         speed = float(np.linalg.norm(cmd))
@@ -456,15 +539,57 @@ class NavRL(Navigator):
         return Setpoint.trajectory(position=[math.nan, math.nan, self.hold_z],
                                    velocity=[cmd[0], cmd[1], math.nan], yaw=self.goal_yaw)
 
+    def _moving(self, obs: Observation) -> ObstacleStates:
+        """The moving obstacles now: the tracker's, or the ground truth."""
+        if self.tracker is not None:
+            return self.tracker.obstacles()
+        if obs.movers is None:
+            raise ValueError("dynamic_obstacles = 'truth' needs the moving obstacles' ground "
+                             "truth (Observation.movers), which only the in-process trial "
+                             "driver supplies; use 'tracked' or 'off' here")
+        return obs.movers
+
+    def _perceive(self, obs: Observation) -> None:
+        """A depth frame, if any: the detector takes it (tracked), and it is fused into the
+        map the lidar is cast in, leaving out the points in the moving obstacles' boxes of
+        the last FREE_HISTORY updates and then freeing the current boxes, as the
+        deployment's map does (not with 'off')."""
+        frame = obs.depth
+        if self.dynamic_mode == "off":
+            if frame is not None:
+                self.map.fuse(frame)
+            return
+        moving = self._moving(obs)  # (truth: checked at every step)
+        if frame is None:
+            return
+        t0 = time.perf_counter()
+        if self.tracker is not None:
+            # the navigator's clock starts again at 0 when navigation starts (it counted
+            # from arming before): the tracker's time goes on one frame period later
+            t_us = int(frame.t_us) + self.clock_offset_us
+            last = self.tracker.last_t_us
+            if last is not None and t_us <= last:
+                self.clock_offset_us += last + round(self.camera.period_us) - t_us
+                t_us = int(frame.t_us) + self.clock_offset_us
+            self.tracker.update(frame, t_us)
+            moving = self.tracker.obstacles()
+        boxes = free_boxes(moving, frame.p_world_camera)
+        if self.free_history:
+            self.map.fuse(frame, exclude_boxes=(np.vstack([b[0] for b in self.free_history]),
+                                                np.vstack([b[1] for b in self.free_history])))
+        else:
+            self.map.fuse(frame)
+        self.map.set_free(boxes)
+        self.free_history.append(boxes)
+        self.perception_s.append(time.perf_counter() - t0)
+
     def observe(self, obs: Observation) -> None:
-        """Before navigation: fuse the depth frame into the map the lidar is cast in."""
-        if obs.depth is not None:
-            self.map.fuse(obs.depth)
+        """Before navigation: the depth frame goes to the detector and the map."""
+        self._perceive(obs)
 
     def step(self, obs: Observation) -> Setpoint:
         t = obs.time_s
-        if obs.depth is not None:
-            self.map.fuse(obs.depth)
+        self._perceive(obs)
         if self.pending is not None and t >= self.pending[0] - 1e-9:
             self.current, self.pending = self.pending[1], None
         if t >= self.next_control - 1e-9:

@@ -178,6 +178,23 @@ class Movers:
             v[:, 1] = self.speed * np.sin(p[:, 3])
         return v
 
+    def boxes(self, t_us: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Each mover as an axis-aligned box at simulation time t_us: centres (M, 3),
+        velocities (M, 3) (m/s) and full sizes (M, 3) (m; a box turned by its heading
+        gets the box around it)."""
+        p = self.poses(t_us)
+        size = np.empty((self.count, 3))
+        for j in range(self.count):
+            k, d = int(self.kind[j]), self.dims[j]
+            if k == CYLINDER:
+                size[j] = (2 * d[0], 2 * d[0], 2 * d[1])
+            elif k == BOX:
+                c, s = abs(math.cos(p[j, 3])), abs(math.sin(p[j, 3]))
+                size[j] = (2 * (c * d[0] + s * d[1]), 2 * (s * d[0] + c * d[1]), 2 * d[2])
+            else:
+                size[j] = 2 * d[0]
+        return p[:, :3].copy(), self.velocities(t_us), size
+
     def describe(self) -> list[dict]:
         """One dict per mover: name, shape, size and path (JSON types)."""
         out = []

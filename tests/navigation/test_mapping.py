@@ -17,6 +17,7 @@ from scipy import ndimage
 from ft_sitl.navigation.mapping import FuseStats, LocalMap, MapConfig
 from ft_sitl.scenarios.camera import CameraConfig, DepthCamera
 from ft_sitl.scenarios.families import build_scenario
+from ft_sitl.scenarios.movers import movers_from_list
 
 RES = 0.1
 CEILING = 3.0
@@ -157,6 +158,81 @@ def test_a_removed_wall_decays_back_to_free():
     untouched = np.isclose(lo, cfg.l_max, atol=1e-6)
     assert np.all(cleared | untouched) and cleared.any()
     assert 0 < m.occupied_count < before
+
+
+def _person_leaving(early_stop: bool):
+    """A person (rendered by the camera) stands 3 m in front of a hovering camera long
+    enough to saturate its voxels (12 frames), then walks out of the view at 1.5 m/s; the
+    scene is otherwise empty. Returns the map, the voxels the standing person occupied
+    (centres) and their log-odds at every frame after it started walking."""
+    cam_cfg = CameraConfig().subsampled(4)  # the benchmark camera, 160 x 120
+    cam = DepthCamera(cam_cfg, nothing())
+    size = {"shape": "person", "radius_m": 0.3, "height_m": 1.8}
+    standing = movers_from_list([{**size, "points": [[3.0, 0.0]], "speed_m_s": 0.0}])
+    walking = movers_from_list([{**size, "points": [[3.0, 0.0], [3.0, 6.0]],
+                                 "speed_m_s": 1.5}])
+    m = LocalMap(MapConfig(skip_pixel=1), CEILING, camera=cam_cfg)
+    period = round(cam_cfg.period_us)
+    for k in range(12):
+        m.fuse(cam.capture(k * period, P0, IDENTITY, movers=standing, movers_time_us=0),
+               early_stop=early_stop)
+    occupied = m.occupied_centers()
+    trace = []
+    for k in range(12, 12 + 60):  # 2 s: it is out of the view after ~1.6 s
+        frame = cam.capture(k * period, P0, IDENTITY, movers=walking,
+                            movers_time_us=(k - 12) * period)
+        m.fuse(frame, early_stop=early_stop)
+        trace.append(m.log_odds(occupied))
+    assert not np.isfinite(frame.depth).any()  # gone (the empty scene is never seen)
+    return m, occupied, np.array(trace)
+
+
+def test_a_person_walking_out_of_the_view_is_cleared_by_the_misses_the_map_predicts():
+    """With every ray traced in full, each voxel the standing person saturated is free
+    misses_to_free() frames (2) after its first miss, and all get their misses once it has
+    gone; the originals' early stop leaves part of them occupied for a hovering camera (no
+    trace reaches them again): the ghosts NavRL's free regions remove (docs/planners.md,
+    "Moving obstacles")."""
+    cfg = MapConfig()
+    n = cfg.misses_to_free()
+    l_max, l_occ = float(np.float32(cfg.l_max)), float(np.float32(cfg.l_occ))
+    m, occupied, trace = _person_leaving(early_stop=False)
+    assert len(occupied) > 40 and np.allclose(trace[0][trace[0] > l_occ], l_max)
+    first_miss = np.argmax(trace < l_max - 1e-5, axis=0)
+    assert np.all(trace[-1] < l_occ) and np.all(first_miss > 0)  # all left behind, freed
+    k = np.arange(len(occupied))
+    assert np.all(trace[first_miss + n - 1, k] < l_occ)  # free after n misses ...
+    assert np.all(trace[first_miss + n - 2, k] > l_occ)  # ... and not before
+    assert m.occupied_count == 0
+    ghosts, occupied, trace = _person_leaving(early_stop=True)
+    stuck = trace[-1] > l_occ
+    assert 0.2 * len(occupied) < stuck.sum() < len(occupied)
+    assert ghosts.occupied_count > stuck.sum()  # and more of the trail it walked
+    walked = (np.array([2.6, -0.4, 0.0]), np.array([3.4, 6.4, 1.9]))  # its path's box
+    before = ghosts.occupied_count
+    assert ghosts.set_free(walked) == before and ghosts.occupied_count == 0
+    assert ghosts.is_known(occupied).all() and ghosts.set_free(walked) == 0
+    assert len(ghosts.occupied_centers(inflated=True)) == 0  # the inflation went with them
+
+
+def test_points_in_excluded_boxes_are_neither_hits_nor_rays():
+    """``fuse(exclude_boxes=...)`` leaves out the end points inside the boxes (NavRL's map
+    in the boxes of the moving obstacles it tracks): a wall behind such a box keeps its
+    voxels outside the box only, and the rays to the left-out points carve nothing."""
+    cam = DepthCamera(SMALL, wall(3.05))
+    frame = cam.capture(0, P0, IDENTITY)
+    box = (np.array([2.9, -0.5, 1.0]), np.array([3.5, 0.5, 2.0]))
+    inside = grid([3.05], centres(-3, 4), centres(12, 19))  # one voxel in from its sides
+    outside = grid([3.05], centres(8, 14), centres(11, 20))
+    m = LocalMap(None, CEILING, camera=SMALL)
+    for k in range(8):
+        m.fuse(cam.capture(k * DT_US, P0, IDENTITY), exclude_boxes=box, early_stop=False)
+    assert m.occupied(outside).all() and not m.is_known(inside).any()
+    axis = grid(centres(5, 28), [0.05], [1.55])  # the ray to the box's centre
+    assert not m.is_known(axis).any()
+    with pytest.raises(ValueError, match="boxes"):
+        m.fuse(frame, exclude_boxes=(np.zeros(3), np.zeros((2, 3))))
+    assert m.set_free((np.zeros((0, 3)), np.zeros((0, 3)))) == 0
 
 
 # --- range rules ------------------------------------------------------------------------------

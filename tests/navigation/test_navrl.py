@@ -1,6 +1,7 @@
 """NavRL: the checkpoint reader, the numpy policy, the lidar, the ORCA shield, the navigator's
 deployment logic and real trials with the authors' released weights."""
 
+import dataclasses
 import json
 import math
 import os
@@ -11,19 +12,25 @@ import zipfile
 from pathlib import Path
 
 import numpy as np
+import pandas as pd
 import pytest
+import trimesh
 from scipy.signal import correlate
 
 from ft_sitl.autopilot.cascade import SP_POS, SP_VEL, SP_YAW
+from ft_sitl.cli.missions import differences
 from ft_sitl.missions.campaign_file import load_campaign
+from ft_sitl.missions.protocol import navigator_params
 from ft_sitl.missions.trial import TrialSpec, run_trial
-from ft_sitl.navigation.base import Limits, Observation, Task
+from ft_sitl.navigation.base import Limits, Observation, ObstacleStates, Task
 from ft_sitl.navigation.navrl import (
     ENV_VAR,
     NavRL,
     cast_lidar,
     cluster_spheres,
     dbscan,
+    dynamic_obstacle_input,
+    dynamic_spheres,
     goal_frame,
     lidar_directions,
     obstacle_in_range,
@@ -39,6 +46,8 @@ from ft_sitl.navigation.navrl_policy import (
     load_checkpoint,
 )
 from ft_sitl.navigation.registry import NavigatorError, create
+from ft_sitl.scenarios.camera import DepthCamera
+from ft_sitl.scenarios.movers import movers_from_list
 
 AGILE = "0.98kg-EGO Planner DIY"
 REPO = Path(__file__).resolve().parents[2]
@@ -382,3 +391,170 @@ def test_rerun_by_the_command_matches_the_worker_row_bit_for_bit(navrl_checkpoin
                            capture_output=True, text=True, timeout=600)
     assert rerun.returncode == 0, rerun.stderr
     assert "identical to the stored result" in rerun.stdout, rerun.stdout
+
+
+# --- moving obstacles ------------------------------------------------------------------------
+
+def test_dynamic_input_is_the_deployments_encoding():
+    """The released deployment's rows (navigation.py, get_action): unit vector to the
+    obstacle and its horizontal and vertical distance in the goal frame (vertical zeroed
+    for one taller than 1 m), its velocity in the goal frame, width category
+    ceil((max(x, y size) + 0.6) / 0.25) - 1 in 0..3, 1 if at most 1 m tall; a row of an
+    obstacle without height keeps only its velocity; the first 5 only."""
+    frame = goal_frame([0.0, 5.0, 0.0])  # goal due north: x_g north, y_g west
+    pos = np.array([1.0, 2.0, 1.5])
+    obstacles = ObstacleStates(
+        position=np.array([[1.0, 5.0, 0.9], [3.0, 2.0, 2.0], [0.0, 0.0, 1.0]]
+                          + [[9.0, 9.0, 1.0]] * 3),
+        velocity=np.array([[1.0, 0.0, 0.0], [0.0, -0.5, 0.0], [0.2, 0.3, 0.0]]
+                          + [[0.0, 0.0, 0.0]] * 3),
+        size=np.array([[0.6, 0.6, 1.8], [0.1, 0.05, 0.3], [0.5, 0.5, 0.0]]
+                      + [[1.0, 1.0, 1.0]] * 3))
+    got = dynamic_obstacle_input(obstacles, pos, frame)
+    n = math.hypot(2.0, 0.5)
+    want = np.zeros((5, 10))
+    want[0] = [1, 0, 0, 3, 0, 0, -1, 0, 3, 0]  # a person 3 m ahead, walking east
+    want[1] = [0, -2 / n, 0.5 / n, 2, 0.5, -0.5, 0, 0, 2, 1]  # a small ball to the east
+    want[2] = [0, 0, 0, 0, 0, 0.3, -0.2, 0, 0, 0]  # no height: only its velocity
+    want[3] = want[4] = 0.0
+    np.testing.assert_allclose(got[:3], want[:3], atol=1e-12)
+    assert got.shape == (5, 10) and np.all(got[3:, 8] == 3) and np.all(got[3:, 9] == 1)
+    assert not dynamic_obstacle_input(ObstacleStates.empty(), pos, frame).any()
+
+
+def test_shield_keeps_clear_of_a_moving_obstacle_coming_at_the_vehicle():
+    person = ObstacleStates(np.array([[2.0, 0.0, 0.9]]), np.array([[-1.0, 0.0, 0.0]]),
+                            np.array([[0.6, 0.6, 1.8]]))
+    spheres = dynamic_spheres(person)  # three stacked, a side (0.6 m) apart
+    np.testing.assert_allclose([c[2] for c, _, _ in spheres], [0.3, 0.9, 1.5])
+    assert all(r == pytest.approx(0.3 * math.sqrt(2)) for _, _, r in spheres)
+    pos, want, none = np.array([0.0, 0.0, 1.5]), np.array([1.0, 0.0, 0.0]), np.zeros((0, 3))
+    v, solved = shield(pos, want, none, 2.0, 0.0, person, 0.6)
+    assert solved and abs(v[1]) > 0.3  # sideways out of its way
+    away = ObstacleStates(person.position, -1.5 * person.velocity, person.size)
+    v, solved = shield(pos, want, none, 2.0, 0.0, away, 0.6)  # faster away than we close
+    assert not solved and np.array_equal(v, want)
+
+
+def _hover_beside_a_crossing_person(mode: str):
+    """NavRL (the released policy, ``dynamic_obstacles`` = mode) hovering at the start,
+    turned toward the goal, while a person walks across 3 m ahead and out of the view;
+    steps at 100 Hz, the benchmark camera at 30 Hz. Returns the navigator and its dynamic
+    input at every control period once settled (time, input, the truth's centre)."""
+    nav = NavRL(latency_s=0.0, dynamic_obstacles=mode)
+    nav.reset(_task())
+    far = trimesh.creation.box(extents=(0.2, 0.2, 0.2))
+    far.apply_translation((-60.0, 0.0, 1.0))  # never seen
+    cam = DepthCamera(nav.camera, far)
+    person = movers_from_list([{"shape": "person", "radius_m": 0.3, "height_m": 1.8,
+                                "points": [[3.0, -4.5], [3.0, 5.0]], "speed_m_s": 1.2}])
+    inputs = []
+    next_frame_us = 0
+    for k in range(650):  # 6.5 s
+        t_us = k * 10_000
+        frame = None
+        if t_us >= next_frame_us:
+            frame = cam.capture(t_us, [0.0, 0.0, 1.5], [1.0, 0, 0, 0], movers=person,
+                                movers_time_us=t_us)
+            next_frame_us += round(nav.camera.period_us)
+        centre, vel, size = person.boxes(t_us)
+        obs = Observation(time_s=t_us * 1e-6, position=np.array([0.0, 0.0, 1.5]),
+                          velocity=np.zeros(3), yaw=0.0, attitude=np.array([1.0, 0, 0, 0]),
+                          angular_velocity=np.zeros(3), depth=frame,
+                          movers=ObstacleStates(centre, vel, size))
+        nav.step(obs)
+        if k % 5 == 0 and nav.settled > 10:
+            inputs.append((t_us * 1e-6, nav.dynamic.copy(), centre[0]))
+    return nav, inputs
+
+
+def test_tracked_and_true_moving_obstacles_give_the_policy_similar_inputs(with_checkpoint):
+    """A person crossing 3 m ahead in plain view: once the tracker has followed it for
+    0.7 s, the policy's dynamic input from the tracker matches the one from the ground
+    truth (direction within 8 deg, distance within 0.35 m, velocity within 0.4 m/s, the
+    same size categories); with "off" the input stays zero. The map of "tracked" and
+    "truth" keeps nothing of the person once it has gone; the plain map ("off") keeps part
+    of its trail (a hovering camera: docs/planners.md, "Moving obstacles")."""
+    runs = {m: _hover_beside_a_crossing_person(m) for m in ("truth", "tracked", "off")}
+    truth, tracked = runs["truth"][1], runs["tracked"][1]
+    assert [t for t, _, _ in truth] == [t for t, _, _ in tracked]
+    rows = [(a[0], b[0]) for (_, a, c), (_, b, _) in zip(truth, tracked)
+            if abs(c[1]) < 2.0]  # within 4 m and fully in view
+    near = [(a, b) for a, b in rows if b.any()]
+    assert len(near) > 0.8 * len(rows) > 40
+    for a, b in near[14:]:  # 0.7 s of tracking
+        assert math.degrees(math.acos(np.clip(a[:3] @ b[:3], -1, 1))) < 8.0
+        assert abs(a[3] - b[3]) < 0.35 and a[4] == b[4] == 0.0  # a tall one: level
+        assert np.linalg.norm(a[5:8] - b[5:8]) < 0.4
+        assert tuple(a[8:]) == tuple(b[8:]) == (3.0, 0.0)
+    assert runs["truth"][0].dynamic_steps > 40 and runs["tracked"][0].dynamic_steps > 40
+    off = runs["off"][0]
+    assert off.dynamic_steps == 0 and not any(d.any() for _, d, _ in runs["off"][1])
+    assert not off.free_history and off.tracker is None
+    walked = np.array([[x, y, z] for x in (2.75, 2.85, 2.95) for y in np.arange(-2.0, 2.0, 0.1)
+                       for z in np.arange(0.15, 1.8, 0.1)])
+    assert off.map.occupied(walked).sum() > 20
+    for mode in ("truth", "tracked"):
+        assert runs[mode][0].map.occupied_count == 0, mode
+
+
+def test_truth_needs_the_ground_truth_in_the_observation(with_checkpoint):
+    nav = NavRL(dynamic_obstacles="truth")
+    assert nav.needs_mover_truth and not NavRL().needs_mover_truth
+    nav.reset(_task())
+    with pytest.raises(ValueError, match="only the in-process trial driver"):
+        nav.step(_obs(0.0, yaw=0.0))
+    nav.step(Observation(**{**_obs(0.0, yaw=0.0).__dict__, "movers": ObstacleStates.empty()}))
+
+
+@pytest.mark.parametrize("mode", ["tracked", "truth", "off"])
+def test_trial_with_movers_ends_by_the_protocol_with_each_option(with_checkpoint, mode):
+    """A short Maze trial among 40 walking people: every option flies to a protocol
+    outcome; "tracked" and "truth" feed the policy moving obstacles, "off" none."""
+    spec = TrialSpec(algorithm="navrl", platform=AGILE, family="maze", scenario_index=1,
+                     algorithm_params={"dynamic_obstacles": mode}, limits=Limits(timeout_s=6.0),
+                     movers={"count": 40, "keep_out_m": 2.0, "speed_m_s": 1.0, "path": "line",
+                             "path_length_m": [4, 8]})
+    nav = create("navrl", {"dynamic_obstacles": mode})
+    row = run_trial(spec, navigator=nav).row
+    assert row["reason"] in {"success", "timeout", "collision", "mover_collision"}, row["detail"]
+    assert row["mover_count"] == 40 and row["planner_calls"] > 0
+    assert (nav.dynamic_steps > 20) == (mode != "off")
+
+
+V6 = REPO / "docs" / "results" / "paper-slice-v6" / "trials.parquet"
+#: a stored protocol-6 NavRL trial (the Maze, 4.50kg-T-MOTOR: a collision after 3.3 s)
+V6_TRIAL = "65af5f4189332b4c"
+
+
+def _stored(trial_id: str) -> tuple[TrialSpec, dict]:
+    df = pd.read_parquet(V6)
+    stored = df[df.trial_id == trial_id].iloc[0].to_dict()
+    return TrialSpec.from_dict(json.loads(stored["spec"])), stored
+
+
+def test_rows_of_earlier_protocols_fly_as_they_were_stored(with_checkpoint):
+    """Before protocol 7 NavRL saw no moving obstacles: its trials fly with
+    dynamic_obstacles = "off" (pinned by their protocol) and give the stored row bit for
+    bit."""
+    spec, stored = _stored(V6_TRIAL)
+    assert spec.protocol == 6 and "dynamic_obstacles" not in spec.algorithm_params
+    assert navigator_params(spec)["dynamic_obstacles"] == "off"
+    assert differences(run_trial(spec).row, stored) == []
+
+
+def test_in_a_static_world_the_detector_changes_nothing(with_checkpoint):
+    """The same trial under protocol 7 ("tracked" by default): in a static world the
+    detector reports nothing, so the flight and its row are those of "off"."""
+    spec, _ = _stored(V6_TRIAL)
+    spec = dataclasses.replace(spec, protocol=7)
+    assert "dynamic_obstacles" not in navigator_params(spec)
+    nav = create("navrl", navigator_params(spec))
+    assert nav.dynamic_mode == "tracked"
+    tracked = run_trial(spec, navigator=nav).row
+    off = run_trial(dataclasses.replace(
+        spec, algorithm_params={"dynamic_obstacles": "off"})).row
+    keys = [k for k in tracked if k not in ("trial_id", "algorithm_params", "spec",
+                                             "wall_time_s", "planner_time_s", "finished_utc")]
+    assert {k: tracked[k] for k in keys} == {k: off[k] for k in keys}
+    assert nav.tracker.frames > 50 and nav.dynamic_steps == 0

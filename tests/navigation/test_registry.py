@@ -23,7 +23,8 @@ DEFAULTS = {
             "no_replan_threshold_m": 2.0, "stop_distance_m": 0.5, "ctrl_pt_dist_m": 0.3,
             "latency_s": 0.03, "measured_latency": False, **CAMERA},
     "navrl": {"checkpoint": None, "action_limit_m_s": 1.0, "latency_s": 0.01,
-              "measured_latency": False, "use_shield": True, **CAMERA},
+              "measured_latency": False, "use_shield": True, "dynamic_obstacles": "tracked",
+              **CAMERA},
 }
 
 
