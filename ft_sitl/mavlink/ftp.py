@@ -5,9 +5,11 @@ The protocol is the MAVLink FTP specification as PX4 implements it
 ``session``, ``opcode``, ``size``, ``req_opcode``, ``burst_complete``, padding, ``offset``
 u32) and up to 239 data bytes; each request is answered ACK (128) or NAK (129) with
 ``seq_number`` + 1 and ``req_opcode`` set to the request's opcode; a NAK carries an error
-code (and an errno after ``FailErrno``). As PX4, a link has one session (id 0), closed
+code (and an errno after ``FailErrno``). As PX4, a link has one session at a time, closed
 after 10 s without activity, and a request repeated with the same sequence number (its
-answer was lost) gets the same answer again.
+answer was lost) gets the same answer again. The session's id is the one the client sent
+with ``OpenFileRO`` (MAVSDK sends 0, the only id PX4 has; MAVProxy picks its own, as
+ArduPilot lets it, and routes the answers by it).
 
 Served (the tree is :mod:`ft_sitl.mavlink.files`): ``TerminateSession``, ``ResetSessions``,
 ``ListDirectory``, ``OpenFileRO``, ``ReadFile``, ``BurstReadFile``, ``CalcFileCRC32``.
@@ -145,6 +147,7 @@ class FtpServer:
     def __init__(self, root: files.Directory):
         self.root = root
         self._file: files.OpenFile | None = None
+        self._session = 0  # the open session's id: the client's, from its OpenFileRO
         self._last_use_us = 0
         #: (request header and data, reply payload) of the last answered request
         self._last: tuple[tuple, list[int]] | None = None
@@ -195,7 +198,7 @@ class FtpServer:
         the burst (burst_complete) after BURST_MAX_BYTES; past the end of the file a NAK
         EOF, which ends the transfer (PX4's stream)."""
         b, f = self._burst, self._file
-        h = Header(b["seq"], 0, Op.ACK, 0, Op.BURST_READ_FILE, 0, b["offset"])
+        h = Header(b["seq"], self._session, Op.ACK, 0, Op.BURST_READ_FILE, 0, b["offset"])
         b["seq"] = (b["seq"] + 1) & 0xFFFF
         try:
             if f is None or b["offset"] >= f.size:
@@ -210,8 +213,8 @@ class FtpServer:
         b["offset"] += len(data)
         b["sent"] += len(data)
         complete = b["sent"] >= BURST_MAX_BYTES and b["offset"] < f.size
-        return pack(Header(h.seq, 0, Op.ACK, 0, Op.BURST_READ_FILE, int(complete), h.offset),
-                    data), not complete
+        return pack(Header(h.seq, h.session, Op.ACK, 0, Op.BURST_READ_FILE, int(complete),
+                           h.offset), data), not complete
 
     # --- the requests ---------------------------------------------------------------
     def _work(self, h: Header, data: bytes, sysid: int, compid: int) -> list[int] | None:
@@ -231,8 +234,8 @@ class FtpServer:
             if self._file is not None:
                 raise Nak(Err.NO_SESSIONS_AVAILABLE)
             self._file = self._node_file(_path(data)).open()
-            return self._ack(h, struct.pack("<I", min(self._file.size, 0xFFFFFFFF)),
-                             session=0)
+            self._session = h.session
+            return self._ack(h, struct.pack("<I", min(self._file.size, 0xFFFFFFFF)))
         if op == Op.READ_FILE:
             self._check_session(h)
             if h.offset >= self._file.size:
@@ -302,7 +305,7 @@ class FtpServer:
         return node
 
     def _check_session(self, h: Header) -> None:
-        if h.session != 0 or self._file is None:
+        if self._file is None or h.session != self._session:
             raise Nak(Err.INVALID_SESSION)
 
     def _close(self) -> None:
@@ -317,9 +320,9 @@ class FtpServer:
             self._last = None
 
     @staticmethod
-    def _ack(h: Header, data: bytes = b"", session: int | None = None) -> list[int]:
-        return pack(Header((h.seq + 1) & 0xFFFF, h.session if session is None else session,
-                           Op.ACK, 0, h.opcode, 0, h.offset), data)
+    def _ack(h: Header, data: bytes = b"") -> list[int]:
+        return pack(Header((h.seq + 1) & 0xFFFF, h.session, Op.ACK, 0, h.opcode, 0, h.offset),
+                    data)
 
     @staticmethod
     def _nak(h: Header, nak: Nak, keep_opcode: bool = False) -> list[int]:

@@ -126,9 +126,11 @@ def test_ftp_refuses_bad_input_and_the_vehicle_carries_on():
         assert (h.opcode, int.from_bytes(data, "little")) == (Op.ACK, size)
         h, data = _ftp_request(c, 17, Op.READ_FILE, offset=size, size=100)
         assert (h.opcode, data) == (Op.NAK, bytes([Err.EOF]))
-        h, data = _ftp_request(c, 18, Op.OPEN_FILE_RO, b"/ft-sitl/params.txt\0")
+        h, data = _ftp_request(c, 18, Op.READ_FILE, offset=0, session=5, size=100)
+        assert (h.opcode, data) == (Op.NAK, bytes([Err.INVALID_SESSION]))
+        h, data = _ftp_request(c, 19, Op.OPEN_FILE_RO, b"/ft-sitl/params.txt\0")
         assert (h.opcode, data) == (Op.NAK, bytes([Err.NO_SESSIONS_AVAILABLE]))
-        assert _ftp_request(c, 19, Op.TERMINATE_SESSION)[0].opcode == Op.ACK
+        assert _ftp_request(c, 20, Op.TERMINATE_SESSION)[0].opcode == Op.ACK
         # no logs without --tlog: the list says so at once, a data request is answered
         t0 = time.time()
         c.mav.log_request_list_send(1, 1, 0, 0xFFFF)
@@ -147,7 +149,7 @@ def test_ftp_refuses_bad_input_and_the_vehicle_carries_on():
         c.mav.log_request_end_send(1, 1)
         # the vehicle is alive and its FTP still works
         wait_msg(c, "HEARTBEAT", timeout=3)
-        h, data = _ftp_request(c, 20, Op.LIST_DIRECTORY, b"/\0")
+        h, data = _ftp_request(c, 21, Op.LIST_DIRECTORY, b"/\0")
         assert (h.opcode, data) == (Op.ACK, b"Dft-sitl\0Dlog\0")
 
 
