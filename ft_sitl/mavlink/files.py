@@ -27,9 +27,6 @@ from pathlib import Path
 
 from pymavlink.dialects.v20 import common as mav
 
-#: the longest path accepted (the FTP data field holds 239 bytes, one of them the NUL)
-MAX_PATH_BYTES = 238
-
 
 class PathError(Exception):
     """A path that names nothing servable."""
@@ -41,10 +38,6 @@ class PathNotFound(PathError):
 
 class PathForbidden(PathError):
     """A ``..`` component: refused, not resolved."""
-
-
-class PathTooLong(PathError):
-    """Longer than :data:`MAX_PATH_BYTES`."""
 
 
 class NotADirectory(PathError):
@@ -167,8 +160,6 @@ def vehicle_tree(params_text: Callable[[], bytes], logs: list[LogFile]) -> Direc
 
 def lookup(root: Directory, path: str) -> Directory | GeneratedFile | HostFile:
     """The node at ``path``; PathError when there is none or the path is refused."""
-    if len(path.encode("utf-8", "surrogateescape")) > MAX_PATH_BYTES:
-        raise PathTooLong(path[:40])
     node: Directory | GeneratedFile | HostFile = root
     for part in path.split("/"):
         if part in ("", "."):

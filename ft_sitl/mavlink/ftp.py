@@ -129,15 +129,18 @@ def unpack(payload) -> tuple[Header, bytes]:
 
 
 def _path(data: bytes) -> str:
-    """The path a request carries: its data up to the first NUL."""
-    return data.split(b"\0", 1)[0].decode("utf-8", "surrogateescape")
+    """The path a request carries: its data up to the first NUL. A path that fills the
+    whole data field leaves no room for the NUL PX4 needs: ENAMETOOLONG (PX4 would cut it
+    silently)."""
+    raw = data.split(b"\0", 1)[0]
+    if len(raw) >= MAX_DATA:
+        raise Nak(Err.FAIL_ERRNO, errno.ENAMETOOLONG)
+    return raw.decode("utf-8", "surrogateescape")
 
 
 def _path_nak(exc: files.PathError) -> Nak:
     if isinstance(exc, files.PathForbidden):
         return Nak(Err.FAIL_ERRNO, errno.EACCES)
-    if isinstance(exc, files.PathTooLong):
-        return Nak(Err.FAIL_ERRNO, errno.ENAMETOOLONG)
     return Nak(Err.FILE_NOT_FOUND)
 
 
