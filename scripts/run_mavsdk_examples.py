@@ -141,10 +141,12 @@ def run_one(example: Path, examples: Path, timeout: float, speed_factor: float,
                 import mavsdk_grpc.bin  # (for the bundled binary's path only)
 
                 binary = Path(mavsdk_grpc.bin.__file__).parent / "mavsdk_server"
+                # in the example's directory: the server writes the example's
+                # downloads, relative to its own working directory
                 server = subprocess.Popen(
                     [str(binary), "-p", str(GRPC_PORT), "udpin://0.0.0.0:14540"],
-                    stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL,
-                    start_new_session=True)
+                    cwd=script.parent, stdout=subprocess.DEVNULL,
+                    stderr=subprocess.DEVNULL, start_new_session=True)
             t0 = time.time()
             with open(out_path, "w") as fh:
                 proc = subprocess.Popen(
