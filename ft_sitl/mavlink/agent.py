@@ -22,6 +22,9 @@ from ft_sitl.autopilot.commander import MissionItem, Result
 from ft_sitl.autopilot.geofence import Fence, FenceError, circle, fits, polygon
 from ft_sitl.autopilot.params import PARAMS, ParamError
 from ft_sitl.autopilot.setpoints import Setpoint, SetpointError
+from ft_sitl.mavlink import files
+from ft_sitl.mavlink.ftp import FtpServer
+from ft_sitl.mavlink.logs import LogServer
 from ft_sitl.mavlink.shell import Shell
 from ft_sitl.physics import dynamics as d
 from ft_sitl.physics.quaternion import qrotate_inv, qto_euler
@@ -48,6 +51,7 @@ CAPABILITIES = (
     | mav.MAV_PROTOCOL_CAPABILITY_MISSION_INT
     | mav.MAV_PROTOCOL_CAPABILITY_COMMAND_INT
     | mav.MAV_PROTOCOL_CAPABILITY_PARAM_ENCODE_BYTEWISE
+    | mav.MAV_PROTOCOL_CAPABILITY_FTP
     | mav.MAV_PROTOCOL_CAPABILITY_SET_ATTITUDE_TARGET
     | mav.MAV_PROTOCOL_CAPABILITY_SET_POSITION_TARGET_LOCAL_NED
     | mav.MAV_PROTOCOL_CAPABILITY_SET_POSITION_TARGET_GLOBAL_INT
@@ -203,7 +207,7 @@ class VehicleAgent:
     """The MAVLink face of vehicle ``index`` of a :class:`Fleet` (sysid index + 1)."""
 
     def __init__(self, fleet: Fleet, index: int, geo: frames.GeoReference, n_links: int,
-                 link_modes: list[str]):
+                 link_modes: list[str], logs: list[files.LogFile] | None = None):
         self.fleet = fleet
         self.i = index
         self.sysid = index + 1
@@ -230,6 +234,13 @@ class VehicleAgent:
         self._param_streams: dict[tuple, int] = {}
         # PX4 SITL: each instance's local frame starts where it spawned
         self.origin = np.asarray(self.cmd.home, dtype=float).copy()
+        # MAVLink FTP and the log protocol, one server of each per link (as PX4), and the
+        # peer a burst or a log transfer of each link goes to
+        tree = files.vehicle_tree(self._params_file, list(logs or []))
+        self._ftp = [FtpServer(tree) for _ in range(n_links)]
+        self._logs = [LogServer(list(logs or []), self._warn) for _ in range(n_links)]
+        self._ftp_peer: dict[int, tuple] = {}
+        self._log_peer: dict[int, tuple] = {}
 
     # --- helpers --------------------------------------------------------------------
     @property
@@ -1139,9 +1150,15 @@ class VehicleAgent:
         return []
 
     def poll(self, wall_us: int) -> list[Outgoing]:
-        """Wall-clock duties: stream the parameter list on, re-request mission items, give
-        up abandoned uploads."""
+        """Wall-clock duties: stream the parameter list, FTP bursts and log data on,
+        re-request mission items, give up abandoned uploads."""
         out = self._stream_params() if self._param_streams else []
+        for link, ftp in enumerate(self._ftp):
+            if ftp.bursting:
+                out += [Outgoing(r, link, self._ftp_peer[link]) for r in ftp.stream(wall_us)]
+        for link, logs in enumerate(self._logs):
+            if logs.sending:
+                out += [Outgoing(r, link, self._log_peer[link]) for r in logs.stream()]
         return out + self._poll_upload(wall_us)
 
     def _poll_upload(self, wall_us: int) -> list[Outgoing]:
@@ -1158,6 +1175,22 @@ class VehicleAgent:
                 sysid, compid, mav.MAV_MISSION_OPERATION_CANCELLED, up.mission_type), up.link,
                 up.peer)]
         return [self._request_item(len(up.items))]
+
+    # files and logs (mavlink/ftp.py, mavlink/logs.py) ---------------------------------
+    def _on_file_transfer_protocol(self, m, link, peer, wall_us):
+        self._ftp_peer[link] = peer
+        return [Outgoing(r, link, peer) for r in self._ftp[link].handle(m, wall_us)]
+
+    def _on_log(self, m, link, peer, wall_us):
+        self._log_peer[link] = peer
+        return [Outgoing(r, link, peer) for r in self._logs[link].handle(m)]
+
+    def _params_file(self) -> bytes:
+        return files.params_file(self.sysid, COMPID, [
+            (n, self.params[n], _param_type(n)) for n in PARAM_NAMES])
+
+    def _warn(self, text: str) -> None:
+        self.cmd.text(cm.Severity.WARNING, text)
 
     def _on_timesync(self, m, link, peer, wall_us):
         if m.tc1 != 0:
@@ -1233,4 +1266,9 @@ _HANDLERS = {
     "SERIAL_CONTROL": VehicleAgent._on_serial_control,
     "FOLLOW_TARGET": VehicleAgent._on_follow_target,
     "MANUAL_CONTROL": VehicleAgent._on_manual_control,
+    "FILE_TRANSFER_PROTOCOL": VehicleAgent._on_file_transfer_protocol,
+    "LOG_REQUEST_LIST": VehicleAgent._on_log,
+    "LOG_REQUEST_DATA": VehicleAgent._on_log,
+    "LOG_REQUEST_END": VehicleAgent._on_log,
+    "LOG_ERASE": VehicleAgent._on_log,
 }

@@ -25,6 +25,7 @@ from pathlib import Path
 from pymavlink.dialects.v20 import common as mav
 
 from ft_sitl import frames
+from ft_sitl.mavlink import files
 from ft_sitl.mavlink.agent import Outgoing, VehicleAgent
 from ft_sitl.sim.fleet import Fleet
 
@@ -51,10 +52,16 @@ class Tlog:
     """A MAVLink telemetry log: each packet prefixed by a big-endian uint64 of wall us."""
 
     def __init__(self, path: Path):
+        self.path = Path(path)
         self._fh = open(path, "ab")  # noqa: SIM115 - closed in close()
 
     def write(self, data: bytes) -> None:
         self._fh.write(struct.pack(">Q", int(time.time() * 1e6)) + data)
+
+    def flush(self) -> None:
+        """Make what was written visible to readers of the file (log download, FTP)."""
+        if not self._fh.closed:
+            self._fh.flush()
 
     def close(self) -> None:
         self._fh.close()
@@ -124,6 +131,8 @@ class SitlServer:
         self.speed_factor = speed_factor
         self.secret = signing_secret(signing_key) if signing_key else None
         self.tlog = Tlog(tlog) if tlog else None
+        #: the logs every vehicle serves (log download, FTP /log): the telemetry log
+        logs = [files.telemetry_log(self.tlog.path, self.tlog.flush)] if self.tlog else []
         self.links: list[Link] = []
         self.agents: list[VehicleAgent] = []
         for i in range(fleet.n):
@@ -135,7 +144,7 @@ class SitlServer:
                      i + 1, self.secret),
             ]
             self.links.extend(links)
-            self.agents.append(VehicleAgent(fleet, i, geo, 2, ["onboard", "normal"]))
+            self.agents.append(VehicleAgent(fleet, i, geo, 2, ["onboard", "normal"], logs))
         self._stop = asyncio.Event()
         self.achieved_speed_factor = 0.0
         #: wall seconds of pace not made up after stalls (MAX_CATCH_UP_S)
