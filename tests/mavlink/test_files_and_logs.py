@@ -18,7 +18,6 @@ from mavsdk.plugins.camera import CameraError, CameraResult, Mode
 from mavsdk.plugins.ftp import FilesystemEntry, FtpError, FtpResult
 from mavsdk.plugins.gimbal import GimbalError, GimbalMode, SendMode
 from mavsdk.plugins.log_files import LogFilesError, LogFilesResult
-from mavsdk.plugins.transponder import TransponderError
 from pymavlink.dialects.v20 import common as mav
 
 from ft_sitl.autopilot.params import PARAMS
@@ -174,7 +173,9 @@ def test_camera_gimbal_transponder_and_logs_fail_fast():
         await refused(camera.start_video(1), CameraError, CameraResult.ACTION_UNSUPPORTED)
         await refused(gimbal.set_angles(0, 0.0, -90.0, 0.0, GimbalMode.YAW_FOLLOW,
                                         SendMode.ONCE), GimbalError)
-        await refused(transponder.set_rate_transponder(1.0), TransponderError)
+        t0 = time.time()  # accepted, as PX4 (its ADSB_VEHICLE stream: the movers' traffic)
+        await asyncio.wait_for(transponder.set_rate_transponder(1.0), 5)
+        assert time.time() - t0 < 2.0
         await refused(logs.get_entries(), LogFilesError, LogFilesResult.NO_LOGFILES)
         m.destroy()
 
@@ -190,6 +191,6 @@ def test_camera_gimbal_transponder_and_logs_fail_fast():
             assert ack_of(c, command, timeout=3).result == mav.MAV_RESULT_UNSUPPORTED
         c.mav.command_long_send(1, 1, mav.MAV_CMD_SET_MESSAGE_INTERVAL, 0,
                                 mav.MAVLINK_MSG_ID_ADSB_VEHICLE, 1e6, 0, 0, 0, 0, 0)
-        assert ack_of(c, mav.MAV_CMD_SET_MESSAGE_INTERVAL, 3).result == mav.MAV_RESULT_DENIED
+        assert ack_of(c, mav.MAV_CMD_SET_MESSAGE_INTERVAL, 3).result == mav.MAV_RESULT_ACCEPTED
         c.close()
         asyncio.run(run())
