@@ -104,6 +104,13 @@ def catalog_range(protocol: int) -> tuple[np.ndarray, np.ndarray]:
     return f.min(axis=0), f.max(axis=0)
 
 
+@functools.cache
+def catalog_rotors() -> int:
+    """The rotor count of every catalog platform (and of those generated from them)."""
+    (n,) = {p.n_rotors for p in catalog().values()}
+    return n
+
+
 def platform_vector(platform: Platform, protocol: int) -> np.ndarray:
     """The observation's platform vector: each feature's log, 0 at the catalog's smallest
     and 1 at its largest (a platform outside the catalog's range lies outside [0, 1];
@@ -144,7 +151,7 @@ class FlightBatch:
         v = cfg.values
         self.k = cfg.steps_per_action
         self.dt_action = self.k / v["physics_hz"]
-        self.n_rotors = 4  # every catalog platform's (a batch flies one rotor count)
+        self.n_rotors = catalog_rotors()  # a batch flies one rotor count: the catalog's
         self.action_dim = self.n_rotors if v["action"] == "motors" else 4
         self.sensor = v["sensor"]
         self.rays_local = ray_directions(v["ray_columns"], v["ray_rows"],
@@ -449,7 +456,8 @@ class FlightBatch:
                                                                           (0, 2, 1)),
                                 self.rays_local, max_range_m=rng_m, movers=self.movers,
                                 movers_time_us=self.sim.time_us)
-        return (np.minimum(lengths, rng_m) / rng_m).astype(np.float32)
+        # (a vehicle touching a surface may read a hair below 0: the float64 plane length)
+        return (np.clip(lengths, 0.0, rng_m) / rng_m).astype(np.float32)
 
     def depths(self, idx: np.ndarray, config, metres: bool = False) -> np.ndarray:
         """(len(idx), H, W) float32 depth images at the true poses: z-depth over the range

@@ -162,12 +162,11 @@ class WorldCache:
 
     def family(self, family: str, index: int, seed: int, params: dict | None) -> World:
         """Configuration ``index`` of ``family`` for ``seed`` (generator ``params``)."""
-        key = ("family", family, int(index), int(seed),
-               json.dumps(params, sort_keys=True) if params else "")
         try:
-            return self._get(key, lambda: build_scenario(family, int(index), int(seed),
-                                                         params))
-        except ScenarioError as exc:
+            key = ("family", family, index, seed,
+                   json.dumps(params, sort_keys=True) if params else "")
+            return self._get(key, lambda: build_scenario(family, index, seed, params))
+        except (ScenarioError, TypeError) as exc:  # (TypeError: params not JSON data)
             raise EnvError(f"scenario: {exc}") from None
 
     def arena(self, size) -> World:
