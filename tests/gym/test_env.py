@@ -30,7 +30,8 @@ DOCS = Path(__file__).resolve().parents[2] / "docs" / "gym.md"
     ("ftsitl/Navigate-v0", {**SMALL, "action": "motors", "platform": "generated",
                             "wind_speed_m_s": (0.0, 6.0), "turbulence": "light",
                             "position_noise_m": (0.0, 0.2)}),
-    ("ftsitl/Navigate-v0", {**SMALL, "action": "acceleration", "movers": {"count": 3}}),
+    ("ftsitl/Navigate-v0", {**SMALL, "action": "acceleration", "movers": {"count": 3},
+                            "mover_layouts": 2}),
 ])
 def test_gymnasium_check_env_passes_without_warnings(env_id, settings):
     env = gym.make(env_id, **settings)
