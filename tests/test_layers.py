@@ -1,7 +1,8 @@
 """The package's layering (docs/architecture.md): imports point down only.
 
 physics <- autopilot <- sim <- mavlink / bridge / missions / cli, with scenarios (geometry)
-beside autopilot, navigation and the bus above them, the wire client above those. Checked
+beside autopilot, navigation and the bus above them, the wire client above those, and the
+Gymnasium environments (gym) above the missions. Checked
 statically on every import statement of the package (in functions too) and dynamically
 by importing the lower layers in a fresh interpreter.
 """
@@ -31,9 +32,11 @@ ALLOWED = {
     "wire": {"physics", "autopilot", "scenarios", "sim", "navigation", "bus"},
     "missions": {"physics", "autopilot", "scenarios", "sim", "navigation", "bus", "mavlink",
                  "wire"},
+    "gym": {"physics", "autopilot", "scenarios", "sim", "navigation", "bus", "mavlink",
+            "wire", "missions"},
     "demo": {"physics", "autopilot", "sim"},
     "cli": {"physics", "autopilot", "scenarios", "sim", "navigation", "bus", "mavlink",
-            "bridge", "wire", "missions", "demo"},
+            "bridge", "wire", "missions", "gym", "demo"},
     "__main__": {"cli"},
 }
 

@@ -240,3 +240,86 @@ def _row_problem(row) -> int:
         if math.isnan(row[c.SP_THRUST]):
             return 5
     return 0
+
+
+# --- many vehicles at once -----------------------------------------------------------------
+# The rows of N offboard setpoints of one kind in one call (a vectorised environment sets
+# a batch's setpoints every control period): each row is the row of the Setpoint
+# constructor named in the docstring, value for value, and the same values are refused.
+def _batch(name: str, values, width: int) -> np.ndarray:
+    try:
+        arr = np.asarray(values, dtype=float)
+    except (TypeError, ValueError):
+        raise SetpointError(f"{name}: not an array of numbers") from None
+    if arr.ndim != 2 or arr.shape[1] != width:
+        raise SetpointError(f"{name}: needs shape (N, {width}), got {arr.shape}")
+    bad = ~np.isfinite(arr)
+    if bad.any():
+        i = int(np.flatnonzero(bad.any(axis=1))[0])
+        raise SetpointError(f"{name}: row {i} {arr[i].tolist()} has non-finite component(s)")
+    return arr
+
+
+def _batch_rows(kind: int, n: int) -> np.ndarray:
+    rows = np.full((n, c.N_SP), np.nan)
+    rows[:, c.SP_KIND] = kind
+    return rows
+
+
+def _unit_interval(name: str, arr: np.ndarray) -> None:
+    out = (arr < 0.0) | (arr > 1.0)
+    if out.any():
+        i = int(np.flatnonzero(out.reshape(len(arr), -1).any(axis=1))[0])
+        raise SetpointError(f"{name}: row {i} {np.atleast_1d(arr[i]).tolist()} is outside "
+                            "[0, 1]")
+
+
+def velocity_rows(velocity, yaw_rate) -> np.ndarray:
+    """(N, N_SP): row i is ``Setpoint.velocity(velocity[i], yaw_rate=yaw_rate[i])
+    .offboard().row`` (yaw held: NaN)."""
+    v = _batch("velocity", velocity, 3)
+    r = _batch("yaw_rate", np.reshape(yaw_rate, (-1, 1)), 1)
+    rows = _batch_rows(c.KIND_TRAJECTORY, len(v))
+    rows[:, c.SP_VEL:c.SP_VEL + 3] = v
+    rows[:, c.SP_YAWRATE] = r[:, 0]
+    rows[:, c.SP_OFFBOARD] = 1.0
+    return rows
+
+
+def acceleration_rows(acceleration, yaw_rate) -> np.ndarray:
+    """(N, N_SP): row i is ``Setpoint.acceleration(acceleration[i], yaw_rate=yaw_rate[i])
+    .offboard().row``."""
+    a = _batch("acceleration", acceleration, 3)
+    r = _batch("yaw_rate", np.reshape(yaw_rate, (-1, 1)), 1)
+    rows = _batch_rows(c.KIND_TRAJECTORY, len(a))
+    rows[:, c.SP_ACC:c.SP_ACC + 3] = a
+    rows[:, c.SP_YAWRATE] = r[:, 0]
+    rows[:, c.SP_OFFBOARD] = 1.0
+    return rows
+
+
+def body_rate_rows(rates_body, thrust) -> np.ndarray:
+    """(N, N_SP): row i is ``Setpoint.body_rates(rates_body[i], thrust[i]).offboard().row``
+    (rad/s FLU, normalised collective thrust 0..1)."""
+    w = _batch("rates", rates_body, 3)
+    f = _batch("thrust", np.reshape(thrust, (-1, 1)), 1)
+    _unit_interval("thrust", f)
+    rows = _batch_rows(c.KIND_RATES, len(w))
+    rows[:, c.SP_RATES:c.SP_RATES + 3] = w
+    rows[:, c.SP_THRUST] = f[:, 0]
+    rows[:, c.SP_OFFBOARD] = 1.0
+    return rows
+
+
+def motor_rows(commands) -> np.ndarray:
+    """(N, N_SP): row i is ``Setpoint.motors(commands[i]).row`` (0..1 per rotor, in the
+    platform's rotor order)."""
+    width = np.shape(commands)[-1] if np.ndim(commands) == 2 else 0
+    if not 1 <= width <= c.MAX_SP_MOTORS:
+        raise SetpointError(f"motors: needs shape (N, 1..{c.MAX_SP_MOTORS}), got "
+                            f"{np.shape(commands)}")
+    u = _batch("motors", commands, width)
+    _unit_interval("motors", u)
+    rows = _batch_rows(c.KIND_MOTORS, len(u))
+    rows[:, c.SP_MOTORS:c.SP_MOTORS + u.shape[1]] = u
+    return rows

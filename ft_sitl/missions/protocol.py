@@ -172,29 +172,85 @@ def check_flight(fleet, n_events: int, s) -> None:
     """The checks of every navigation step: the guard's events since ``n_events``
     (collision, leaving the volume), a non-finite state, the tilt, touching the floor."""
     check_events(fleet, n_events, "")
-    x = fleet.sim.x[0]
-    if not np.all(np.isfinite(x)):
-        raise TrialFailure(Outcome.LOSS_OF_CONTROL, "non-finite state")
-    if s.tilt > MAX_TILT_RAD:
-        raise TrialFailure(Outcome.LOSS_OF_CONTROL, f"tilt {math.degrees(s.tilt):.0f} deg")
-    if s.on_ground:
-        raise TrialFailure(Outcome.OUT_OF_BOUNDS, "touched the floor")
+    failure = flight_failure(bool(np.all(np.isfinite(fleet.sim.x[0]))), s.tilt, s.on_ground)
+    if failure is not None:
+        raise failure
+
+
+def flight_failure(finite: bool, tilt: float, on_ground: bool) -> TrialFailure | None:
+    """How the vehicle's true state ends the flight, if it does: a non-finite state or a
+    tilt beyond :data:`MAX_TILT_RAD` (loss of control), touching the floor (out of
+    bounds). The rule every navigation step applies (:func:`check_flight`, and
+    ``ft_sitl.gym`` for each of its vehicles)."""
+    if not finite:
+        return TrialFailure(Outcome.LOSS_OF_CONTROL, "non-finite state")
+    if tilt > MAX_TILT_RAD:
+        return TrialFailure(Outcome.LOSS_OF_CONTROL, f"tilt {math.degrees(tilt):.0f} deg")
+    if on_ground:
+        return TrialFailure(Outcome.OUT_OF_BOUNDS, "touched the floor")
+    return None
 
 
 def check_events(fleet, n_events: int, when: str) -> None:
     """A collision or the centre leaving the flight volume among the guard's events since
     ``n_events`` ends the trial; ``when`` ("" or " before navigation started") is said."""
     for ev in fleet.events[n_events:]:
-        if ev.kind == GuardEventKind.COLLISION:
-            speed = f" at {ev.speed_m_s:.1f} m/s" if not when else ""
-            raise TrialFailure(Outcome.COLLISION, f"hit {ev.what}{speed}{when}")
-        if ev.kind == GuardEventKind.MOVER_COLLISION:
-            raise TrialFailure(Outcome.MOVER_COLLISION, f"hit {ev.what} (moving) at "
-                               f"{ev.speed_m_s:.1f} m/s relative{when}")
-        if ev.kind == GuardEventKind.LEFT_VOLUME:
-            raise TrialFailure(Outcome.OUT_OF_BOUNDS,
-                               f"left the flight volume past the {ev.what}{when}"
-                               if ev.what != "ceiling" else f"climbed above the ceiling{when}")
+        failure = event_failure(ev, when)
+        if failure is not None:
+            raise failure
+
+
+def event_failure(ev, when: str = "") -> TrialFailure | None:
+    """How a collision guard event ends the flight, if it does: a collision (with an
+    obstacle, or with a moving one) or the centre leaving the flight volume; ``when`` is
+    appended to the detail. The rule :func:`check_events` applies (and ``ft_sitl.gym``, to
+    each vehicle's events)."""
+    if ev.kind == GuardEventKind.COLLISION:
+        speed = f" at {ev.speed_m_s:.1f} m/s" if not when else ""
+        return TrialFailure(Outcome.COLLISION, f"hit {ev.what}{speed}{when}")
+    if ev.kind == GuardEventKind.MOVER_COLLISION:
+        return TrialFailure(Outcome.MOVER_COLLISION, f"hit {ev.what} (moving) at "
+                            f"{ev.speed_m_s:.1f} m/s relative{when}")
+    if ev.kind == GuardEventKind.LEFT_VOLUME:
+        return TrialFailure(Outcome.OUT_OF_BOUNDS,
+                            f"left the flight volume past the {ev.what}{when}"
+                            if ev.what != "ceiling" else f"climbed above the ceiling{when}")
+    return None
+
+
+class GoalRule:
+    """The navigation phase's goal and time limit for one vehicle (``limits``: a
+    :class:`~ft_sitl.navigation.base.Limits`). :meth:`update` after every check, with the
+    distance to the goal and the time since navigation started: True once the vehicle has
+    stayed in the goal sphere (``goal_radius_m``) for ``hold_s`` since it entered it;
+    raises :class:`TrialFailure` ``unstable`` when it leaves within the hold, ``timeout``
+    when it is not in the sphere ``timeout_s`` after the start. The rules of
+    :class:`NavigationJudge` (and of ``ft_sitl.gym``'s episodes)."""
+
+    def __init__(self, limits):
+        self.limits = limits
+        self.radius_m = limits.goal_radius_m
+        self.hold_us = round(limits.hold_s * 1e6)
+        self.timeout_us = round(limits.timeout_s * 1e6)
+        #: the time (since navigation started) the vehicle entered the sphere, or None
+        self.entered_us: int | None = None
+
+    def update(self, dist: float, t_nav_us: int) -> bool:
+        if dist <= self.radius_m:
+            if self.entered_us is None:
+                self.entered_us = t_nav_us
+            elif t_nav_us - self.entered_us >= self.hold_us:
+                return True
+        elif self.entered_us is not None:
+            raise TrialFailure(Outcome.UNSTABLE,
+                               f"left the goal sphere "
+                               f"{(t_nav_us - self.entered_us) * 1e-6:.2f} s after "
+                               f"entering it (hold {self.limits.hold_s:g} s)")
+        if self.entered_us is None and t_nav_us >= self.timeout_us:
+            raise TrialFailure(Outcome.TIMEOUT,
+                               f"not in the goal sphere after {self.limits.timeout_s:g} s "
+                               f"({dist:.1f} m away)")
+        return False
 
 
 def check_fence(fleet, n_breaches: int, when: str) -> None:
@@ -320,9 +376,7 @@ class NavigationJudge:
         self._state = fleet.true_state(0)
         self._state_us = fleet.time_us
         self.prev = self._state.position.copy()
-        self.entered_us = None
-        self.timeout_us = round(spec.limits.timeout_s * 1e6)
-        self.hold_us = round(spec.limits.hold_s * 1e6)
+        self.goal = GoalRule(spec.limits)
         stall_s = PROTOCOLS[spec.protocol].stall_timeout_s
         self.stall_us = None if stall_s is None else round(stall_s * 1e6)
         self.best_dist = math.inf  # the closest to the goal so far, less STALL_PROGRESS_M
@@ -336,7 +390,7 @@ class NavigationJudge:
         return self.fleet.true_state(0)
 
     def after_step(self) -> bool:
-        fleet, spec, m = self.fleet, self.spec, self.m
+        fleet, m = self.fleet, self.m
         s = fleet.true_state(0)
         self._state, self._state_us = s, fleet.time_us
         m.sample(self.guard, self.prev, s, (fleet.time_us - self.t_sample_us) * 1e-6)
@@ -348,22 +402,13 @@ class NavigationJudge:
         check_flight(fleet, self.n_events, s)
         check_fence(fleet, self.n_breaches, "")
         dist = norm(s.position - self.sc.goal)
-        if dist <= spec.limits.goal_radius_m:
-            if self.entered_us is None:
-                self.entered_us = t_nav_us
-                m.time_to_goal_s = t_nav_us * 1e-6
-            elif t_nav_us - self.entered_us >= self.hold_us:
-                return True
-        elif self.entered_us is not None:
-            raise TrialFailure(Outcome.UNSTABLE,
-                               f"left the goal sphere "
-                               f"{(t_nav_us - self.entered_us) * 1e-6:.2f} s after "
-                               f"entering it (hold {spec.limits.hold_s:g} s)")
-        if self.entered_us is None and t_nav_us >= self.timeout_us:
-            raise TrialFailure(Outcome.TIMEOUT,
-                               f"not in the goal sphere after {spec.limits.timeout_s:g} s "
-                               f"({dist:.1f} m away)")
-        if self.stall_us is not None and self.entered_us is None:
+        goal = self.goal
+        outside = goal.entered_us is None
+        if goal.update(dist, t_nav_us):
+            return True
+        if outside and goal.entered_us is not None:
+            m.time_to_goal_s = t_nav_us * 1e-6
+        if self.stall_us is not None and goal.entered_us is None:
             if dist < self.best_dist:
                 self.best_dist = dist - STALL_PROGRESS_M
                 self.best_us = t_nav_us
@@ -526,25 +571,38 @@ def navigator_params(spec) -> dict:
     return params
 
 
+def vehicle_collision(protocol: int, platform):
+    """What touches obstacles in a trial of this protocol version: (the collision guard's
+    radius, the body or None). From protocol 5 (``vehicle_body``) the platform's body, its
+    bounding radius the broad phase; before, its collision sphere."""
+    if PROTOCOLS[protocol].vehicle_body:
+        body = platform.body()
+        return body.bounding_radius_m, body
+    return platform.collision_radius_m, None
+
+
+def flight_params(params: dict | None, limits, protocol: int, gains: str) -> ParamSet:
+    """The flight controller's parameters in a trial: ``params`` (the spec's) with the speed
+    cap as MPC_XY_VEL_MAX, the protocol's offboard rule as FT_OFFB_ACC_LIM and the
+    controller-gain mode ``gains`` as FT_GAIN_MODE."""
+    return ParamSet({**(params or {}),
+                     "MPC_XY_VEL_MAX": limits.max_speed_m_s,
+                     "FT_OFFB_ACC_LIM": int(PROTOCOLS[protocol].offboard_acc_clamp),
+                     "FT_GAIN_MODE": GAIN_MODES[gains]})
+
+
 def trial_vehicle(spec, scenario, platform, resources: TrialResources = RESOURCES):
     """The trial's collision guard and its one-vehicle Fleet, on the takeoff point facing
     the goal, the speed cap as MPC_XY_VEL_MAX, the spec's controller-gain mode as
     FT_GAIN_MODE, its geofence as GF_* and the commander's fence (in-process and over the
     wire alike)."""
     world, grid = resources.world_and_grid(scenario)
-    rules = PROTOCOLS[spec.protocol]
-    if rules.vehicle_body:
-        body = platform.body()
-        guard = CollisionGuard(world, [body.bounding_radius_m], grid=grid,
-                               names=scenario.obstacle_name, bodies=[body])
-    else:
-        guard = CollisionGuard(world, [platform.collision_radius_m], grid=grid,
-                               names=scenario.obstacle_name)
-    params = ParamSet({**(spec.params or {}),
-                       **(fence_params(spec.fence) if spec.fence is not None else {}),
-                       "MPC_XY_VEL_MAX": spec.limits.max_speed_m_s,
-                       "FT_OFFB_ACC_LIM": int(rules.offboard_acc_clamp),
-                       "FT_GAIN_MODE": GAIN_MODES[spec.gains]})
+    radius, body = vehicle_collision(spec.protocol, platform)
+    guard = CollisionGuard(world, [radius], grid=grid, names=scenario.obstacle_name,
+                           bodies=[body] if body is not None else None)
+    params = flight_params({**(spec.params or {}),
+                            **(fence_params(spec.fence) if spec.fence is not None else {})},
+                           spec.limits, spec.protocol, spec.gains)
     fleet = Fleet([platform], params=[params], spawn=[scenario.takeoff],
                   spawn_yaw=[scenario.start_yaw], physics_hz=spec.physics_hz, guard=guard)
     if spec.fence is not None:  # the flight controller's, from the start (PX4: uploaded)

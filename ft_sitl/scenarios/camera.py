@@ -507,6 +507,104 @@ class DepthCamera:
         _hit_lengths(tri, dirs_world, origin, self._normals, self._plane_c, _GRAZING_COS, out)
         return out
 
+    # -- many vehicles at once -----------------------------------------------------------------
+    def cast_fans(self, origins_world: np.ndarray, rots: np.ndarray, dirs_local: np.ndarray,
+                  *, max_range_m: float | None = None, movers=None,
+                  movers_time_us: int | None = None) -> np.ndarray:
+        """Ray lengths (V, N) of V fans of the same rays: fan v leaves ``origins_world[v]``
+        (V, 3) along ``rots[v] @ dirs_local[k]`` (``rots`` (V, 3, 3), ``dirs_local`` (N, 3)
+        unit vectors); inf where nothing is hit. With ``max_range_m`` a surface farther than
+        that may be reported as inf (the rays stop just past it). ``movers`` are hit where
+        they are at ``movers_time_us``. One compiled call for all the fans (Embree's packets);
+        fan v's lengths are :meth:`cast`'s for its origin and the directions ``rots[v] @
+        dirs_local[k]`` (rotated component by component: a matmul's may differ in the last
+        bit)."""
+        origins = np.ascontiguousarray(origins_world, dtype=np.float64)
+        rots = np.ascontiguousarray(rots, dtype=np.float64)
+        dirs_local = np.ascontiguousarray(dirs_local, dtype=np.float64)
+        if origins.ndim != 2 or origins.shape[1] != 3 or rots.shape != (len(origins), 3, 3):
+            raise ValueError(f"origins_world (V, 3) and rots (V, 3, 3) expected, got "
+                             f"{origins.shape} and {rots.shape}")
+        if dirs_local.ndim != 2 or dirs_local.shape[1] != 3:
+            raise ValueError(f"dirs_local must have shape (N, 3), got {dirs_local.shape}")
+        n_fans, n = len(origins), len(dirs_local)
+        out = np.empty((n_fans, n))
+        dirs_world = np.empty((n_fans, n, 3))
+        if self._packets is not None:
+            wrap = self._wrap
+            tfar32 = None
+            if max_range_m is not None:
+                tfar32 = np.full(n, max_range_m * float(wrap.scale) * 1.001 + 1e-6, np.float32)
+            self._packets.fans_lengths(dirs_local, rots, origins,
+                                       np.asarray(wrap.origin, np.float64).reshape(3),
+                                       float(wrap.scale), tfar32, self._normals, self._plane_c,
+                                       _GRAZING_COS, dirs_world, out)
+        else:  # one cast per fan
+            for v in range(n_fans):
+                np.matmul(dirs_local, rots[v].T, out=dirs_world[v])
+                out[v] = self.cast(origins[v], dirs_world[v])
+        if movers is not None and movers.count:
+            if movers_time_us is None:
+                raise ValueError("movers: pass movers_time_us, the simulation time to "
+                                 "render them at")
+            poses = movers.poses(movers_time_us)
+            for v in range(n_fans):
+                ray_first_hit(movers.kind, movers.dims, movers.bounding, poses, origins[v],
+                              dirs_world[v], out[v], np.inf)
+        return out
+
+    def capture_depths(self, p_world: np.ndarray, q_world_body: np.ndarray, *, movers=None,
+                       movers_time_us: int | None = None) -> np.ndarray:
+        """The depth images (V, H, W) float32 of V vehicles at ``p_world`` (V, 3) with
+        attitudes ``q_world_body`` (V, 4), in one compiled call (Embree's packets): image v
+        is exactly :meth:`capture`'s ``depth`` for that pose. Noise-free cameras only (a
+        noisy one needs :meth:`capture`'s generator per frame); no point clouds, and the
+        capture schedule (:meth:`due`) is left alone."""
+        cfg = self.config
+        if cfg.noise_k > 0.0 or cfg.dropout > 0.0:
+            raise ValueError("capture_depths renders noise-free frames: this camera has "
+                             "noise_k or dropout set (use capture, with its rng)")
+        p = np.ascontiguousarray(p_world, dtype=np.float64)
+        q = np.asarray(q_world_body, dtype=np.float64)
+        if p.ndim != 2 or p.shape[1] != 3 or q.shape != (len(p), 4):
+            raise ValueError(f"p_world (V, 3) and q_world_body (V, 4) expected, got {p.shape} "
+                             f"and {q.shape}")
+        n_v, n_pix = len(p), cfg.n_pixels
+        r_wo = np.empty((n_v, 3, 3))
+        origins = np.empty((n_v, 3))
+        for v in range(n_v):
+            r_wb = matrix_from_quat(q[v], name="q_world_body")
+            r_wo[v] = r_wb @ self.r_body_optical
+            origins[v] = p[v] + r_wb @ self.mount_body
+        lengths = np.empty((n_v, n_pix))
+        dirs_world = np.empty((n_v, n_pix, 3))
+        if self._packets is not None:
+            wrap = self._wrap
+            self._packets.fans_lengths(self.dirs_optical, r_wo, origins,
+                                       np.asarray(wrap.origin, np.float64).reshape(3),
+                                       float(wrap.scale), self._tfar32, self._normals,
+                                       self._plane_c, _GRAZING_COS, dirs_world, lengths)
+        else:  # one cast per vehicle
+            for v in range(n_v):
+                np.matmul(self.dirs_optical, r_wo[v].T, out=dirs_world[v])
+                lengths[v] = self.cast(origins[v], dirs_world[v])
+        depth = np.empty((n_v, n_pix), dtype=np.float32)
+        lo, hi = float(cfg.min_range_m), float(cfg.max_range_m)
+        poses = None
+        if movers is not None and movers.count:
+            if movers_time_us is None:
+                raise ValueError("movers: pass movers_time_us, the simulation time to "
+                                 "render them at")
+            poses = movers.poses(movers_time_us)
+        for v in range(n_v):
+            z = lengths[v] * self.cos_axis
+            if poses is not None:
+                image_first_hit(movers.kind, movers.dims, movers.bounding, poses, origins[v],
+                                r_wo[v], dirs_world[v], self.cos_axis, cfg.width, cfg.height,
+                                cfg.fx, cfg.fy, cfg.cx, cfg.cy, lo, hi, z)
+            _depth_image(z, lo, hi, depth[v])
+        return depth.reshape(n_v, cfg.height, cfg.width)
+
     def capture(self, t_us: int, p_world, q_world_body,
                 rng: np.random.Generator | None = None, *, movers=None,
                 movers_time_us: int | None = None) -> DepthFrame:

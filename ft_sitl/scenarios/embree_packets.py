@@ -256,6 +256,24 @@ class PacketScene:
                self.offset, dirs_world, out)
 
 
+    def fans_lengths(self, dirs_local: np.ndarray, rots: np.ndarray, origins: np.ndarray,
+                     shift: np.ndarray, scale: float, tfar32: np.ndarray | None,
+                     normals: np.ndarray, plane_c: np.ndarray, grazing: float,
+                     dirs_world: np.ndarray, out: np.ndarray) -> None:
+        """:meth:`fan_lengths` for V origins at once, in one compiled call: fan v leaves
+        ``origins[v]`` (V, 3) along ``rots[v] @ dirs_local[k]`` (rots (V, 3, 3)); world
+        directions into ``dirs_world`` (V, N, 3), lengths into ``out`` (V, N). Fan v gets
+        exactly what ``fan_lengths`` gives it alone."""
+        buf, valid = _packet_buffers()
+        n = len(dirs_local)
+        if tfar32 is None:
+            tfar32 = np.full(n, 1e37, np.float32)
+        _fans16(self._scene, buf.view(np.float32), buf.view(np.uint32), buf.ctypes.data,
+                valid.view(np.int32), valid.ctypes.data, dirs_local, rots, origins, shift,
+                float(scale), tfar32, normals, plane_c, float(grazing), self.face_of,
+                self.offset, dirs_world, out)
+
+
 def _packet_buffers():
     """A 64-byte-aligned RTCRayHit16 and valid mask, fresh per call (no state shared
     between threads)."""
@@ -428,6 +446,16 @@ def _fan16(scene, bf, bu, buf_addr, valid, valid_addr, dirs_local, rot, origin, 
         for lane in range(m):
             out[p + lane] = plane_length(_face(bu, lane, face_of, offset), dirs_world, p + lane,
                                          origin, normals, plane_c, grazing)
+
+
+@njit
+def _fans16(scene, bf, bu, buf_addr, valid, valid_addr, dirs_local, rots, origins, shift,
+            scale, tfar32, normals, plane_c, grazing, face_of, offset, dirs_world, out):
+    """PacketScene.fans_lengths: _fan16 for each origin."""
+    for v in range(origins.shape[0]):
+        _fan16(scene, bf, bu, buf_addr, valid, valid_addr, dirs_local, rots[v], origins[v],
+               shift, scale, tfar32, normals, plane_c, grazing, face_of, offset,
+               dirs_world[v], out[v])
 
 
 _RTC_INTERSECT16 = _intersect16() if _library() is not None else None

@@ -215,6 +215,18 @@ class GuardEvent:
     contact: Contact | None = None
 
 
+def check_vehicle(i: int, radius: float, body: VehicleBody | None) -> None:
+    """Refuse a collision radius that is not a non-negative number of metres, or one that
+    does not enclose vehicle i's body (the broad phase would miss contacts)."""
+    if not (math.isfinite(radius) and radius >= 0.0):
+        raise ValueError(f"collision radius must be a non-negative number of metres, "
+                         f"got {radius!r}")
+    if body is not None and radius < body.bounding_radius_m:
+        raise ValueError(f"vehicle {i}: collision radius {radius} m is smaller than its "
+                         f"body's bounding radius ({body.bounding_radius_m:.4f} m): the "
+                         "broad phase would miss contacts")
+
+
 class CollisionGuard:
     """Collision and flight-volume checks for the vehicles of one Simulation in one world.
 
@@ -231,18 +243,11 @@ class CollisionGuard:
                  bodies: Sequence[VehicleBody | None] | None = None) -> None:
         self.world = world
         self.radii = [float(r) for r in radii]
-        for r in self.radii:
-            if not (math.isfinite(r) and r >= 0.0):
-                raise ValueError(f"collision radius must be a non-negative number of metres, "
-                                 f"got {r!r}")
         bodies = list(bodies) if bodies is not None else [None] * len(self.radii)
         if len(bodies) != len(self.radii):
             raise ValueError(f"{len(bodies)} bodies for {len(self.radii)} collision radii")
         for i, (r, b) in enumerate(zip(self.radii, bodies)):
-            if b is not None and r < b.bounding_radius_m:
-                raise ValueError(f"vehicle {i}: collision radius {r} m is smaller than its "
-                                 f"body's bounding radius ({b.bounding_radius_m:.4f} m): the "
-                                 "broad phase would miss contacts")
+            check_vehicle(i, r, b)
         #: per vehicle, its body as fcl shapes (None: the vehicle is its sphere)
         self.probes = [BodyProbe(b) if b is not None else None for b in bodies]
         self.grid = grid
@@ -283,6 +288,17 @@ class CollisionGuard:
             return cls.for_scenario(scenario, [b.bounding_radius_m for b in bodies],
                                     bodies=bodies, **kw)
         return cls.for_scenario(scenario, [p.collision_radius_m for p in platforms], **kw)
+
+    def set_vehicle(self, i: int, radius: float, body: VehicleBody | None = None) -> None:
+        """Vehicle i is now of collision radius ``radius`` (m) and ``body`` (None: its
+        sphere), e.g. after :meth:`Simulation.set_platform
+        <ft_sitl.sim.lockstep.Simulation.set_platform>`; its history is forgotten at the
+        next ``Simulation.place``. The same checks as the constructor's."""
+        r = float(radius)
+        check_vehicle(i, r, body)
+        self.radii[i] = r
+        self.probes[i] = BodyProbe(body) if body is not None else None
+        self._measured[i] = None
 
     # --- binding to a simulation ------------------------------------------------------
     def bind(self, sim) -> None:

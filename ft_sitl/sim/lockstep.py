@@ -196,6 +196,30 @@ class Simulation:
         for i, (p, ps) in enumerate(zip(self.platforms, self.params)):
             self.gains[i] = build_gains(p, ps, self.dt)
 
+    def set_platform(self, i: int, platform: Platform, params: ParamSet | None = None) -> None:
+        """Fly vehicle i as ``platform`` (same rotor count as the batch) with ``params``
+        (None: its present parameter set) from now on: its plant rows, mixer and gains are
+        rebuilt, its actuators nominal again. The other vehicles are untouched. Follow with
+        :meth:`place` (and, with a guard attached, give the guard the new body first:
+        ``CollisionGuard.set_vehicle``)."""
+        if not isinstance(platform, Platform):
+            raise TypeError(f"platform: a Platform, got {type(platform).__name__}")
+        if platform.n_rotors != self.n_rotors:
+            raise ValueError(f"platform {platform.name!r} has {platform.n_rotors} rotors; this "
+                             f"batch flies {self.n_rotors}-rotor vehicles")
+        params = self.params[i] if params is None else params
+        gains = build_gains(platform, params, self.dt)  # refuses a platform it cannot fly
+        self.platforms[i] = platform
+        self.params[i] = params
+        self.gains[i] = gains
+        self.plant.prm[i] = d.plant_params(platform)
+        self.plant.alloc[i] = platform.allocation()
+        self._nominal[0][i] = self.plant.prm[i]
+        self._nominal[1][i] = self.plant.alloc[i]
+        self.mix[i] = mixer(platform)
+        self.act[i] = 0.0
+        self.actuator_settings[i] = None
+
     def attach_guard(self, guard, handler=None) -> None:
         """Check every physics step of every vehicle with ``guard`` (a
         :class:`~ft_sitl.sim.guard.CollisionGuard` with one radius per vehicle);
