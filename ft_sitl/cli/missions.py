@@ -61,6 +61,9 @@ def cmd_campaign_check(args) -> int:
             "params": [p or {} for p in c.param_sets],
             "actuators": [a or {} for a in c.actuator_sets],
             "perception": [p or {} for p in c.perceptions],
+            "estimator": [e or {} for e in c.estimators],
+            "failures": [f or {} for f in c.failure_sets],
+            "movers": [m or {} for m in c.mover_sets],
             "fence": [f or {} for f in c.fences], "notes": list(c.notes)}
     if args.json:
         print(json.dumps(info, indent=2))
@@ -68,7 +71,9 @@ def cmd_campaign_check(args) -> int:
     axes = "".join(f" x {n} {what}" for n, what in (
         (len(c.winds), "winds"), (len(c.modes()), "gain modes"),
         (len(c.param_sets), "parameter sets"), (len(c.actuator_sets), "actuator settings"),
-        (len(c.perceptions), "perception settings"), (len(c.fences), "fences")) if n > 1)
+        (len(c.perceptions), "perception settings"), (len(c.estimators), "estimators"),
+        (len(c.failure_sets), "failure settings"), (len(c.mover_sets), "mover settings"),
+        (len(c.fences), "fences")) if n > 1)
     print(f"campaign {c.name!r}: {len(specs)} trials = {len(c.algorithms)} algorithms x "
           f"{len(c.platforms)} platforms x {len(c.scenarios)} scenario families x "
           f"{c.trials} trials{axes}")
@@ -83,7 +88,10 @@ def cmd_campaign_check(args) -> int:
         print(f"  gains:      {', '.join(c.modes())}")
     for label, values, none in (("params", c.param_sets, "defaults"),
                                 ("actuators", c.actuator_sets, "as built"),
-                                ("perception", c.perceptions, "ideal")):
+                                ("perception", c.perceptions, "ideal"),
+                                ("estimator", c.estimators, "the truth"),
+                                ("failures", c.failure_sets, "none"),
+                                ("movers", c.mover_sets, "static")):
         if values != [None]:
             print(f"  {label + ':':11s} " + "; ".join(
                 ", ".join(f"{k} {v:g}" if isinstance(v, float) else f"{k} {v}"

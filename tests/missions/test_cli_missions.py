@@ -77,7 +77,28 @@ def test_check_prints_the_matrix(capsys, campaign, yard):
         "trials_per_combination": 2,
         "limits": {"max_speed_m_s": 4.0, "timeout_s": 90.0, "goal_radius_m": 2.0,
                    "hold_s": 3.0}, "wind": [{}], "gains": ["bandwidth"], "params": [{}],
-        "actuators": [{}], "perception": [{}], "fence": [{}], "notes": []}
+        "actuators": [{}], "perception": [{}], "estimator": [{}], "failures": [{}],
+        "movers": [{}], "fence": [{}], "notes": []}
+
+
+def test_check_shows_every_axis(capsys, tmp_path, yard):
+    body = (f'algorithms = ["straight"]\nplatforms = ["{PLATFORM}"]\n'
+            f'scenarios = [{{file = "{yard}"}}]\ntrials = 1\n'
+            'estimator = [{}, {position_noise_m = 0.1}]\n'
+            'failures = [{}, {at_s = 5.0, unit = "gps", type = "off"}]\n'
+            'movers = [{}, {count = 8, speed_m_s = 3.0}]\n')
+    path = campaign_file(tmp_path, "axes.toml", body)
+    rc, out, err = cli(capsys, "campaign", "check", path)
+    assert (rc, err) == (0, "")
+    lines = out.splitlines()
+    assert lines[0].endswith("1 trials x 2 estimators x 2 failure settings x 2 mover "
+                             "settings"), lines[0]
+    assert "  estimator:  the truth; position_noise_m 0.1" in lines
+    assert "  failures:   none; at_s 5, unit gps, type off, instance 1" in lines
+    assert "  movers:     static; count 8, speed_m_s 3" in lines
+    rc, out, _ = cli(capsys, "campaign", "check", path, "--json")
+    info = json.loads(out)
+    assert info["trials"] == 8 and info["movers"] == [{}, {"count": 8, "speed_m_s": 3.0}]
 
 
 def test_check_a_preset(capsys):
