@@ -171,11 +171,11 @@ class Movers:
 
     def velocities(self, t_us: int) -> np.ndarray:
         """(M, 3) velocity (m/s) at simulation time t_us: 0 before the start."""
-        p = self.poses(t_us)
         v = np.zeros((self.count, 3))
-        if self.time_s(t_us) > 0.0:
-            v[:, 0] = self.speed * np.cos(p[:, 3])
-            v[:, 1] = self.speed * np.sin(p[:, 3])
+        t = self.time_s(t_us)
+        if t > 0.0:
+            mover_velocities(t, self.speed, self.length, self.mode, self.s0, self.n_points,
+                             self.cum, self.points, v)
         return v
 
     def boxes(self, t_us: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -225,44 +225,69 @@ def no_movers() -> Movers:
 # --- compiled evaluations --------------------------------------------------------------------
 
 @njit(cache=True)
+def _leg(j, t, speed, length, mode, s0, n_points, cum):
+    """Where mover j is at mover time t: its leg k (cum[k] <= s <= cum[k + 1]), the
+    fraction along it and whether it walks the leg backwards; k = -1 for a mover that
+    does not move (one point, or a path of no length)."""
+    n = n_points[j]
+    L = length[j]
+    if n < 2 or L <= 0.0:
+        return -1, 0.0, False
+    s = s0[j] + speed[j] * t
+    back = False
+    if mode[j] == PINGPONG:
+        s = s % (2.0 * L)
+        if s > L:
+            s = 2.0 * L - s
+            back = True
+    else:
+        s = s % L
+    lo, hi = 0, n - 1
+    while hi - lo > 1:
+        mid = (lo + hi) // 2
+        if cum[j, mid] <= s:
+            lo = mid
+        else:
+            hi = mid
+    seg = cum[j, lo + 1] - cum[j, lo]
+    return lo, ((s - cum[j, lo]) / seg if seg > 0.0 else 0.0), back
+
+
+@njit(cache=True)
 def mover_poses(t, speed, length, mode, s0, n_points, cum, points, out):
     """Each mover's centre and heading at mover time t (s) into out (M, 4)."""
     for j in range(speed.shape[0]):
-        n = n_points[j]
-        L = length[j]
-        if n < 2 or L <= 0.0:
+        k, f, back = _leg(j, t, speed, length, mode, s0, n_points, cum)
+        if k < 0:
             out[j, 0] = points[j, 0, 0]
             out[j, 1] = points[j, 0, 1]
             out[j, 2] = points[j, 0, 2]
             out[j, 3] = 0.0
             continue
-        s = s0[j] + speed[j] * t
-        back = False
-        if mode[j] == PINGPONG:
-            s = s % (2.0 * L)
-            if s > L:
-                s = 2.0 * L - s
-                back = True
-        else:
-            s = s % L
-        lo, hi = 0, n - 1  # the leg k with cum[k] <= s <= cum[k + 1]
-        while hi - lo > 1:
-            mid = (lo + hi) // 2
-            if cum[j, mid] <= s:
-                lo = mid
-            else:
-                hi = mid
-        seg = cum[j, lo + 1] - cum[j, lo]
-        f = (s - cum[j, lo]) / seg if seg > 0.0 else 0.0
-        dx = points[j, lo + 1, 0] - points[j, lo, 0]
-        dy = points[j, lo + 1, 1] - points[j, lo, 1]
-        out[j, 0] = points[j, lo, 0] + f * dx
-        out[j, 1] = points[j, lo, 1] + f * dy
-        out[j, 2] = points[j, lo, 2] + f * (points[j, lo + 1, 2] - points[j, lo, 2])
+        dx = points[j, k + 1, 0] - points[j, k, 0]
+        dy = points[j, k + 1, 1] - points[j, k, 1]
+        out[j, 0] = points[j, k, 0] + f * dx
+        out[j, 1] = points[j, k, 1] + f * dy
+        out[j, 2] = points[j, k, 2] + f * (points[j, k + 1, 2] - points[j, k, 2])
         h = math.atan2(dy, dx)
         if back:
             h = h + math.pi if h <= 0.0 else h - math.pi
         out[j, 3] = h
+
+
+@njit(cache=True)
+def mover_velocities(t, speed, length, mode, s0, n_points, cum, points, out):
+    """Each mover's velocity (m/s, along its current leg, the vertical included) at mover
+    time t into out (M, 3); 0 for one that does not move."""
+    for j in range(speed.shape[0]):
+        k, _, back = _leg(j, t, speed, length, mode, s0, n_points, cum)
+        seg = cum[j, k + 1] - cum[j, k] if k >= 0 else 0.0
+        if seg <= 0.0:
+            out[j, 0] = out[j, 1] = out[j, 2] = 0.0
+            continue
+        g = (-speed[j] if back else speed[j]) / seg
+        for a in range(3):
+            out[j, a] = g * (points[j, k + 1, a] - points[j, k, a])
 
 
 @njit(cache=True)

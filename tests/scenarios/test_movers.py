@@ -55,6 +55,12 @@ def test_paths_walk_back_and_forth_or_round_at_their_speed():
     assert p[1, :2] == pytest.approx([1.0, 0.0])
     v = m.velocities(7_000_000)
     assert v[0] == pytest.approx([-2.0, 0.0, 0.0])
+    assert m.velocities(3_000_000)[1] == pytest.approx([0.0, 1.0, 0.0])  # up the loop's side
+    still = mv.movers_from_list([person([[0, 0]], 2.0),
+                                 {"shape": "sphere", "radius_m": 0.3,
+                                  "points": [[0, 0, 1], [0, 0, 4]], "speed_m_s": 0.5}])
+    v = still.velocities(1_000_000)  # one point: still; a vertical path: climbing
+    assert v[0].tolist() == [0.0, 0.0, 0.0] and v[1] == pytest.approx([0.0, 0.0, 0.5])
 
 
 def test_the_clock_holds_the_movers_until_started():
