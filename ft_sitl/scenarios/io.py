@@ -556,6 +556,13 @@ def write_scenario_spec(scenario: Scenario, path, *, mesh_path=None) -> list[Pat
         else:
             text = _format_float(value)
         lines.append(f"{key}{sep}{text}")
+    if s.movers is not None and s.movers.count:  # each mover as movers_from_list reads it
+        items = s.movers.as_list()
+        if suffix == ".toml":  # (JSON numbers, strings, booleans and arrays are TOML's too)
+            for it in items:
+                lines += ["", "[[movers]]"] + [f"{k} = {json.dumps(v)}" for k, v in it.items()]
+        else:  # a YAML list of flow mappings (JSON is YAML)
+            lines += ["movers:"] + [f"  - {json.dumps(it)}" for it in items]
     files[path] = ("\n".join(lines) + "\n").encode("utf-8")
     if mesh_bytes is not None:
         files[mesh_file] = mesh_bytes

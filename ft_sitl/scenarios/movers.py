@@ -195,6 +195,26 @@ class Movers:
                 size[j] = 2 * d[0]
         return p[:, :3].copy(), self.velocities(t_us), size
 
+    def as_list(self) -> list[dict]:
+        """The movers as :func:`movers_from_list` takes them (JSON types): what a scenario
+        spec file writes so that loading it gives these paths exactly."""
+        out = []
+        for j in range(self.count):
+            k = int(self.kind[j])
+            dims = [float(v) for v in self.dims[j]]
+            size = {CYLINDER: {"radius_m": dims[0], "height_m": 2.0 * dims[1]},
+                    BOX: {"length_m": 2.0 * dims[0], "width_m": 2.0 * dims[1],
+                          "height_m": 2.0 * dims[2]},
+                    SPHERE: {"radius_m": dims[0]}}[k]
+            pts = self.points[j, :int(self.n_points[j])]
+            loop = int(self.mode[j]) == LOOP
+            if loop:  # (movers_from_list closes the loop itself)
+                pts = pts[:-1]
+            out.append({"shape": SHAPES[k], **size, "points": pts.tolist(),
+                        "speed_m_s": float(self.speed[j]), "loop": loop,
+                        "start_m": float(self.s0[j])})
+        return out
+
     def describe(self) -> list[dict]:
         """One dict per mover: name, shape, size and path (JSON types)."""
         out = []

@@ -246,3 +246,16 @@ def test_the_docs_table_is_the_schema():
     doc = (Path(__file__).resolve().parents[2] / "docs" / "scenarios.md").read_text()
     assert (f"<!-- BEGIN generated: movers.SCHEMA.markdown() -->\n{mv.SCHEMA.markdown()}\n"
             "<!-- END generated -->") in doc
+
+
+@pytest.mark.parametrize("suffix", [".toml", ".yaml"])
+def test_an_exported_spec_carries_the_movers_on_the_same_paths(tmp_path, suffix):
+    from ft_sitl.scenarios.io import load_scenario, write_scenario_spec
+    sc = mv.with_movers(build_scenario("forest", 2), {"count": 9, "shape": "mixed"}, seed=3)
+    back = load_scenario(write_scenario_spec(sc, tmp_path / f"s{suffix}")[0]).movers
+    assert back.count == 9 and back.names == sc.movers.names
+    for t in (0, 1_234_567, 20_000_000, 95_000_000):
+        assert np.array_equal(back.poses(t), sc.movers.poses(t))
+        assert np.array_equal(back.velocities(t), sc.movers.velocities(t))
+    assert np.array_equal(back.dims, sc.movers.dims)
+    assert np.array_equal(back.bounding, sc.movers.bounding)
