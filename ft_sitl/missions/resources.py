@@ -28,7 +28,7 @@ from ft_sitl.scenarios.movers import MoverError, with_movers
 
 #: entries kept per cache
 CACHE_MAX = 8
-#: mover placements kept (a few kB each): one per trial number of a configuration, which a
+#: mover placements kept (a few kB each): one per configuration and trial number, which a
 #: campaign cycles through for every algorithm and platform
 MOVER_CACHE_MAX = 256
 #: shared grids kept on disk (the newest; up to ~30 MB each): a campaign's chunks come
@@ -66,7 +66,8 @@ class TrialResources:
     def scenario(self, spec: TrialSpec):
         """The spec's scenario: from its file, or built from (family, index, seed); with
         the spec's moving obstacles placed in it (scenarios.movers, for the trial's
-        mover seed: every algorithm and platform of a trial meets the same movers), or a
+        mover seed: every algorithm and platform of a configuration's trial k meets the same
+        movers), or a
         scenario file's own (its ``movers`` table or list)."""
         if spec.scenario_file:
             sc = self._cached(self._scenarios, ("file", spec.scenario_file),

@@ -542,9 +542,17 @@ def estimator_seed(spec: TrialSpec) -> int:
 
 
 def mover_seed(spec: TrialSpec) -> int:
-    """The seed of a trial's moving obstacles (stream 6): the same for every algorithm and
-    platform flying trial ``spec.trial`` of a campaign."""
-    return _stream_seed(spec, 6)
+    """The seed of a trial's moving obstacles: a function of the scenario (family or file,
+    configuration, scenario seed) and the trial number only, so every algorithm and
+    platform flying trial ``spec.trial`` of a configuration meets the same movers (a
+    paired comparison, and one placement per configuration and trial number for a whole
+    campaign). The movers are scenario content, like the static obstacles: the campaign's
+    ``seed`` does not change them; ``scenario_seed`` does."""
+    import numpy as np  # (kept off this module's import path: specs are built everywhere)
+    where = spec.scenario_file or spec.family
+    key = int.from_bytes(hashlib.sha256(where.encode()).digest()[:4], "little")
+    return int(np.random.SeedSequence([spec.scenario_seed, key, spec.scenario_index,
+                                       spec.trial, 6]).generate_state(1)[0])
 
 
 def perception_rng(spec: TrialSpec):

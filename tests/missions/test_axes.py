@@ -421,3 +421,23 @@ def test_bad_mover_axis_values_are_named(tmp_path, text, message):
     with pytest.raises(CampaignError) as exc:
         load_campaign(path)
     assert str(exc.value).startswith(f"{path}: {message}"), str(exc.value)
+
+
+def test_every_algorithm_and_platform_meets_the_same_movers_in_trial_k():
+    """Movers are scenario content: the placement follows the configuration and the trial
+    number, not the algorithm, the platform or the campaign's seed (a paired comparison)."""
+    from ft_sitl.missions.resources import RESOURCES
+
+    def movers(**kw):
+        spec = TrialSpec(**{"algorithm": "straight", "platform": "1.00kg-SunnySky",
+                            "family": "forest", "scenario_index": 2, "trial": 1, "seed": 5,
+                            "movers": {"count": 5}, **kw})
+        return RESOURCES.scenario(spec).movers.poses(3_000_000)
+
+    same = movers()
+    for kw in ({"algorithm": "ego"}, {"platform": "0.98kg-EGO Planner DIY"}, {"seed": 99},
+               {"label": "other"}):
+        assert np.array_equal(movers(**kw), same), kw
+    for kw in ({"trial": 2}, {"scenario_index": 3}, {"scenario_seed": 1}):
+        other = movers(**kw)
+        assert other.shape != same.shape or not np.array_equal(other, same), kw
