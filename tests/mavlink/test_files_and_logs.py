@@ -6,7 +6,6 @@ a vehicle that has none of them."""
 import asyncio
 import errno
 import random
-import time
 
 import pytest
 from mavsdk.asyncio.plugins.camera import CameraAsync
@@ -131,10 +130,9 @@ def test_ftp_refuses_bad_input_and_the_vehicle_carries_on():
         assert (h.opcode, data) == (Op.NAK, bytes([Err.NO_SESSIONS_AVAILABLE]))
         assert _ftp_request(c, 20, Op.TERMINATE_SESSION)[0].opcode == Op.ACK
         # no logs without --tlog: the list says so at once, a data request is answered
-        t0 = time.time()
         c.mav.log_request_list_send(1, 1, 0, 0xFFFF)
-        entry = wait_msg(c, "LOG_ENTRY", timeout=3)
-        assert (entry.num_logs, entry.id, time.time() - t0 < 3) == (0, 0, True)
+        entry = wait_msg(c, "LOG_ENTRY", timeout=3)  # (it raises after 3 s without one)
+        assert (entry.num_logs, entry.id) == (0, 0)
         c.mav.log_request_data_send(1, 1, 3, 0, 1000)
         assert wait_msg(c, "LOG_DATA", timeout=3).count == 0
         # random FTP payloads and log requests: each answered or dropped, never a crash
@@ -159,10 +157,11 @@ def test_camera_gimbal_transponder_and_logs_fail_fast():
         transponder, logs = TransponderAsync(drone), LogFilesAsync(drone)
 
         async def refused(call, error, result=None):
-            t0 = time.time()
+            # answered, not left to time out: a hang trips wait_for, MAVSDK's own
+            # command timeout is a TIMEOUT result
             with pytest.raises(error) as err:
                 await asyncio.wait_for(call, 5)
-            assert time.time() - t0 < 2.0
+            assert "TIMEOUT" not in str(err.value.result)
             if result is not None:
                 assert err.value.result == result
 
@@ -173,9 +172,8 @@ def test_camera_gimbal_transponder_and_logs_fail_fast():
         await refused(camera.start_video(1), CameraError, CameraResult.ACTION_UNSUPPORTED)
         await refused(gimbal.set_angles(0, 0.0, -90.0, 0.0, GimbalMode.YAW_FOLLOW,
                                         SendMode.ONCE), GimbalError)
-        t0 = time.time()  # accepted, as PX4 (its ADSB_VEHICLE stream: the movers' traffic)
+        # accepted, as PX4 (its ADSB_VEHICLE stream: the movers' traffic); an error raises
         await asyncio.wait_for(transponder.set_rate_transponder(1.0), 5)
-        assert time.time() - t0 < 2.0
         await refused(logs.get_entries(), LogFilesError, LogFilesResult.NO_LOGFILES)
         m.destroy()
 
