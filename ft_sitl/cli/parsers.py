@@ -160,7 +160,31 @@ def build_parser() -> argparse.ArgumentParser:
     _add_navigate(sub)
     _add_bridge(sub)
     _add_scenarios(sub)
+    _add_train(sub)
     return ap
+
+
+def _add_train(sub) -> None:
+    t = sub.add_parser(
+        "train", help="train a navigation policy with PPO (needs the 'train' extra)",
+        description="Train a velocity policy on the batched Gymnasium environment with "
+                    "Stable-Baselines3's PPO on the CPU and write it as a policy file the "
+                    "'learned' navigator flies (params.policy = PATH). The configuration is "
+                    "a TOML file with [train], [env] and [reward] tables (default: the "
+                    "shipped policy's, ft_sitl/gym/presets/learned.toml; docs/gym.md, "
+                    "\"Training\"). Writes OUT/config.json, training.csv, training.png and "
+                    "policy.npz.")
+    t.add_argument("--config", metavar="FILE", help="training configuration (TOML)")
+    t.add_argument("--out", metavar="DIR", required=True, help="output directory")
+    t.add_argument("--steps", type=number("--steps", minimum=1, integer=True), metavar="N",
+                   help="environment steps (overrides [train] total_steps)")
+    t.add_argument("--seed", type=number("--seed", minimum=0, maximum=2**31 - 1, integer=True),
+                   metavar="S",
+                   help="seed (overrides [train] seed)")
+    t.add_argument("--check", action="store_true",
+                   help="check the configuration and print it; train nothing")
+    t.add_argument("--quiet", action="store_true", help="no progress bar")
+    t.set_defaults(handler="train:cmd_train")
 
 
 def _add_missions(sub) -> None:

@@ -41,7 +41,7 @@ from ft_sitl.autopilot.setpoints import (
     velocity_rows,
 )
 from ft_sitl.gym.config import ARENA, EnvConfig, EnvError
-from ft_sitl.gym.kernels import N_STATE, measure, observe_state, shaped_rewards
+from ft_sitl.gym.kernels import measure, shaped_rewards
 from ft_sitl.gym.worlds import BASE_CAMERA, World
 from ft_sitl.missions.protocol import (
     GoalRule,
@@ -53,6 +53,18 @@ from ft_sitl.missions.protocol import (
 )
 from ft_sitl.missions.results import Outcome
 from ft_sitl.missions.spec import vehicle_half_span_m
+from ft_sitl.navigation.policy_io import (
+    N_STATE,
+    PLATFORM_NAMES,
+    STATE_HIGH,
+    STATE_LOW,
+    edge_distances,
+    goal_frame,
+    normalise_platform,
+    observe_state,
+    ray_directions,
+    velocity_action,
+)
 from ft_sitl.physics import dynamics as d
 from ft_sitl.physics.catalog import PlatformRegistry, catalog
 from ft_sitl.physics.platform import Platform
@@ -63,27 +75,6 @@ from ft_sitl.schema import SchemaError
 from ft_sitl.sim.guard import CollisionGuard
 from ft_sitl.sim.lockstep import Simulation
 
-#: the state vector's components, in order (docs/gym.md, "Observations")
-STATE_NAMES = (
-    "goal_dir_x", "goal_dir_y", "goal_dir_z",  # unit vector to the goal, goal frame
-    "goal_horizontal_m", "goal_vertical_m",  # horizontal distance, height difference
-    "vel_x", "vel_y", "vel_z",  # velocity, goal frame (m/s)
-    "body_z_x", "body_z_y", "body_z_z",  # the body's up axis, goal frame
-    "body_x_x", "body_x_y", "body_x_z",  # the body's forward axis, goal frame
-    "rate_roll", "rate_pitch", "rate_yaw",  # body rates (rad/s, FLU)
-    "height_m", "below_ceiling_m",  # above the floor, below the ceiling
-)
-_UNIT = 1.0
-_METRES = 1000.0
-_SPEED = 100.0
-STATE_HIGH = np.array([_UNIT] * 3 + [_METRES] * 2 + [_SPEED] * 3 + [_UNIT] * 6
-                      + [_SPEED] * 3 + [_METRES] * 2, np.float32)
-STATE_LOW = -STATE_HIGH
-assert len(STATE_NAMES) == len(STATE_HIGH) == N_STATE
-#: the platform vector's components: the catalog's indicators and size, each
-#: log-normalised to the catalog's range (0: its smallest, 1: its largest)
-PLATFORM_NAMES = ("twr_max", "alpha_xy_max", "alpha_z_max", "half_span")
-PLATFORM_LOW, PLATFORM_HIGH = -1.0, 2.0
 #: outcomes a collision penalty answers (the others but success and timeout: the failure
 #: penalty)
 COLLISIONS = (Outcome.COLLISION, Outcome.MOVER_COLLISION)
@@ -116,30 +107,7 @@ def platform_vector(platform: Platform, protocol: int) -> np.ndarray:
     and 1 at its largest (a platform outside the catalog's range lies outside [0, 1];
     clipped to [-1, 2])."""
     lo, hi = catalog_range(protocol)
-    v = (np.log(platform_features(platform, protocol)) - lo) / (hi - lo)
-    return np.clip(v, PLATFORM_LOW, PLATFORM_HIGH)
-
-
-def goal_frame(direction) -> np.ndarray:
-    """Rows x, y, z of the goal frame (NavRL's): x the horizontal direction, z up."""
-    dx, dy = float(direction[0]), float(direction[1])
-    n = math.hypot(dx, dy)
-    x = np.array([dx / n, dy / n, 0.0]) if n > 1e-9 else np.array([1.0, 0.0, 0.0])
-    return np.array([x, [-x[1], x[0], 0.0], [0.0, 0.0, 1.0]])
-
-
-def ray_directions(columns: int, rows: int, elevation_deg) -> np.ndarray:
-    """(columns * rows, 3) unit rays of the scan in the goal frame: column-major, column j
-    at ``360 j / columns`` deg counter-clockwise from the goal direction, row k at the
-    k-th of ``rows`` elevations evenly spaced over ``elevation_deg`` (lo, hi)."""
-    h = np.deg2rad(360.0 / columns) * np.arange(columns)
-    lo, hi = elevation_deg
-    v = np.deg2rad(np.linspace(lo, hi, rows) if rows > 1 else np.array([(lo + hi) / 2.0]))
-    dirs = np.empty((columns, rows, 3))
-    dirs[..., 0] = np.cos(h)[:, None] * np.cos(v)[None, :]
-    dirs[..., 1] = np.sin(h)[:, None] * np.cos(v)[None, :]
-    dirs[..., 2] = np.sin(v)[None, :]
-    return dirs.reshape(-1, 3)
+    return normalise_platform(platform_features(platform, protocol), lo, hi)
 
 
 class FlightBatch:
@@ -327,16 +295,13 @@ class FlightBatch:
         a = actions
         try:
             if v["action"] in ("velocity", "acceleration"):
-                if v["action"] == "velocity":
-                    scale = np.array([v["max_speed_m_s"], v["max_speed_m_s"],
-                                      v["max_climb_m_s"]])
-                else:
-                    scale = np.full(3, v["max_acc_m_s2"])
-                # goal frame -> world: frame rows are the goal axes, so world = F^T g
-                world = np.einsum("nji,nj->ni", self.frame, a[:, :3] * scale)
                 rate = a[:, 3] * v["max_yaw_rate_rad_s"]
                 if v["action"] == "velocity":
+                    world = velocity_action(self.frame, a, v["max_speed_m_s"],
+                                            v["max_climb_m_s"])
                     return velocity_rows(world, rate)
+                # goal frame -> world: frame rows are the goal axes, so world = F^T g
+                world = np.einsum("nji,nj->ni", self.frame, a[:, :3] * v["max_acc_m_s2"])
                 return acceleration_rows(world, rate)
             if v["action"] == "attitude_rate":
                 return body_rate_rows(a[:, :3] * v["max_body_rate_rad_s"],
@@ -436,6 +401,8 @@ class FlightBatch:
         observe_state(xs, self.goal[idx], self.frame[idx], sc.floor, sc.ceiling, STATE_LOW,
                       STATE_HIGH, state)
         obs = {"state": state,
+               "edges": edge_distances(xs[:, d.X_POS:d.X_POS + 3], self.frame[idx],
+                                       sc.bounds_min, sc.bounds_max),
                "platform": self.platform_obs[idx].astype(np.float32),
                "last_action": self.last_action[idx].astype(np.float32)}
         if self.sensor == "rays":

@@ -20,14 +20,7 @@ from gymnasium.utils import seeding
 from gymnasium.vector import AutoresetMode, VectorEnv
 from gymnasium.vector.utils import batch_space
 
-from ft_sitl.gym.batch import (
-    PLATFORM_HIGH,
-    PLATFORM_LOW,
-    PLATFORM_NAMES,
-    STATE_HIGH,
-    STATE_LOW,
-    FlightBatch,
-)
+from ft_sitl.gym.batch import FlightBatch
 from ft_sitl.gym.config import (
     ANY,
     ARENA,
@@ -52,6 +45,15 @@ from ft_sitl.gym.worlds import (
     disc,
     ring,
 )
+from ft_sitl.navigation.policy_io import (
+    EDGE_NAMES,
+    EDGE_RANGE_M,
+    PLATFORM_HIGH,
+    PLATFORM_LOW,
+    PLATFORM_NAMES,
+    STATE_HIGH,
+    STATE_LOW,
+)
 from ft_sitl.scenarios.families import REGISTRY
 from ft_sitl.scenarios.scenario import Scenario
 
@@ -66,6 +68,7 @@ def observation_space(cfg: EnvConfig, action_dim: int) -> spaces.Dict:
     """The observation space of one vehicle (docs/gym.md, "Observations")."""
     items = {
         "state": spaces.Box(STATE_LOW, STATE_HIGH, dtype=np.float32),
+        "edges": spaces.Box(0.0, EDGE_RANGE_M, (len(EDGE_NAMES),), np.float32),
         "platform": spaces.Box(PLATFORM_LOW, PLATFORM_HIGH, (len(PLATFORM_NAMES),),
                                np.float32),
         "last_action": spaces.Box(-1.0, 1.0, (action_dim,), np.float32),

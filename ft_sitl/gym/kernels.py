@@ -1,19 +1,17 @@
-"""The per-step arithmetic of a batch over its vehicles, compiled: what the judges measure,
-the observation's state vector and the shaped reward. One pass each over the vehicles,
-so a batch of one does not pay numpy's per-call overhead a dozen times per step."""
+"""The per-step arithmetic of a batch over its vehicles, compiled: what the judges measure
+and the shaped reward (the observation's state vector is
+:func:`ft_sitl.navigation.policy_io.observe_state`, shared with the learned navigator).
+One pass each over the vehicles, so a batch of one does not pay numpy's per-call
+overhead a dozen times per step."""
 
 from __future__ import annotations
 
 import math
 
-import numpy as np
 from numba import njit
 
-from ft_sitl.physics.dynamics import X_OMEGA, X_POS, X_QUAT, X_VEL
-from ft_sitl.physics.quaternion import qrotate, tilt_angle
-
-#: the state vector's length (ft_sitl.gym.batch.STATE_NAMES)
-N_STATE = 19
+from ft_sitl.physics.dynamics import X_POS, X_QUAT
+from ft_sitl.physics.quaternion import tilt_angle
 
 
 @njit(cache=True)
@@ -34,41 +32,6 @@ def measure(x, contact, goal, finite, tilt, ground, dist):
         dy = x[n, X_POS + 1] - goal[n, 1]
         dz = x[n, X_POS + 2] - goal[n, 2]
         dist[n] = math.sqrt(dx * dx + dy * dy + dz * dz)
-
-
-@njit(cache=True)
-def observe_state(xs, goal, frame, floor, ceiling, low, high, out):
-    """The state vectors (ft_sitl.gym.batch.STATE_NAMES) of the states ``xs`` (the flight
-    controller's estimates) into ``out`` (float32): goal-frame rows ``frame``; a NaN
-    component becomes 0, and every component is clipped to [low, high]."""
-    ex = np.array([1.0, 0.0, 0.0])
-    ez = np.array([0.0, 0.0, 1.0])
-    vals = np.empty(N_STATE)
-    for n in range(xs.shape[0]):
-        x = xs[n]
-        f = frame[n]
-        rx = goal[n, 0] - x[X_POS]
-        ry = goal[n, 1] - x[X_POS + 1]
-        rz = goal[n, 2] - x[X_POS + 2]
-        s = max(math.sqrt(rx * rx + ry * ry + rz * rz), 1e-6)
-        q = x[X_QUAT:X_QUAT + 4]
-        bz = qrotate(q, ez)
-        bx = qrotate(q, ex)
-        for a in range(3):
-            vals[a] = (f[a, 0] * rx + f[a, 1] * ry + f[a, 2] * rz) / s
-            vals[5 + a] = f[a, 0] * x[X_VEL] + f[a, 1] * x[X_VEL + 1] + f[a, 2] * x[X_VEL + 2]
-            vals[8 + a] = f[a, 0] * bz[0] + f[a, 1] * bz[1] + f[a, 2] * bz[2]
-            vals[11 + a] = f[a, 0] * bx[0] + f[a, 1] * bx[1] + f[a, 2] * bx[2]
-            vals[14 + a] = x[X_OMEGA + a]
-        vals[3] = math.sqrt(rx * rx + ry * ry)
-        vals[4] = rz
-        vals[17] = x[X_POS + 2] - floor
-        vals[18] = ceiling - x[X_POS + 2]
-        for k in range(N_STATE):
-            v = vals[k]
-            if math.isnan(v):
-                v = 0.0
-            out[n, k] = min(max(v, low[k]), high[k])
 
 
 @njit(cache=True)

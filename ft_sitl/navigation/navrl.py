@@ -90,6 +90,7 @@ from ft_sitl.navigation.common import (
 )
 from ft_sitl.navigation.navrl_detector import DynamicObstacleTracker, in_range
 from ft_sitl.navigation.navrl_policy import DYN_DIM, DYN_OBS, CheckpointError, NavRLPolicy
+from ft_sitl.navigation.policy_io import goal_frame
 from ft_sitl.schema import Param, Schema
 
 ENV_VAR = "FT_SITL_NAVRL_CHECKPOINT"
@@ -165,17 +166,7 @@ def load_policy(path: Path):
     return _policy(str(path.resolve()), path.stat().st_mtime_ns)
 
 
-# --- geometry of the goal frame -----------------------------------------------------------
-
-def goal_frame(direction) -> np.ndarray:
-    """Rows x, y, z of NavRL's goal frame: x = the horizontal direction, z up."""
-    d = np.array([direction[0], direction[1], 0.0], dtype=float)
-    n = float(np.linalg.norm(d))
-    x = d / n if n > 1e-9 else np.array([1.0, 0.0, 0.0])
-    z = np.array([0.0, 0.0, 1.0])
-    y = np.cross(z, x)
-    return np.array([x, y, np.cross(x, y)])
-
+# --- geometry of the goal frame (policy_io.goal_frame: NavRL's) -----------------------------
 
 def lidar_directions(start_angle: float) -> np.ndarray:
     """(36, 4, 3) unit ray directions: horizontal beams counter-clockwise from

@@ -21,6 +21,7 @@ from ft_sitl.config import did_you_mean
 from ft_sitl.navigation.base import Navigator
 from ft_sitl.navigation.ego import EgoPlanner
 from ft_sitl.navigation.fast import FastPlanner
+from ft_sitl.navigation.learned import Learned
 from ft_sitl.navigation.navrl import NavRL
 from ft_sitl.navigation.pgo import PgoPlanner
 from ft_sitl.navigation.straight import StraightLine
@@ -34,7 +35,8 @@ class NavigatorError(ValueError):
 
 
 def _builtin() -> dict[str, type[Navigator]]:
-    return {c.name: c for c in (StraightLine, EgoPlanner, FastPlanner, PgoPlanner, NavRL)}
+    return {c.name: c for c in (StraightLine, EgoPlanner, FastPlanner, PgoPlanner, NavRL,
+                                 Learned)}
 
 
 def available() -> dict[str, type[Navigator] | str]:

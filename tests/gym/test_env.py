@@ -197,8 +197,11 @@ def test_spaces_and_observation_layout():
     assert env.action_space.shape == (4,)
     assert env.observation_space["depth"].shape == (1, 12, 16)
     obs, _ = env.reset(seed=0)
-    assert obs in env.observation_space and set(obs) == {"state", "platform", "last_action",
-                                                         "depth"}
+    assert obs in env.observation_space and set(obs) == {"state", "edges", "platform",
+                                                         "last_action", "depth"}
+    e = obs["edges"]  # the 12 x 20 m area, flown along its length from near one end
+    assert e[0] + e[2] == pytest.approx(20.0, abs=1e-4) and e[0] > e[2] > 0
+    assert e[1] + e[3] == pytest.approx(12.0, abs=1e-4)
     hover = NavigateEnv(**SMALL, sensor="none")
     obs, _ = hover.reset(seed=0)
     s = obs["state"]
