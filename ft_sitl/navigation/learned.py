@@ -135,6 +135,14 @@ class Learned(Navigator):
         *CAMERA_PARAMS,
     ))
 
+    @classmethod
+    def unavailable(cls) -> str | None:
+        try:
+            policy_path(DEFAULT_POLICY)
+        except FileNotFoundError as exc:
+            return f"{exc} (the installation lacks ft_sitl/navigation/data)"
+        return None
+
     def __init__(self, **params):
         super().__init__(**params)
         p = self.settings

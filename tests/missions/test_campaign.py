@@ -191,7 +191,8 @@ def test_the_quick_preset(navrl_checkpoint, monkeypatch):
     assert all(s.indices == (1, 2) for s in c.scenarios)
     specs = c.trial_specs()
     assert len(specs) == 6 * 7 * 2 * len(c.algorithms)
-    assert {a.name for a in c.algorithms} == {"straight", "ego", "fast", "pgo", "navrl"}
+    assert {a.name for a in c.algorithms} == {"straight", "ego", "fast", "pgo", "navrl",
+                                              "learned"}
     assert c.notes == []
     assert len({s.trial_id for s in specs}) == len(specs)
 

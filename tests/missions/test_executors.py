@@ -22,6 +22,7 @@ import numpy as np
 import psutil
 import pytest
 
+from ft_sitl.cli import main as cli_main
 from ft_sitl.missions.campaign import run_campaign
 from ft_sitl.missions.campaign_file import load_campaign
 from ft_sitl.missions.executors import KILL_GRACE_S, DaskExecutor, ExecutorError
@@ -312,20 +313,27 @@ def test_workers_with_other_code_or_that_cannot_spawn_are_refused(cluster, monke
         ex.close()
 
 
-def test_bad_scheduler_options_are_named(tmp_path, cli_env, forty):
+def test_bad_scheduler_options_are_named(tmp_path, cli_env, forty, capsys):
     _, campaign, _ = forty
-    cases = [
+    cases = [  # refused before anything starts: the command's own function, in-process
         (["--scheduler", "localhost:8786"], "--scheduler: 'localhost:8786' is not a scheduler "
                                             "address like tcp://host:8786"),
         (["--scheduler", "tcp://127.0.0.1:9", "--cluster", "local"],
          "--scheduler and --cluster: give one"),
         (["--chunk-size", "3"], "--chunk-size: only with --scheduler or --cluster"),
         (["--cluster", "local", "--chunk-size", "0"], "--chunk-size: 0 must be at least 1"),
-        (["--scheduler", f"tcp://127.0.0.1:{_free_port()}"], "--scheduler tcp://127.0.0.1:"),
     ]
+    plain = tmp_path / "plain.toml"  # (built-in navigators only: no test plug-ins here)
+    plain.write_text('name = "plain"\nalgorithms = ["straight"]\nplatforms = ["real"]\n'
+                     'scenarios = ["forest"]\nindices = [1]\ntrials = 1\n')
     for extra, message in cases:
-        proc = run_exe("campaign", "run", campaign, "--out", tmp_path / "o", "--quiet",
-                       *extra, env=cli_env, timeout=120)
-        assert proc.returncode == 2, (extra, proc.stderr)
-        assert message in proc.stderr, (extra, proc.stderr)
-        assert "Traceback" not in proc.stderr
+        code = cli_main(["campaign", "run", str(plain), "--out", str(tmp_path / "o"),
+                         "--quiet", *extra])
+        err = capsys.readouterr().err
+        assert code == 2 and message in err, (extra, err)
+        assert not (tmp_path / "o").exists()
+    # a scheduler nobody listens at: found out by the installed command, exit 2
+    proc = run_exe("campaign", "run", campaign, "--out", tmp_path / "o", "--quiet",
+                   "--scheduler", f"tcp://127.0.0.1:{_free_port()}", env=cli_env, timeout=120)
+    assert proc.returncode == 2 and "--scheduler tcp://127.0.0.1:" in proc.stderr, proc.stderr
+    assert "Traceback" not in proc.stderr
