@@ -274,28 +274,28 @@ def _unit_interval(name: str, arr: np.ndarray) -> None:
                             "[0, 1]")
 
 
-def velocity_rows(velocity, yaw_rate) -> np.ndarray:
-    """(N, N_SP): row i is ``Setpoint.velocity(velocity[i], yaw_rate=yaw_rate[i])
-    .offboard().row`` (yaw held: NaN)."""
-    v = _batch("velocity", velocity, 3)
+def _trajectory_rows(name: str, slot: int, vectors, yaw_rate) -> np.ndarray:
+    """Offboard trajectory rows controlling one level (``slot``: SP_VEL or SP_ACC) of
+    every axis, with a yaw rate (the heading held)."""
+    v = _batch(name, vectors, 3)
     r = _batch("yaw_rate", np.reshape(yaw_rate, (-1, 1)), 1)
     rows = _batch_rows(c.KIND_TRAJECTORY, len(v))
-    rows[:, c.SP_VEL:c.SP_VEL + 3] = v
+    rows[:, slot:slot + 3] = v
     rows[:, c.SP_YAWRATE] = r[:, 0]
     rows[:, c.SP_OFFBOARD] = 1.0
     return rows
+
+
+def velocity_rows(velocity, yaw_rate) -> np.ndarray:
+    """(N, N_SP): row i is ``Setpoint.velocity(velocity[i], yaw_rate=yaw_rate[i])
+    .offboard().row`` (yaw held: NaN)."""
+    return _trajectory_rows("velocity", c.SP_VEL, velocity, yaw_rate)
 
 
 def acceleration_rows(acceleration, yaw_rate) -> np.ndarray:
     """(N, N_SP): row i is ``Setpoint.acceleration(acceleration[i], yaw_rate=yaw_rate[i])
     .offboard().row``."""
-    a = _batch("acceleration", acceleration, 3)
-    r = _batch("yaw_rate", np.reshape(yaw_rate, (-1, 1)), 1)
-    rows = _batch_rows(c.KIND_TRAJECTORY, len(a))
-    rows[:, c.SP_ACC:c.SP_ACC + 3] = a
-    rows[:, c.SP_YAWRATE] = r[:, 0]
-    rows[:, c.SP_OFFBOARD] = 1.0
-    return rows
+    return _trajectory_rows("acceleration", c.SP_ACC, acceleration, yaw_rate)
 
 
 def body_rate_rows(rates_body, thrust) -> np.ndarray:
