@@ -395,7 +395,8 @@ def plot_curve(csv_path: str | Path, png_path: str | Path) -> None:
     import matplotlib.pyplot as plt  # (after choosing the Agg backend)
     df = pd.read_csv(csv_path)
     fig, (a, b) = plt.subplots(2, 1, figsize=(8, 6), sharex=True)
-    w = max(1, len(df) // 50)
+    # a world (one family) lasts world_every steps: smooth over many of them
+    w = max(1, len(df) // 20)
     other = df["out_of_bounds"] + df["loss_of_control"] + df["unstable"]
     for series, label, colour in (
             (df["success"], "success", "tab:green"),
