@@ -13,6 +13,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from ft_sitl.cli import main as cli_main
 from ft_sitl.gym.train import PRESET, TrainError, evaluate, load_config, policy_vec_env, train
 from ft_sitl.navigation.learned import load_policy
 from ft_sitl.navigation.policy_io import MlpPolicy
@@ -50,16 +51,16 @@ def test_bad_configurations_name_what_is_wrong(tmp_path, text, message):
         load_config(f)
 
 
-def test_the_command_checks_and_refuses_by_name(tmp_path):
+def test_the_command_checks_and_refuses_by_name(tmp_path, capsys):
     ok = subprocess.run(CLI + ["train", "--out", str(tmp_path / "o"), "--check",
                                "--steps", "5000"], capture_output=True, text=True)
     assert ok.returncode == 0, ok.stderr
     assert f"{PRESET}: valid" in ok.stdout and '"total_steps": 5000' in ok.stdout
     bad = tmp_path / "b.toml"
     bad.write_text("[train]\nhidden = [64]\n")
-    out = subprocess.run(CLI + ["train", "--config", str(bad), "--out", str(tmp_path / "o")],
-                         capture_output=True, text=True)
-    assert out.returncode == 2 and "hidden" in out.stderr and not (tmp_path / "o").exists()
+    code = cli_main(["train", "--config", str(bad), "--out", str(tmp_path / "o")])
+    err = capsys.readouterr().err
+    assert code == 2 and "hidden" in err and not (tmp_path / "o").exists()
 
 
 def test_without_the_stack_training_says_what_to_install(tmp_path):
