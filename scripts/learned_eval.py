@@ -7,7 +7,9 @@ trials (the scan cast into the depth camera's map) costs it.
 ``--blind`` also flies every episode with the platform vector replaced by the catalog's
 middle (0.5 for each component): how much the policy's success depends on knowing its
 vehicle. Writes ``eval.parquet`` (one row per episode: family, index, platform, outcome,
-detail, time, blind) and prints success per family.
+detail, time, blind) and ``eval.md`` (success per family, the spread of per-platform
+success and its correlations with the indicators); ``--summary`` rewrites eval.md from
+eval.parquet.
 
     PYTHONPATH=$PWD .venv/bin/python scripts/learned_eval.py [--policy v1] --out DIR [--blind]
 """
@@ -26,6 +28,7 @@ from tqdm import tqdm
 
 from ft_sitl.gym.envs import NavigateVectorEnv
 from ft_sitl.gym.train import ENV_DEFAULTS
+from ft_sitl.missions.spec import PROTOCOL_VERSION, vehicle_half_span_m
 from ft_sitl.navigation.learned import load_policy
 from ft_sitl.navigation.policy_io import EDGE_NAMES, N_STATE, PLATFORM_NAMES, policy_input
 from ft_sitl.physics.catalog import catalog
@@ -67,12 +70,49 @@ def fly(policy, family: str, index: int, platforms, blind: bool) -> list[dict]:
     return rows
 
 
+def summary(df: pd.DataFrame) -> str:
+    """Markdown: success per family (and platform-blind), the outcomes, and the spread of
+    per-platform success with its correlations with the indicators."""
+    df = df.assign(success=df.outcome == "success")
+    out = ["| family | success | success, platform-blind |", "|---|---:|---:|"]
+    fam = df.groupby(["family", "blind"]).success.mean().unstack()
+    for f, r in fam.iterrows():
+        out.append(f"| {f} | {r[False]:.2f} | " + (f"{r[True]:.2f} |" if True in r else "- |"))
+    tot = df.groupby("blind").success.mean()
+    out.append(f"| **all** | **{tot[False]:.2f}** | " + (f"**{tot[True]:.2f}** |"
+                                                         if True in tot else "- |"))
+    out += ["", "| platform vector | per-platform success: mean | sd | min | max | r(TWR) "
+            "| r(log alpha_xy) | r(alpha_z) | r(footprint) |", "|---|---|---|---|---|---|---|"
+            "---|---|"]
+    cat = catalog()
+    ind = pd.DataFrame({n: {"twr": p.indicators().twr_max,
+                            "axy": np.log(p.indicators().alpha_xy_max_rad_s2),
+                            "az": p.indicators().alpha_z_max_rad_s2,
+                            "fp": vehicle_half_span_m(PROTOCOL_VERSION, p)}
+                        for n, p in cat.items()}).T
+    for b, g in df.groupby("blind"):
+        per = g.groupby("platform").success.mean()
+        x = ind.loc[per.index]
+        label = "0.5 (blind)" if b else "the platform's"
+        out.append(f"| {label} | {per.mean():.2f} | "
+                   f"{per.std():.3f} | {per.min():.2f} | {per.max():.2f} | "
+                   + " | ".join(f"{per.corr(x[c]):+.2f}" for c in ("twr", "axy", "az", "fp"))
+                   + " |")
+    return "\n".join(out) + "\n"
+
+
 def main() -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--policy", default="v1")
     ap.add_argument("--out", type=Path, required=True)
     ap.add_argument("--blind", action="store_true")
+    ap.add_argument("--summary", action="store_true",
+                    help="only summarise OUT/eval.parquet into OUT/eval.md")
     a = ap.parse_args()
+    if a.summary:
+        (a.out / "eval.md").write_text(summary(pd.read_parquet(a.out / "eval.parquet")))
+        print((a.out / "eval.md").read_text())
+        return 0
     policy = load_policy(a.policy)
     platforms = list(catalog().values())
     jobs = [(f, i, b) for f in REGISTRY for i in range(1, 11)
@@ -83,9 +123,9 @@ def main() -> int:
     df = pd.DataFrame(rows)
     a.out.mkdir(parents=True, exist_ok=True)
     df.to_parquet(a.out / "eval.parquet")
-    df["success"] = df.outcome == "success"
-    print(df.groupby(["family", "blind"]).success.mean().unstack().round(2))
-    print(pd.crosstab(df.outcome, df.blind))
+    (a.out / "eval.md").write_text(summary(df))
+    print((a.out / "eval.md").read_text())
+    print(pd.crosstab([df.family, df.blind], df.outcome))
     return 0
 
 

@@ -132,6 +132,48 @@ NO_REPLAN_THRESHOLD = Param("no_replan_threshold_m", 2.0, "m", (0.0, 10.0),
                             doc="no new plan once the goal is this close")
 
 
+class DelayedCommands:
+    """A command computed every ``1 / rate_hz`` s (simulated) from the observation of that
+    moment and put in force ``latency_s`` later, or after its measured compute time with
+    ``measured``: how the learned navigators (NavRL, learned) turn a policy's output into
+    the setpoint of each step. ``compute_s`` keeps each computation's wall-clock time."""
+
+    def __init__(self, rate_hz: float, latency_s: float, measured: bool):
+        self.period = 1.0 / float(rate_hz)
+        self.latency = float(latency_s)
+        self.measured = bool(measured)
+        self.next_t = 0.0
+        self.current = None
+        self.pending: tuple[float, object] | None = None
+        self.compute_s: list[float] = []
+
+    def step(self, t: float, compute):
+        """The command in force at ``t``: a pending one whose time has come takes over;
+        when a period is due, ``compute()`` gives the next (None: no new command). None
+        before the first command is in force."""
+        if self.pending is not None and t >= self.pending[0] - 1e-9:
+            self.current, self.pending = self.pending[1], None
+        if t >= self.next_t - 1e-9:
+            self.next_t = t + self.period
+            t0 = time.perf_counter()
+            cmd = compute()
+            dt = time.perf_counter() - t0
+            self.compute_s.append(dt)
+            if cmd is not None:
+                lat = dt if self.measured else self.latency
+                if lat <= 0.0:
+                    self.current = cmd
+                else:
+                    self.pending = (t + lat, cmd)
+        return self.current
+
+
+def camera_of(settings: dict):
+    """The depth camera a navigator's resolved settings name (:data:`CAMERA_PARAMS`)."""
+    return camera_config(settings["camera"], settings["camera_width"],
+                         settings["camera_height"], settings["camera_rate_hz"])
+
+
 def planner_schema(*own: Param, **defaults) -> Schema:
     """A replanning planner's parameters: ``max_acc_m_s2``, the planner's ``own``, the
     latency ones and the camera's, with ``defaults`` replacing the declared ones."""
@@ -159,8 +201,7 @@ class ReplanningPlanner(Navigator):
         self.max_acc = float(p["max_acc_m_s2"])
         self.latency = float(p["latency_s"])
         self.measured_latency = bool(p["measured_latency"])
-        self.camera = camera_config(p["camera"], p["camera_width"], p["camera_height"],
-                                    p["camera_rate_hz"])
+        self.camera = camera_of(p)
 
     def reset(self, task: Task) -> None:
         super().reset(task)

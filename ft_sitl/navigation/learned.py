@@ -33,7 +33,6 @@ from __future__ import annotations
 
 import functools
 import math
-import time
 from pathlib import Path
 
 import numpy as np
@@ -44,7 +43,8 @@ from ft_sitl.navigation.common import (
     CAMERA_PARAMS,
     LATENCY,
     MEASURED_LATENCY,
-    camera_config,
+    DelayedCommands,
+    camera_of,
     wrap_angle,
 )
 from ft_sitl.navigation.mapping import LocalMap, MapConfig
@@ -157,8 +157,7 @@ class Learned(Navigator):
         self.platform_range = (np.array(m["platform_log_lo"]), np.array(m["platform_log_hi"]))
         self.latency = float(p["latency_s"])
         self.measured_latency = bool(p["measured_latency"])
-        self.camera = camera_config(p["camera"], p["camera_width"], p["camera_height"],
-                                    p["camera_rate_hz"])
+        self.camera = camera_of(p)
 
     def reset(self, task: Task) -> None:
         super().reset(task)
@@ -177,11 +176,8 @@ class Learned(Navigator):
         self.last_action = np.zeros((1, 4))
         self.x = np.zeros((1, d.X_ROTOR))  # (the rotor speeds are not observed)
         self.state = np.empty((1, N_STATE), np.float32)
-        self.next_control = 0.0
         self.facing = False
-        self.current: Setpoint | None = None
-        self.pending: tuple[float, Setpoint] | None = None
-        self.compute_s: list[float] = []
+        self.commands = DelayedCommands(self.control_hz, self.latency, self.measured_latency)
 
     def observe(self, obs: Observation) -> None:
         """Before navigation: the depth frames go into the map (from take-off on)."""
@@ -224,19 +220,7 @@ class Learned(Navigator):
         t = obs.time_s
         if obs.depth is not None:
             self.map.fuse(obs.depth)
-        if self.pending is not None and t >= self.pending[0] - 1e-9:
-            self.current, self.pending = self.pending[1], None
-        if t >= self.next_control - 1e-9:
-            self.next_control = t + 1.0 / self.control_hz
-            t0 = time.perf_counter()
-            sp = self.command(obs)
-            dt = time.perf_counter() - t0
-            self.compute_s.append(dt)
-            lat = dt if self.measured_latency else self.latency
-            if lat <= 0.0:
-                self.current = sp
-            else:
-                self.pending = (t + lat, sp)
-        if self.current is None:  # before the first command: hold the start
+        sp = self.commands.step(t, lambda: self.command(obs))
+        if sp is None:  # before the first command: hold the start
             return Setpoint.position(self.task.start, yaw=obs.yaw)
-        return self.current
+        return sp

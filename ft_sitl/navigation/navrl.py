@@ -85,7 +85,8 @@ from ft_sitl.navigation.common import (
     CAMERA_PARAMS,
     LATENCY,
     MEASURED_LATENCY,
-    camera_config,
+    DelayedCommands,
+    camera_of,
     wrap_angle,
 )
 from ft_sitl.navigation.navrl_detector import DynamicObstacleTracker, in_range
@@ -441,8 +442,7 @@ class NavRL(Navigator):
         self.use_shield = bool(p["use_shield"])
         self.dynamic_mode = p["dynamic_obstacles"]
         self.needs_mover_truth = self.dynamic_mode == "truth"
-        self.camera = camera_config(p["camera"], p["camera_width"], p["camera_height"],
-                                    p["camera_rate_hz"])
+        self.camera = camera_of(p)
 
     @classmethod
     def unavailable(cls) -> str | None:
@@ -477,11 +477,8 @@ class NavRL(Navigator):
         self.free_history: deque = deque(maxlen=FREE_HISTORY)
         self.clock_offset_us = 0
         self.perception_s: list[float] = []  # wall-clock time of each frame's perception
-        self.next_control = 0.0
         self.settled = 0
-        self.current: Setpoint | None = None
-        self.pending: tuple[float, Setpoint] | None = None
-        self.compute_s: list[float] = []
+        self.commands = DelayedCommands(CONTROL_HZ, self.latency, self.measured_latency)
         self.policy_calls = 0
         self.shield_solves = 0
         self.dynamic_steps = 0  # control periods with a moving obstacle in the input
@@ -581,20 +578,7 @@ class NavRL(Navigator):
     def step(self, obs: Observation) -> Setpoint:
         t = obs.time_s
         self._perceive(obs)
-        if self.pending is not None and t >= self.pending[0] - 1e-9:
-            self.current, self.pending = self.pending[1], None
-        if t >= self.next_control - 1e-9:
-            self.next_control = t + 1.0 / CONTROL_HZ
-            t0 = time.perf_counter()
-            sp = self.command(obs)
-            dt = time.perf_counter() - t0
-            self.compute_s.append(dt)
-            if sp is not None:
-                lat = dt if self.measured_latency else self.latency
-                if lat <= 0.0:
-                    self.current = sp
-                else:
-                    self.pending = (t + lat, sp)
-        if self.current is None:  # before the first command: hold the start
+        sp = self.commands.step(t, lambda: self.command(obs))
+        if sp is None:  # before the first command: hold the start
             return Setpoint.position(self.task.start, yaw=obs.yaw)
-        return self.current
+        return sp
