@@ -1,4 +1,5 @@
-"""The ft-sitl command as a user runs it: the installed console script, real processes."""
+"""The ft-sitl command as a user runs it: the installed console script, real processes (and
+the same command function in-process where only its argument parsing is checked)."""
 
 import json
 import os
@@ -8,6 +9,8 @@ import sys
 from pathlib import Path
 
 import pytest
+
+from ft_sitl.cli import main as cli_main
 
 EXE = shutil.which("ft-sitl", path=str(Path(sys.executable).parent))
 
@@ -20,14 +23,23 @@ def run(*args, check=True):
     return proc
 
 
-def test_help_lists_every_subcommand():
-    out = run("--help").stdout
-    for cmd in ("demo", "platforms", "params"):
+def _help(capsys, *args) -> str:
+    """A command's --help through the command's own function, in-process."""
+    with pytest.raises(SystemExit) as exc:
+        cli_main([*args, "--help"])
+    assert exc.value.code == 0
+    return capsys.readouterr().out
+
+
+def test_help_lists_every_subcommand(capsys):
+    out = run("--help").stdout  # (the installed command, once)
+    for cmd in ("demo", "platforms", "params", "campaign", "navigators", "train"):
         assert cmd in out
+    assert all(sub in _help(capsys, "platforms") for sub in ("list", "show", "check",
+                                                            "generate"))
     for sub in ("list", "show", "check", "generate"):
-        assert sub in run("platforms", "--help").stdout
-        assert run("platforms", sub, "--help").stdout.startswith("usage: ft-sitl platforms")
-    assert "--json" in run("platforms", "show", "--help").stdout
+        assert _help(capsys, "platforms", sub).startswith("usage: ft-sitl platforms")
+    assert "--json" in _help(capsys, "platforms", "show")
 
 
 def test_platforms_list_json_has_the_36_with_recomputed_indicators(table1_rows):
