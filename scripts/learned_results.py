@@ -1,9 +1,10 @@
 """The learned navigator against the five algorithms (issue 25's results): tables and
 figures for docs/results/learned/.
 
-Reads the rows of a campaign that flew ``learned`` (``--learned DIR``) and the rows of the
-paper matrix (``--others DIR``), keeps the other algorithms' rows of the cells the learned
-campaign flew (platform, family, configuration), and writes into ``--out``:
+Reads the rows of the campaigns that flew ``learned`` (``--learned DIR [DIR ...]``: their
+rows together, each trial once) and the rows of the paper matrix (``--others DIR``),
+keeps the other algorithms' rows of the cells the learned campaigns flew (platform,
+family, configuration), and writes into ``--out``:
 
 * ``comparison.md``: success per family and algorithm (with the number of trials), mean
   speed of the successful flights, the spread of per-platform success, and the logistic
@@ -16,7 +17,11 @@ campaign flew (platform, family, configuration), and writes into ``--out``:
 Run::
 
     PYTHONPATH=$PWD .venv/bin/python scripts/learned_results.py \\
-        --learned runs/learned-v1-sample --others runs/paper-v6-full --out docs/results/learned
+        --learned runs/learned-v1-sample runs/learned-v1-rest --others docs/results/paper \\
+        --out docs/results/learned
+
+A directory is read from its ``trials.jsonl`` (a campaign being flown) or, without one,
+its ``trials.parquet`` (a committed result).
 """
 
 from __future__ import annotations
@@ -40,24 +45,28 @@ from ft_sitl.missions.regression import (  # noqa: E402
     fit_success_models,
     footprints,
 )
+from ft_sitl.missions.results import rows_from_parquet  # noqa: E402
 
 ORDER = ["straight", "ego", "fast", "pgo", "navrl", "learned"]
 CELL = ["platform", "family", "scenario_index"]
 
 
 def rows(directory: Path) -> pd.DataFrame:
-    with open(directory / "trials.jsonl") as f:
-        df = pd.DataFrame([json.loads(line) for line in f if line.strip()])
-    return df
+    live = directory / "trials.jsonl"
+    if live.exists():
+        with open(live) as f:
+            return pd.DataFrame([json.loads(line) for line in f if line.strip()])
+    return pd.DataFrame(rows_from_parquet(directory / "trials.parquet"))
 
 
 def main() -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--learned", type=Path, required=True)
+    ap.add_argument("--learned", type=Path, nargs="+", required=True)
     ap.add_argument("--others", type=Path, required=True)
     ap.add_argument("--out", type=Path, required=True)
     a = ap.parse_args()
-    learned = rows(a.learned)
+    learned = pd.concat([rows(d) for d in a.learned], ignore_index=True)
+    learned = learned.drop_duplicates("trial_id")
     learned = learned[learned.algorithm == "learned"]
     others = rows(a.others)
     cells = learned[CELL].drop_duplicates()
