@@ -171,6 +171,8 @@ def report_meta(out_dir: Path, campaign: dict) -> dict:
         meta["started_utc"] = runs[0]["started_utc"]
         meta["finished_utc"] = runs[-1]["finished_utc"]
         meta["wall_time_s"] = round(sum(r["wall_time_s"] for r in runs), 2)
+        if all(isinstance(r.get("trials_run"), int) for r in runs):
+            meta["trials_run"] = sum(r["trials_run"] for r in runs)
         meta["runs (resumes)"] = len(runs)
         meta["workers"] = runs[-1].get("workers")
     return meta

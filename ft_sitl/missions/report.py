@@ -55,7 +55,8 @@ from ft_sitl.scenarios.families import FAMILIES, PAPER_NAMES
 
 #: ``meta`` keys the report reads, in the order it shows them; any other key of ``meta``
 #: is listed after them as given.
-META_KEYS = ("code_version", "machine", "started_utc", "finished_utc", "wall_time_s")
+META_KEYS = ("code_version", "machine", "started_utc", "finished_utc", "wall_time_s",
+             "trials_run")
 #: ``meta["machine"]`` keys shown first when it is a mapping (as bench/benchutil writes).
 MACHINE_KEYS = ("cpu_model", "n_cpus")
 #: Heatmaps carry the value in each cell up to this many cells.
@@ -765,9 +766,17 @@ def _run_facts(df: pd.DataFrame, meta: Mapping) -> list[tuple[str, str]]:
     wall = meta.get("wall_time_s")
     n = len(df)
     facts.append(("trials", f"{n}"))
+    # a run stopped before its end records nothing: the rows it flew are not in the wall
+    # time, so the rate counts the trials of the recorded runs (meta "trials_run")
+    flown = meta.get("trials_run")
+    flown = n if not isinstance(flown, int) or isinstance(flown, bool) else flown
+    if flown < n:
+        facts.append(("trials flown by the recorded runs",
+                      f"{flown} (the other {n - flown}: runs stopped before they ended, "
+                      "which record no wall time)"))
     if isinstance(wall, int | float) and math.isfinite(wall) and wall > 0:
         facts.append(("wall time", f"{wall:.1f} s"))
-        facts.append(("trials per second", f"{n / wall:.3g}"))
+        facts.append(("trials per second", f"{flown / wall:.3g}"))
     else:
         facts.append(("wall time", "not recorded" if wall is None else str(wall)))
         facts.append(("trials per second", "–"))
@@ -965,8 +974,9 @@ def write_report(df: pd.DataFrame, out_dir, *, campaign_spec: Mapping, meta: Map
     ``df`` is the table of :func:`ft_sitl.missions.results.to_frame`. ``campaign_spec`` is
     shown as YAML. ``meta`` keys read: ``code_version``, ``machine`` (a mapping, e.g.
     ``{"cpu_model": ..., "n_cpus": ...}``, or a string), ``started_utc``,
-    ``finished_utc``, ``wall_time_s`` (campaign wall time; trials per second = rows /
-    wall time). A key that is absent shows as "not recorded"; other keys are listed as
+    ``finished_utc``, ``wall_time_s`` (campaign wall time), ``trials_run`` (the trials
+    flown in that wall time, default: every row; trials per second = trials_run / wall
+    time). A key that is absent shows as "not recorded"; other keys are listed as
     given. ``B`` and ``seed`` are the bootstrap's.
 
     Returns ``{file name: path}`` for every file written (``report.html``, ``summary.md``,

@@ -374,3 +374,30 @@ def test_nothing_in_any_figure_is_cut_off_by_its_edge(campaign):
             eps = 1.0 / report._DPI
             assert (drawn.x0 >= -eps and drawn.y0 >= -eps and drawn.x1 <= w + eps
                     and drawn.y1 <= h + eps), (name, drawn, (w, h))
+
+
+def test_a_resumed_campaigns_rate_counts_only_the_recorded_runs_trials(tmp_path):
+    """A run stopped before its end records nothing in runs.json: its rows are not in the
+    recorded wall time, so the rate divides the recorded runs' trials, and the facts say
+    how many rows came from unrecorded runs."""
+    import json
+
+    from ft_sitl.missions.campaign import report_meta
+    from ft_sitl.missions.report import _run_facts
+
+    df = to_frame(_rows(["straight"], _real_platforms(2), ["forest"], 5, seed=1))
+    run = {"started_utc": "2026-01-02T03:04:05Z", "finished_utc": "2026-01-02T03:05:05Z",
+           "wall_time_s": 20.0, "trials_run": 4, "workers": 2, "machine": {"n_cpus": 2}}
+    (tmp_path / "runs.json").write_text(json.dumps([run]))
+    meta = report_meta(tmp_path, {"code_version": "x"})
+    assert meta["trials_run"] == 4 and meta["wall_time_s"] == 20.0
+    facts = dict(_run_facts(df, meta))
+    assert facts["trials per second"] == "0.2"
+    assert facts["trials flown by the recorded runs"].startswith(f"4 (the other {len(df) - 4}")
+    # runs.json from before runs recorded their trials: every row counts, as before
+    del run["trials_run"]
+    (tmp_path / "runs.json").write_text(json.dumps([run]))
+    meta = report_meta(tmp_path, {"code_version": "x"})
+    facts = dict(_run_facts(df, meta))
+    assert "trials_run" not in meta and "trials flown by the recorded runs" not in facts
+    assert facts["trials per second"] == f"{len(df) / 20.0:.3g}"
