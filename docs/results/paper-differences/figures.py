@@ -10,17 +10,14 @@ import matplotlib.pyplot as plt
 
 from ft_sitl.scenarios.families import build_scenario
 from ft_sitl.scenarios.solvability import convex_pieces
+from perlin_rac_geometry import slice_grid  # this folder
 
 OUT = str(__import__("pathlib").Path(__file__).resolve().parent) + "/"
 
 
 def slice_occ(sc, z, step=0.1):
-    lo = np.array(sc.bounds_min, float)
-    hi = np.array(sc.bounds_max, float)
-    nx = int(round((hi[0] - lo[0]) / step))
-    ny = int(round((hi[1] - lo[1]) / step))
-    cx = lo[0] + (np.arange(nx) + 0.5) * step
-    cy = lo[1] + (np.arange(ny) + 0.5) * step
+    cx, cy, lo, hi = slice_grid(sc, step)
+    nx, ny = len(cx), len(cy)
     occ = np.zeros((nx, ny), bool)
     for p in convex_pieces(sc.mesh):
         if not (p.lo[2] <= z <= p.hi[2]):
