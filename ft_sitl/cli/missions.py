@@ -5,6 +5,7 @@ from __future__ import annotations
 import json
 import math
 import random
+import signal
 import sys
 from pathlib import Path
 
@@ -124,6 +125,10 @@ def _fence_summary(fence: dict | None) -> str:
     return f"{fence['action']}: {', '.join(parts)}"
 
 
+def _interrupt(signum, frame):
+    raise KeyboardInterrupt(f"signal {signum}")
+
+
 def cmd_campaign_run(args) -> int:
     c = _campaign(args.campaign)
     if args.workers < 1:
@@ -142,6 +147,9 @@ def cmd_campaign_run(args) -> int:
         print(f"note: {note}", file=sys.stderr)
     if args.mqtt:
         option_value("--mqtt", parse_broker_url, args.mqtt)
+    # SIGTERM (kill, a cluster's job limit) ends the run as Ctrl-C does: the finished
+    # trials stay, the workers stop and runs.json records the run as interrupted
+    previous = signal.signal(signal.SIGTERM, _interrupt)
     try:
         summary = run_campaign(c, out, executor=executor, progress=not args.quiet,
                                limit=args.limit, transport=transport)
@@ -151,6 +159,8 @@ def cmd_campaign_run(args) -> int:
         print(f"interrupted: finished trials are in {out}; run the same command again to "
               f"resume", file=sys.stderr)
         return 130
+    finally:
+        signal.signal(signal.SIGTERM, previous)
     rate = summary.ran / summary.wall_s if summary.wall_s > 0 else math.nan
     print(f"{summary.ran} trials run, {summary.skipped} already done, {summary.total} in the "
           f"campaign; {summary.wall_s:.1f} s ({rate:.2f} trials/s) -> {out}")

@@ -221,6 +221,7 @@ def run_campaign(campaign: Campaign, out_dir: str | Path, *, workers: int = 1,
     bar = None
     ran = 0
     per_worker: dict[str, list[float]] = defaultdict(list)
+    completed = False
     try:
         ex.start()
         dashboard = getattr(ex, "dashboard", None)
@@ -244,6 +245,7 @@ def run_campaign(campaign: Campaign, out_dir: str | Path, *, workers: int = 1,
                     errors.append((tid, err))
                 if bar is not None:
                     bar.update(1)
+        completed = True
     finally:
         if bar is not None:
             bar.close()
@@ -256,6 +258,7 @@ def run_campaign(campaign: Campaign, out_dir: str | Path, *, workers: int = 1,
             "finished_utc": time.strftime("%Y-%m-%dT%H:%M:%SZ", time.gmtime()),
             "wall_time_s": round(wall, 3), "trials_run": ran, "trials_skipped": skipped,
             "errors": len(errors), "workers": described.get("workers", workers),
+            "interrupted": not completed,
             **{k: v for k, v in described.items() if k != "workers"},
             "throughput": throughput(per_worker),
             "machine": machine_info(),

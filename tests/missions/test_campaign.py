@@ -480,6 +480,47 @@ def test_a_killed_campaign_resumes_to_the_uninterrupted_result(tmp_path, cli_env
     assert trials.read_bytes() == before
 
 
+def test_a_terminated_campaign_records_its_run_and_keeps_its_rows(tmp_path, cli_env, plugins):
+    """SIGTERM (kill, a batch system's time limit) stops a campaign as Ctrl-C does: exit
+    130 with a message, the workers gone, every finished row kept, and runs.json records
+    the run, marked interrupted, with the trials it flew; the resume completes it."""
+    campaign = _resume_dir(tmp_path)
+    out = tmp_path / "terminated"
+    trials = out / "trials.jsonl"
+    proc = subprocess.Popen([EXE, "campaign", "run", str(campaign), "--out", str(out),
+                             "--workers", "2", "--no-report", "--quiet"], env=cli_env,
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE,
+                            start_new_session=True)
+    try:
+        deadline = time.monotonic() + 120
+        while not (trials.exists() and trials.read_bytes().count(b"\n") >= 2):
+            assert proc.poll() is None, proc.communicate()
+            assert time.monotonic() < deadline, "no trial finished in 120 s"
+            time.sleep(0.02)
+        proc.send_signal(signal.SIGTERM)  # the runner only: it stops its workers
+        _, err = proc.communicate(timeout=60)
+    finally:
+        if proc.poll() is None:
+            os.killpg(proc.pid, signal.SIGKILL)
+            proc.communicate()
+    assert proc.returncode == 130, err
+    assert "interrupted: finished trials are in" in err.decode()
+    rows = read_jsonl(trials)
+    assert 2 <= len(rows) < N_RESUME, "the signal must interrupt the campaign"
+    runs = json.loads((out / "runs.json").read_text())
+    assert len(runs) == 1 and runs[0]["interrupted"] is True
+    assert runs[0]["trials_run"] == len(rows) and runs[0]["wall_time_s"] > 0
+    assert not (out / GRID_CACHE_DIR).exists()  # closed as at a normal end
+
+    proc = run_exe("campaign", "run", campaign, "--out", out, "--workers", "2", "--no-report",
+                   "--quiet", env=cli_env)
+    assert proc.returncode == 0, proc.stderr
+    runs = json.loads((out / "runs.json").read_text())
+    assert [(r["trials_run"], r["interrupted"]) for r in runs] == [
+        (len(rows), True), (N_RESUME - len(rows), False)]
+    assert len({r["trial_id"] for r in read_jsonl(trials)}) == N_RESUME
+
+
 def _row(tid: str, v: int, reason: str = "timeout") -> dict:
     return {"trial_id": tid, "v": v, "reason": reason, "success": reason == "success"}
 
