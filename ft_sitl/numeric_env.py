@@ -9,9 +9,9 @@ same order. Two settings of the BLAS library numpy loads change that order:
   with AVX-512 it takes its SkylakeX kernels, whose dot products differ in the last bits
   from the AVX2 (Haswell/Zen) kernels the committed results were made with; the planners'
   trajectories then drift apart. Measured on 2026-11-26: every planner trial of a
-  53-row sample of docs/results/paper differed on an AVX-512 host, and all were identical
-  with ``OPENBLAS_CORETYPE=Haswell``. So on a processor that has AVX2 and FMA the Haswell
-  kernels are used.
+  53-row sample of the protocol-1 paper run (then docs/results/paper) differed on an
+  AVX-512 host, and all were identical with ``OPENBLAS_CORETYPE=Haswell``. So on a
+  processor that has AVX2 and FMA the Haswell kernels are used.
 
 Variables the user set are left alone. This runs on ``import ft_sitl``, before numba (and
 with it numpy) loads; a program that imported numpy first keeps what its BLAS chose.

@@ -77,7 +77,8 @@ class ProtocolRules:
 #: (absent: 1, the rules of every row written before versions were recorded), its row says
 #: which version made it, and ``ft-sitl trial rerun`` flies an old row by its own rules
 PROTOCOLS = {
-    1: ProtocolRules(1, "the rules of docs/results/paper (campaigns up to 2026-11-26)",
+    1: ProtocolRules(1, "the rules of the first paper run and docs/results/paper-sample "
+                        "(campaigns up to 2026-11-26)",
                      offboard_acc_clamp=True, benchmark_camera_hz=15.0,
                      observe_approach=False, max_acc_m_s2=None),
     2: ProtocolRules(2, "PX4's offboard rule: MPC_ACC_* no longer clamp the navigator's "

@@ -674,15 +674,25 @@ def test_the_gain_mode_reaches_the_vehicle_and_the_row(yard):
 
 
 def test_a_committed_paper_row_keeps_its_trial_id_and_version():
-    """The committed results predate recorded versions: their specs read as protocol 1 and
-    hash to the ids they were stored under."""
+    """Committed rows re-read as the protocol they were flown under and hash to the ids they
+    were stored under: the one-tenth sample predates recorded versions (its specs name none
+    and read as protocol 1), the full paper run names version 6 in its specs and its
+    ``protocol_version`` column."""
     import pandas as pd
 
-    paper = Path(__file__).resolve().parents[2] / "docs" / "results" / "paper"
-    df = pd.read_parquet(paper / "trials.parquet", columns=["trial_id", "spec"]).head(50)
-    for tid, doc in zip(df["trial_id"], df["spec"]):
+    results = Path(__file__).resolve().parents[2] / "docs" / "results"
+    old = pd.read_parquet(results / "paper-sample" / "trials.parquet",
+                          columns=["trial_id", "spec"]).head(50)
+    for tid, doc in zip(old["trial_id"], old["spec"]):
+        assert "protocol" not in json.loads(doc)
         spec = TrialSpec.from_dict(json.loads(doc))
         assert spec.protocol == 1 and spec.trial_id == tid
+    paper = pd.read_parquet(results / "paper" / "trials.parquet",
+                            columns=["trial_id", "spec", "protocol_version"])
+    assert set(paper["protocol_version"]) == {6}
+    for tid, doc in zip(paper["trial_id"].head(50), paper["spec"].head(50)):
+        spec = TrialSpec.from_dict(json.loads(doc))
+        assert spec.protocol == 6 and spec.trial_id == tid
 
 
 @pytest.mark.parametrize("version", [0, 99, "1", True])
