@@ -413,24 +413,36 @@ def _resume_dir(root):
     return campaign_file(root, "resume.toml", RESUME)
 
 
-def test_a_killed_campaign_resumes_to_the_uninterrupted_result(tmp_path, cli_env, plugins):
-    campaign = _resume_dir(tmp_path)
-    out = tmp_path / "killed"
-    trials = out / "trials.jsonl"
+def _run_until_rows(campaign, out, n, env) -> subprocess.Popen:
+    """``ft-sitl campaign run`` (2 workers, its own session) started and left running once
+    ``n`` rows are in its trials.jsonl; killed (with its workers) if that fails."""
     assert EXE
+    trials = out / "trials.jsonl"
     proc = subprocess.Popen([EXE, "campaign", "run", str(campaign), "--out", str(out),
-                             "--workers", "2", "--no-report", "--quiet"], env=cli_env,
+                             "--workers", "2", "--no-report", "--quiet"], env=env,
                             stdout=subprocess.PIPE, stderr=subprocess.PIPE,
                             start_new_session=True)
     try:
         deadline = time.monotonic() + 120
-        while not (trials.exists() and trials.read_bytes().count(b"\n") >= 4):
+        while not (trials.exists() and trials.read_bytes().count(b"\n") >= n):
             assert proc.poll() is None, proc.communicate()
             assert time.monotonic() < deadline, "no trial finished in 120 s"
             time.sleep(0.02)
-    finally:
-        os.killpg(proc.pid, signal.SIGKILL)  # the runner and its worker processes
-        proc.communicate()
+    except BaseException:
+        if proc.poll() is None:
+            os.killpg(proc.pid, signal.SIGKILL)
+            proc.communicate()
+        raise
+    return proc
+
+
+def test_a_killed_campaign_resumes_to_the_uninterrupted_result(tmp_path, cli_env, plugins):
+    campaign = _resume_dir(tmp_path)
+    out = tmp_path / "killed"
+    trials = out / "trials.jsonl"
+    proc = _run_until_rows(campaign, out, 4, cli_env)
+    os.killpg(proc.pid, signal.SIGKILL)  # the runner and its worker processes
+    proc.communicate()
     raw = trials.read_bytes()
     written = raw[:raw.rfind(b"\n") + 1]  # (the kill may even have cut a write short)
     done_before = [json.loads(line) for line in written.decode().splitlines()]
@@ -487,16 +499,8 @@ def test_a_terminated_campaign_records_its_run_and_keeps_its_rows(tmp_path, cli_
     campaign = _resume_dir(tmp_path)
     out = tmp_path / "terminated"
     trials = out / "trials.jsonl"
-    proc = subprocess.Popen([EXE, "campaign", "run", str(campaign), "--out", str(out),
-                             "--workers", "2", "--no-report", "--quiet"], env=cli_env,
-                            stdout=subprocess.PIPE, stderr=subprocess.PIPE,
-                            start_new_session=True)
+    proc = _run_until_rows(campaign, out, 2, cli_env)
     try:
-        deadline = time.monotonic() + 120
-        while not (trials.exists() and trials.read_bytes().count(b"\n") >= 2):
-            assert proc.poll() is None, proc.communicate()
-            assert time.monotonic() < deadline, "no trial finished in 120 s"
-            time.sleep(0.02)
         proc.send_signal(signal.SIGTERM)  # the runner only: it stops its workers
         _, err = proc.communicate(timeout=60)
     finally:
