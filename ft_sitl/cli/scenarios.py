@@ -45,8 +45,9 @@ SCENARIO_DESCRIPTIONS = {
     "narrow_gap": "walls across the route, one 0.85-0.90 m gap each, on the line or 1-2 m "
                   "beside it; index = walls",
     "sudden_drop": "overhanging blocks from 1.5 m up, start at 2.5 m; index = blocks",
-    "maze": "a perfect maze with dead ends: one route to the goal",
-    "perlin": "blobs of 0.25 m voxels where 3-D Perlin noise is in its top 3 %",
+    "maze": "a 7 x 10-cell maze with dead ends and loops; the start opens towards the goal",
+    "perlin": "~2,000 blobs of 0.1 m cells where 3-D Perlin noise (1 cycle/m, mockamap's "
+              "reading) is in its top 3 %",
 }
 """One line per family for ``scenarios list`` (what it is made of and what index does)."""
 

@@ -190,12 +190,19 @@ def segment_mesh_distance(mesh, p, q, cutoff: float = np.inf) -> float:
     examined; if none is nearer, the result is ``inf`` (the distance exceeds ``cutoff``).
     """
     tri = _triangles(mesh)
+    return _segment_distance(tri, None, p, q, cutoff)
+
+
+def _segment_distance(tri: np.ndarray, boxes, p, q, cutoff: float) -> float:
+    """:func:`segment_mesh_distance` with the triangles' bounding boxes (lo, hi), when a
+    caller asks about many segments, computed once (None: here)."""
     if len(tri) == 0:
         return float("inf")
     p, q = np.asarray(p, dtype=float), np.asarray(q, dtype=float)
     if np.isfinite(cutoff):
+        tlo, thi = boxes if boxes is not None else (tri.min(axis=1), tri.max(axis=1))
         lo, hi = np.minimum(p, q) - cutoff, np.maximum(p, q) + cutoff
-        keep = np.all((tri.min(axis=1) <= hi) & (tri.max(axis=1) >= lo), axis=1)
+        keep = np.all((tlo <= hi) & (thi >= lo), axis=1)
         tri = tri[keep]
         if len(tri) == 0:
             return float("inf")
@@ -206,8 +213,10 @@ def polyline_clearance(mesh, points, cutoff: float = np.inf) -> float:
     """Exact smallest distance from a polyline (N, 3) to the mesh (``inf`` beyond cutoff)."""
     pts = np.asarray(points, dtype=float)
     tri = _triangles(mesh)
+    boxes = (tri.min(axis=1), tri.max(axis=1)) if np.isfinite(cutoff) and len(tri) else None
     return min(
-        (segment_mesh_distance(tri, pts[i], pts[i + 1], cutoff) for i in range(len(pts) - 1)),
+        (_segment_distance(tri, boxes, pts[i], pts[i + 1], cutoff)
+         for i in range(len(pts) - 1)),
         default=float("inf"),
     )
 
@@ -262,7 +271,12 @@ def _triangle_pieces(tri: np.ndarray) -> list[ConvexPiece]:
 
 
 def convex_pieces(mesh) -> list[ConvexPiece]:
-    """Convex pieces that together cover the mesh's surface (see the module docstring)."""
+    """Convex pieces that together cover the mesh's surface (see the module docstring).
+
+    Each connected component that is closed and convex becomes one piece (its distinct
+    face planes, in order of first appearance); any other component, one piece per
+    triangle. Components with the same number of faces are handled together (a Perlin
+    field has ~40,000 boxes: one pass over each was 7 s of a solvability check)."""
     faces = np.asarray(mesh.faces, dtype=np.int64)
     verts = np.asarray(mesh.vertices, dtype=float)
     if len(faces) == 0:
@@ -275,29 +289,56 @@ def convex_pieces(mesh) -> list[ConvexPiece]:
     face_label = labels[faces[:, 0]]
     order = np.argsort(face_label, kind="stable")
     bounds = np.flatnonzero(np.diff(face_label[order])) + 1
+    starts = np.concatenate([[0], bounds])
+    sizes = np.diff(np.concatenate([starts, [len(order)]]))
     scale = max(1.0, float(np.abs(verts).max()))
-    pieces: list[ConvexPiece] = []
-    for group in np.split(order, bounds):
-        f = faces[group]
-        tri = verts[f]
-        n = np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0])
-        ln = np.linalg.norm(n, axis=1)
-        good = ln > _EPS * scale * scale
-        edges = np.sort(np.concatenate([f[:, [0, 1]], f[:, [1, 2]], f[:, [2, 0]]]), axis=1)
-        _, counts = np.unique(edges, axis=0, return_counts=True)
-        closed = bool(np.all(counts == 2)) and good.any()
-        if closed:
-            normals = n[good] / ln[good, None]
-            offsets = np.einsum("ij,ij->i", normals, tri[good, 0])
-            normals, offsets = _unique_planes(normals, offsets)
-            vidx = np.unique(f)
-            excess = verts[vidx] @ normals.T - offsets
-            if excess.max() <= 1e-9 * scale:
-                pieces.append(ConvexPiece(normals, offsets, verts[vidx].min(axis=0),
-                                          verts[vidx].max(axis=0)))
+    out: list[list[ConvexPiece]] = [[] for _ in starts]
+    for size in np.unique(sizes):
+        which = np.flatnonzero(sizes == size)
+        group_faces = faces[order[starts[which][:, None] + np.arange(size)]]
+        for w, pieces in zip(which, _component_pieces(group_faces, verts, scale)):
+            out[w] = pieces
+    return [piece for pieces in out for piece in pieces]
+
+
+def _component_pieces(f: np.ndarray, verts: np.ndarray, scale: float):
+    """The pieces of components of equal face count, ``f`` (g, faces, 3): per component,
+    [one ConvexPiece] if it is closed and convex, else one per triangle."""
+    g, s = f.shape[:2]
+    tri = verts[f]                                                     # (g, s, 3, 3)
+    n = np.cross(tri[:, :, 1] - tri[:, :, 0], tri[:, :, 2] - tri[:, :, 0])
+    ln = np.linalg.norm(n, axis=2)
+    good = ln > _EPS * scale * scale
+    # closed: every edge is shared by exactly two faces of the component
+    edges = np.sort(np.concatenate([f[:, :, [0, 1]], f[:, :, [1, 2]], f[:, :, [2, 0]]],
+                                   axis=1), axis=2)
+    key = np.sort(edges[:, :, 0] * (int(verts.shape[0]) + 1) + edges[:, :, 1], axis=1)
+    if key.shape[1] % 2:
+        closed = np.zeros(g, dtype=bool)
+    else:
+        closed = np.all(key[:, 0::2] == key[:, 1::2], axis=1) & \
+            np.all(key[:, 1:-1:2] != key[:, 2::2], axis=1)
+    closed &= good.any(axis=1)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        normals = n / ln[:, :, None]
+    offsets = np.einsum("gij,gij->gi", normals, tri[:, :, 0])
+    # the distinct planes, in order of first appearance (rounded as _unique_planes does)
+    plane = np.round(np.concatenate([normals, offsets[:, :, None]], axis=2), 9)
+    same = np.all(plane[:, :, None, :] == plane[:, None, :, :], axis=3)
+    same &= good[:, None, :] & good[:, :, None]
+    earlier = np.tril(np.ones((s, s), dtype=bool), -1)
+    keep = good & ~np.any(same & earlier[None], axis=2)
+    corners = tri.reshape(g, -1, 3)
+    lo, hi = corners.min(axis=1), corners.max(axis=1)
+    out = []
+    for c in range(g):
+        if closed[c]:
+            nm, off = normals[c, keep[c]], offsets[c, keep[c]]
+            if (corners[c] @ nm.T - off).max() <= 1e-9 * scale:
+                out.append([ConvexPiece(nm, off, lo[c], hi[c])])
                 continue
-        pieces.extend(_triangle_pieces(tri))
-    return pieces
+        out.append(_triangle_pieces(tri[c]))
+    return out
 
 
 # --------------------------------------------------------------------------------------

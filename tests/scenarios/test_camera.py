@@ -371,16 +371,18 @@ def test_packet_queries_hit_the_same_triangles_as_single_rays(family):
     assert hits > 10_000  # the frames saw the scene (~5 % of their pixels at least)
 
 
-@pytest.mark.parametrize("family", ["forest", "random_angle_cylinder", "perlin"])
-def test_one_instance_per_piece_sees_the_same_surfaces(family):
+@pytest.mark.parametrize("family,version", [("forest", None), ("random_angle_cylinder", None),
+                                            ("perlin", 1)])
+def test_one_instance_per_piece_sees_the_same_surfaces(family, version):
     """The default packet scene (each connected piece an Embree instance in its own
     principal-axes frame) against the one-scene query: every piece is its own instance, and
     all but a handful of pixels in a million (rays through an edge or grazing a silhouette,
-    tested in the piece's frame) are bit-identical."""
+    tested in the piece's frame) are bit-identical. (Perlin version 2's ~40,000 boxes are
+    more pieces than MAX_INSTANCES: one scene, next test.)"""
     from ft_sitl.navigation.common import camera_config
     from ft_sitl.scenarios.families import build_scenario
 
-    sc = build_scenario(family, 3)
+    sc = build_scenario(family, 3, version=version)
     cfg = camera_config("benchmark", None, None, None)
     inst = DepthCamera(cfg, sc.mesh)
     plain = DepthCamera(cfg, sc.mesh, instances=False)
@@ -405,6 +407,26 @@ def test_one_instance_per_piece_sees_the_same_surfaces(family):
     la, lb = plain.cast(sc.start, dirs), inst.cast(sc.start, dirs)
     assert np.isfinite(la).sum() > 10
     assert np.sum(~((la == lb) | (np.isinf(la) & np.isinf(lb)))) <= 1
+
+
+def test_a_mesh_of_more_pieces_than_max_instances_is_one_scene():
+    """Perlin version 2 (~40,000 boxes) is built as one Embree scene, not as one instance
+    per box, and its frames are the one-scene camera's, pixel for pixel."""
+    from ft_sitl.navigation.common import camera_config
+    from ft_sitl.scenarios.embree_packets import MAX_INSTANCES
+    from ft_sitl.scenarios.families import build_scenario
+
+    sc = build_scenario("perlin", 2)
+    assert len(sc.piece_names) > MAX_INSTANCES
+    cfg = camera_config("benchmark", None, None, None)
+    cam, plain = DepthCamera(cfg, sc.mesh), DepthCamera(cfg, sc.mesh, instances=False)
+    if cam._packets is None:
+        pytest.fail("Embree's C API did not load from the embreex wheel")
+    assert len(cam._packets.offset) == 1
+    q = np.array([np.cos(np.pi / 4), 0.0, 0.0, np.sin(np.pi / 4)])  # facing the goal
+    a, b = cam.capture(0, sc.start, q).depth, plain.capture(0, sc.start, q).depth
+    np.testing.assert_array_equal(a, b)
+    assert np.isfinite(a).mean() > 0.2  # the clutter fills the view
 
 
 def test_a_triangle_soup_is_one_scene():

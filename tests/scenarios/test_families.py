@@ -26,9 +26,11 @@ from ft_sitl.scenarios.families import (
     OPEN_FAMILIES,
     REGISTRY,
     build_scenario,
+    mockamap_noise,
     perlin3,
     resolve_family,
     start_altitude,
+    voxel_boxes,
 )
 from ft_sitl.scenarios.scenario import Scenario, ScenarioError
 from ft_sitl.scenarios.solvability import (
@@ -639,15 +641,92 @@ def test_maze_v2_gets_harder_with_the_index():
     assert all(lo <= w <= hi for w, (lo, hi) in zip(waste, bands))
 
 
-def test_perlin():
+def test_perlin_version_1():
     for i in INDICES:
-        sc = built("perlin", i)
+        sc = build_scenario("perlin", i, version=1)
         par, lay = sc.provenance["parameters"], sc.provenance["layout"]
         assert par["noise_frequency_per_voxel"] == 0.05 and par["fill_rate"] == 0.03
         assert lay["filled_voxels"] == round(0.03 * np.prod(lay["voxels"]))
         assert np.prod(lay["voxels"]) * par["voxel_m"] ** 3 == pytest.approx(40 * 50 * 4)
         assert sc.mesh.volume == pytest.approx(lay["filled_voxels"] * par["voxel_m"] ** 3)
         assert sc.obstacle_count == lay["blobs"] > 1
+
+
+def _perlin_cells(sc) -> np.ndarray:
+    """The filled 0.1 m cells of a Perlin version-2 scene, read back from its mesh: each
+    cell centre inside one of the boxes (every box is its own 12-triangle piece)."""
+    lay, voxel = sc.provenance["layout"], sc.provenance["parameters"]["voxel_m"]
+    corners = sc.mesh.vertices.reshape(-1, 8, 3)
+    lo = np.rint(corners.min(axis=1) / voxel).astype(int)
+    hi = np.rint(corners.max(axis=1) / voxel).astype(int)
+    cells = np.zeros(lay["voxels"], dtype=np.int16)
+    for a, b in zip(lo, hi):
+        cells[a[0]:b[0], a[1]:b[1], a[2]:b[2]] += 1
+    assert cells.max() == 1  # the boxes do not overlap
+    return cells.astype(bool)
+
+
+def test_perlin_version_2_is_mockamaps_field_at_the_papers_numbers():
+    """Version 2 (issue 20): the paper's frequency 0.05 and fill 0.03 read as mockamap reads
+    them in EGO-Planner's simulator launch: 0.1 m cells, noise at 2 x 0.05 per cell (1.0
+    cycles/m), the top 3 % of the cells filled; thousands of small blobs, several of them
+    across the start->goal line, none within 3 m of the start and goal columns."""
+    from scipy.ndimage import label
+    for i in (1, 10):
+        sc = built("perlin", i)
+        par, lay = sc.provenance["parameters"], sc.provenance["layout"]
+        assert sc.provenance["generator_version"] == 2
+        assert (par["complexity"], par["fill_rate"], par["voxel_m"], par["fractal"]) == \
+            (0.05, 0.03, 0.1, 1)
+        assert par["noise_frequency_per_m"] == pytest.approx(1.0)
+        assert lay["voxels"] == [400, 500, 40]
+        assert lay["filled_voxels"] == round(0.03 * 400 * 500 * 40)
+        cells = _perlin_cells(sc)
+        assert cells.sum() == lay["filled_voxels"] and lay["boxes"] == len(sc.mesh.faces) // 12
+        assert sc.mesh.volume == pytest.approx(lay["filled_voxels"] * 0.1 ** 3)
+        _, blobs = label(cells)
+        assert sc.obstacle_count == lay["blobs"] == blobs and 1000 < blobs < 4000
+        # blobs across the line at the start altitude (0.1 m cells at x 19.9-20.1 m)
+        on_line, n_line = label(cells[199:201, 30:470, 19:21])
+        assert n_line >= 3
+        # 3 m clear around the takeoff column and the goal
+        c = (np.arange(400) + 0.5) * 0.1
+        y = (np.arange(500) + 0.5) * 0.1
+        for gy in (3.0, 47.0):
+            near = np.hypot(c[:, None] - 20.0, y[None, :] - gy) < 3.0
+            assert not cells[near].any()
+        # the field's scale is mockamap's: blobs of ~0.1 m^3 on average (~120 cells, a
+        # 0.5 m cube), where version 1's 0.2 cycles/m made 37-58 blobs of ~5 m^3
+        assert 50 < cells.sum() / blobs < 300
+
+
+def test_voxel_boxes_cover_the_filled_cells_exactly():
+    rng = np.random.default_rng(3)
+    for shape, p in (((7, 9, 5), 0.5), ((20, 11, 6), 0.9), ((4, 4, 4), 0.0), ((3, 5, 2), 1.0)):
+        filled = rng.random(shape) < p
+        lo, hi = voxel_boxes(filled)
+        cover = np.zeros(shape, dtype=int)
+        for a, b in zip(lo, hi):
+            assert np.all(b > a)
+            cover[a[0]:b[0], a[1]:b[1], a[2]:b[2]] += 1
+        np.testing.assert_array_equal(cover, filled.astype(int))
+    # a solid block is one box; two columns of different heights stay two
+    lo, hi = voxel_boxes(np.ones((3, 4, 5), dtype=bool))
+    assert lo.tolist() == [[0, 0, 0]] and hi.tolist() == [[3, 4, 5]]
+    two = np.zeros((2, 1, 3), dtype=bool)
+    two[0, 0, :] = True
+    two[1, 0, :2] = True
+    assert len(voxel_boxes(two)[0]) == 2
+
+
+def test_mockamap_noise_octaves():
+    """Octave it is Perlin noise at 2^it x complexity with amplitude attenuation / it."""
+    perm = np.random.default_rng(1).permutation(256)
+    x = np.linspace(0.0, 7.0, 50)
+    one = mockamap_noise(x, 0.3, 0.7, perm, 0.5, 1, 0.5)
+    np.testing.assert_allclose(one, 0.5 * perlin3(x, 0.3, 0.7, perm))
+    two = mockamap_noise(x, 0.3, 0.7, perm, 0.5, 2, 0.5)
+    np.testing.assert_allclose(two - one, 0.25 * perlin3(2 * x, 0.6, 1.4, perm))
 
 
 def test_perlin_noise_is_smooth_and_bounded():

@@ -151,7 +151,7 @@ def test_guard_matches_the_monitor_on_recorded_flights():
         assert len(hits) == 1
         assert hits[0].time_us == (k + 1) * sim.dt_us
         assert hits[0].contact.center == pytest.approx(contact.center, abs=1e-6)
-        assert hits[0].what.startswith("noise column")
+        assert hits[0].what.startswith("noise blob")
     assert found >= 1
 
 
