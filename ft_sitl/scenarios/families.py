@@ -1749,6 +1749,11 @@ def perlin(fam: Family, p: dict, rng: np.random.Generator, index: int, seed: int
     )
 
 
+#: the most cells a Perlin field may have (the paper's area at 0.1 m: 8 M; each cell costs
+#: ~100 bytes while the field is built)
+PERLIN_MAX_CELLS = 40_000_000
+
+
 def _perlin_fill(p: dict, rng: np.random.Generator, index: int, noise):
     """The filled voxels of a Perlin field (both versions): ``noise(x, y, z, perm)`` (x, y,
     z in metres, broadcast) sampled at the voxel centres plus a random offset (the
@@ -1763,6 +1768,12 @@ def _perlin_fill(p: dict, rng: np.random.Generator, index: int, noise):
     alt = start_altitude(ceiling)
     voxel, fill_rate = p["voxel_m"], p["fill_rate"]
     shape = (int(width / voxel), int(length / voxel), int(ceiling / voxel))
+    cells = shape[0] * shape[1] * shape[2]
+    if cells > PERLIN_MAX_CELLS:
+        raise ScenarioError(
+            f"perlin #{index}: {width:g} x {length:g} x {ceiling:g} m in {voxel:g} m cells "
+            f"is {cells:,} cells, more than {PERLIN_MAX_CELLS:,} (the field needs ~100 "
+            f"bytes per cell): raise voxel_m or shrink size_m / ceiling_m")
     perm = rng.permutation(256)
     offset = rng.uniform(0.0, 1000.0, 3)
     n_fill = round(fill_rate * shape[0] * shape[1] * shape[2])

@@ -902,3 +902,9 @@ def test_the_generator_version_travels_in_the_spec_the_row_and_the_campaign(tmp_
     with pytest.raises(CampaignError, match=r"scenarios\[0\]: version: maze: no generator "
                                             r"version 7"):
         load_campaign(p)
+
+
+def test_a_perlin_field_too_fine_for_memory_is_refused_by_name():
+    with pytest.raises(ScenarioError, match=r"perlin #1: 400 x 500 x 4 m in 0.05 m cells is "
+                                            r"6,400,000,000 cells.*raise voxel_m"):
+        build_scenario("perlin", 1, params={"size_m": (400.0, 500.0), "voxel_m": 0.05})
