@@ -62,7 +62,7 @@ from __future__ import annotations
 
 import heapq
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 from numba import njit
@@ -915,14 +915,49 @@ def _densify(points: np.ndarray, step: float) -> np.ndarray:
 TAUTEN_SPLIT_M = 0.5
 
 
+def _pieces_within(grown: GrownPieces, path: np.ndarray) -> GrownPieces:
+    """The grown pieces that a polyline no longer than ``path`` between its ends can meet.
+
+    Every point of such a polyline lies in the ellipsoid whose foci are the ends and whose
+    major axis is ``path``'s length; :func:`_tauten` only ever tests segments inside it (it
+    accepts a vertex only where the path gets shorter, bisects towards the chord, and
+    shortcuts between path vertices, all inside that convex set). A piece whose box misses
+    the ellipsoid's bounding box cannot meet any of them, so leaving it out changes no
+    answer: the same path, faster (a Perlin version-2 field's 40,000 boxes made this 100 s
+    per configuration)."""
+    if len(path) < 2 or not len(grown.lo):
+        return grown
+    start, end = path[0], path[-1]
+    chord = end - start
+    dist = float(np.linalg.norm(chord))
+    semi_major = 0.5 * _polyline_length(path)
+    semi_minor = math.sqrt(max(semi_major ** 2 - (0.5 * dist) ** 2, 0.0))
+    u2 = (chord / dist) ** 2 if dist > 0.0 else np.zeros(3)
+    half = np.sqrt(semi_major ** 2 * u2 + semi_minor ** 2 * (1.0 - u2)) + 1e-6
+    centre = 0.5 * (start + end)
+    keep = np.flatnonzero(np.all((grown.lo <= centre + half) & (grown.hi >= centre - half),
+                                 axis=1))
+    if len(keep) == len(grown.lo):
+        return grown
+    counts = np.diff(grown.first)[keep]
+    first = np.concatenate([[0], np.cumsum(counts)]).astype(np.int64)
+    planes = np.repeat(grown.first[keep], counts) + (np.arange(first[-1]) -
+                                                    np.repeat(first[:-1], counts))
+    return replace(grown, normals=np.ascontiguousarray(grown.normals[planes]),
+                   offsets=np.ascontiguousarray(grown.offsets[planes]), first=first,
+                   lo=np.ascontiguousarray(grown.lo[keep]),
+                   hi=np.ascontiguousarray(grown.hi[keep]))
+
+
 def tauten(grown: GrownPieces, path, max_rounds: int = 200) -> np.ndarray:
     """A free polyline pulled tight among the grown pieces: the same ends, never longer,
     every segment still free (:func:`_tauten`); then split into segments of at most
     :data:`TAUTEN_SPLIT_M` and pulled tight again while that still shortens it (by more
     than a millionth). A local optimum: it goes round each obstacle on the side the
     polyline did."""
-    args = (_MOVES, *_kernel_args(grown))
-    pts = _tauten(np.ascontiguousarray(path, dtype=float), *args, int(max_rounds))
+    path = np.ascontiguousarray(path, dtype=float)
+    args = (_MOVES, *_kernel_args(_pieces_within(grown, path)))
+    pts = _tauten(path, *args, int(max_rounds))
     for _ in range(8):
         finer = _tauten(_densify(pts, TAUTEN_SPLIT_M), *args, int(max_rounds))
         gain = _polyline_length(pts) - _polyline_length(finer)
