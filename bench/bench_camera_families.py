@@ -13,6 +13,7 @@ never asserted.
 
     .venv/bin/python bench/bench_camera_families.py            # ~1 min
     .venv/bin/python bench/bench_camera_families.py --frames 50 --json
+    .venv/bin/python bench/bench_camera_families.py --all-versions   # older generators too
 """
 
 from __future__ import annotations
@@ -32,11 +33,12 @@ from benchutil import machine_info, pin_to_one_cpu  # noqa: E402
 
 from ft_sitl.navigation.common import camera_config  # noqa: E402
 from ft_sitl.scenarios.camera import DepthCamera  # noqa: E402
-from ft_sitl.scenarios.families import FAMILIES, build_scenario  # noqa: E402
+from ft_sitl.scenarios.families import FAMILIES, REGISTRY, build_scenario  # noqa: E402
 
 
-def family_row(family: str, index: int, frames: int, seed: int) -> dict:
-    sc = build_scenario(family, index)
+def family_row(family: str, index: int, frames: int, seed: int,
+               version: int | None = None) -> dict:
+    sc = build_scenario(family, index, version=version)
     cfg = camera_config("benchmark", None, None, None)
     plain = DepthCamera(cfg, sc.mesh, instances=False)
     inst = DepthCamera(cfg, sc.mesh)
@@ -57,7 +59,8 @@ def family_row(family: str, index: int, frames: int, seed: int) -> dict:
         t_inst += t2 - t1
         differ += int(np.sum(~((a == b) | (np.isnan(a) & np.isnan(b)))))
     pieces = len(inst._packets.offset) if inst._packets is not None else None
-    return {"family": family, "index": index, "triangles": int(len(sc.mesh.faces)),
+    return {"family": family, "version": sc.provenance["generator_version"], "index": index,
+            "triangles": int(len(sc.mesh.faces)),
             "pieces": pieces, "ms_one_scene": 1000 * t_plain / frames,
             "ms_instances": 1000 * t_inst / frames, "ratio": t_inst / t_plain,
             "pixels_differing": differ, "pixels": frames * cfg.n_pixels}
@@ -70,22 +73,26 @@ def main() -> None:
     ap.add_argument("--seed", type=int, default=7)
     ap.add_argument("--json", action="store_true", help="results as JSON on stdout")
     ap.add_argument("--no-pin", action="store_true", help="do not pin to one CPU")
+    ap.add_argument("--all-versions", action="store_true",
+                    help="a row for every generator version of each family (default: the "
+                         "newest)")
     args = ap.parse_args()
     if args.frames < 1:
         ap.error(f"--frames must be >= 1, got {args.frames}")
     if not 1 <= args.index <= 10:
         ap.error(f"--index must be within 1..10, got {args.index}")
     cpu = None if args.no_pin else pin_to_one_cpu(None)
-    rows = [family_row(f, args.index, args.frames, args.seed) for f in FAMILIES]
+    rows = [family_row(f, args.index, args.frames, args.seed, v) for f in FAMILIES
+            for v in (sorted(REGISTRY[f].versions) if args.all_versions else [None])]
     if args.json:
         print(json.dumps({"machine": machine_info(cpu), "rows": rows}, indent=1))
         return
     print(f"planners' camera 160 x 120, configuration {args.index}, {args.frames} frames "
           f"per family, CPU {cpu}")
-    print(f"{'family':<24}{'triangles':>10}{'pieces':>8}{'one scene ms':>14}"
+    print(f"{'family':<24}{'v':>3}{'triangles':>10}{'pieces':>8}{'one scene ms':>14}"
           f"{'instances ms':>14}{'ratio':>7}{'px differ':>11}")
     for r in rows:
-        print(f"{r['family']:<24}{r['triangles']:>10}{r['pieces']:>8}"
+        print(f"{r['family']:<24}{r['version']:>3}{r['triangles']:>10}{r['pieces']:>8}"
               f"{r['ms_one_scene']:>14.3f}{r['ms_instances']:>14.3f}{r['ratio']:>7.2f}"
               f"{r['pixels_differing']:>7} / {r['pixels'] // 1000}k")
 
