@@ -1776,7 +1776,7 @@ def _perlin_fill(p: dict, rng: np.random.Generator, index: int, noise):
             f"bytes per cell): raise voxel_m or shrink size_m / ceiling_m")
     perm = rng.permutation(256)
     offset = rng.uniform(0.0, 1000.0, 3)
-    n_fill = round(fill_rate * shape[0] * shape[1] * shape[2])
+    n_fill = round(fill_rate * cells)
     cx = (np.arange(shape[0]) + 0.5) * voxel
     cy = (np.arange(shape[1]) + 0.5) * voxel
     cz = (np.arange(shape[2]) + 0.5) * voxel

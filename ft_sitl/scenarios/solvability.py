@@ -236,13 +236,6 @@ class ConvexPiece:
     hi: np.ndarray
 
 
-def _unique_planes(normals, offsets):
-    key = np.round(np.column_stack([normals, offsets]), 9)
-    _, idx = np.unique(key, axis=0, return_index=True)
-    idx = np.sort(idx)
-    return normals[idx], offsets[idx]
-
-
 def _triangle_pieces(tri: np.ndarray) -> list[ConvexPiece]:
     out = []
     for t in tri:
@@ -322,7 +315,7 @@ def _component_pieces(f: np.ndarray, verts: np.ndarray, scale: float):
     with np.errstate(invalid="ignore", divide="ignore"):
         normals = n / ln[:, :, None]
     offsets = np.einsum("gij,gij->gi", normals, tri[:, :, 0])
-    # the distinct planes, in order of first appearance (rounded as _unique_planes does)
+    # the distinct planes (equal when equal rounded to 1e-9), in order of first appearance
     plane = np.round(np.concatenate([normals, offsets[:, :, None]], axis=2), 9)
     same = np.all(plane[:, :, None, :] == plane[:, None, :, :], axis=3)
     same &= good[:, None, :] & good[:, :, None]
