@@ -21,7 +21,7 @@ from ft_sitl.physics.catalog import PlatformRegistry
 from ft_sitl.physics.platform import PlatformError
 from ft_sitl.physics.wind import SCHEMA as WIND_SCHEMA
 from ft_sitl.scenarios import movers as mv
-from ft_sitl.scenarios.families import REGISTRY
+from ft_sitl.scenarios.families import REGISTRY, resolve_family
 from ft_sitl.scenarios.scenario import ScenarioError
 from ft_sitl.schema import Param, Schema, SchemaError
 
@@ -148,8 +148,8 @@ REWARD_SCHEMA = Schema((
 #: what ``reset(options=...)`` takes (all optional); each replaces that episode's draw
 RESET_OPTIONS = {
     "platform": "a platform's name or a Platform (same rotor count)",
-    "scenario": "a Scenario, or {family, index, seed, params} (the vector environment: "
-                "only when all its vehicles reset)",
+    "scenario": "a Scenario, or {family, index, seed, params, version} (the vector "
+                "environment: only when all its vehicles reset)",
     "wind": "wind settings (physics.wind.SCHEMA) or None (calm)",
     "estimator": "estimator settings (autopilot.estimator.SCHEMA) or None (the truth)",
     "movers": "moving-obstacle settings (scenarios.movers.SCHEMA) or None (the vector "
@@ -170,17 +170,24 @@ class ActionError(ValueError):
 @dataclass(frozen=True)
 class EnvConfig:
     """An environment's validated settings: ``values`` (:data:`ENV_SCHEMA`, every key),
-    ``reward`` (:data:`REWARD_SCHEMA`), the scenario generator's ``scenario_params`` and
-    the ``movers`` settings (None: none)."""
+    ``reward`` (:data:`REWARD_SCHEMA`), the scenario generator's ``scenario_params``, the
+    ``movers`` settings (None: none) and ``scenario_versions``, the generator version of
+    each family named there (the others: their newest)."""
 
     values: dict
     reward: dict
     scenario_params: dict | None
     movers: dict | None
     protocol: int = PROTOCOL_VERSION
+    scenario_versions: dict | None = None
 
     def __getitem__(self, key: str):
         return self.values[key]
+
+    def version_of(self, family: str) -> int | None:
+        """The generator version the worlds of ``family`` (a registry key) are built with
+        (None: the newest)."""
+        return (self.scenario_versions or {}).get(family)
 
     @property
     def steps_per_action(self) -> int:
@@ -196,7 +203,8 @@ class EnvConfig:
 
 def make_config(settings: Mapping, reward: Mapping | None = None,
                 scenario_params: Mapping | None = None,
-                movers: Mapping | None = None) -> EnvConfig:
+                movers: Mapping | None = None,
+                scenario_versions: Mapping | None = None) -> EnvConfig:
     """The settings checked (EnvError naming the key, the value and what is allowed)."""
     owner = "ft-sitl gym environment"
     try:
@@ -212,6 +220,7 @@ def make_config(settings: Mapping, reward: Mapping | None = None,
         raise EnvError(f"{owner}: control_hz {ctrl} must divide physics_hz {phys} (an action "
                        "lasts whole physics steps)")
     platform_choice(values["platform"])
+    scenario_versions = check_versions(scenario_versions, f"{owner}: scenario_versions")
     if scenario_params is not None:
         if values["family"] in (ANY, ARENA):
             raise EnvError(f"{owner}: scenario_params need one benchmark family, not "
@@ -220,13 +229,34 @@ def make_config(settings: Mapping, reward: Mapping | None = None,
             raise EnvError(f"{owner}: scenario_params must be a mapping, got "
                            f"{type(scenario_params).__name__}")
         try:
-            REGISTRY[values["family"]].resolve(scenario_params)
+            REGISTRY[values["family"]].resolve(
+                scenario_params, (scenario_versions or {}).get(values["family"]))
         except ScenarioError as exc:
             raise EnvError(f"{owner}: scenario_params: {exc}") from None
         scenario_params = json.loads(json.dumps(dict(scenario_params)))
     if movers is not None:
         movers = check_movers(movers, f"{owner}: movers")
-    return EnvConfig(values, rewards, scenario_params, movers)
+    return EnvConfig(values, rewards, scenario_params, movers,
+                     scenario_versions=scenario_versions)
+
+
+def check_versions(versions, owner: str) -> dict | None:
+    """Generator versions by family, ``{family: version}`` (the paper's family names are
+    accepted), as ``{registry key: version}``; None or empty: every family's newest. An
+    unknown family or version is an EnvError naming it and what there is."""
+    if versions is None:
+        return None
+    if not isinstance(versions, Mapping):
+        raise EnvError(f"{owner}: a mapping of family to generator version, got "
+                       f"{type(versions).__name__}")
+    out: dict = {}
+    for name, version in versions.items():
+        try:
+            key = resolve_family(name)
+            out[key] = REGISTRY[key].check_version(version)
+        except ScenarioError as exc:
+            raise EnvError(f"{owner}: {exc}") from None
+    return out or None
 
 
 def check_movers(movers, owner: str) -> dict | None:

@@ -54,8 +54,8 @@ from ft_sitl.navigation.policy_io import (
     STATE_HIGH,
     STATE_LOW,
 )
-from ft_sitl.scenarios.families import REGISTRY
-from ft_sitl.scenarios.scenario import Scenario
+from ft_sitl.scenarios.families import REGISTRY, resolve_family
+from ft_sitl.scenarios.scenario import Scenario, ScenarioError
 
 #: the world stream of a seed (see the module docstring)
 WORLD_STREAM = 0x776F726C64
@@ -125,7 +125,7 @@ class _WorldDraw:
         """(world, mover settings, mover seed)."""
         cfg, rng = self.cfg, self.rng
         if "scenario" in options:
-            world = scenario_option(options["scenario"])
+            world = scenario_option(options["scenario"], cfg)
         elif cfg["family"] == ARENA:
             world = WORLDS.arena(cfg["arena_size_m"])
         else:
@@ -137,28 +137,35 @@ class _WorldDraw:
             index = int(rng.integers(lo, hi + 1))
             slo, shi = cfg["scenario_seed"]
             seed = int(rng.integers(slo, shi + 1))
-            world = WORLDS.family(fam, index, seed, cfg.scenario_params)
+            world = WORLDS.family(fam, index, seed, cfg.scenario_params, cfg.version_of(fam))
         movers = (check_movers(options["movers"], "option movers") if "movers" in options
                   else cfg.movers)
         return world, movers, int(rng.integers(cfg["mover_layouts"]))
 
 
-def scenario_option(value) -> World:
+def scenario_option(value, cfg: EnvConfig | None = None) -> World:
     """The world of a ``scenario`` reset option: a Scenario, or {family, index, seed,
-    params}."""
+    params, version} (version: the family's generator version; by default the one the
+    environment's ``scenario_versions`` names, else the newest)."""
     if isinstance(value, Scenario):
         return WORLDS.scenario(value)
     if not isinstance(value, dict):
         raise EnvError(f"option scenario: a Scenario or a mapping with family, index, seed "
-                       f"(and params), got {type(value).__name__}")
-    unknown = set(value) - {"family", "index", "seed", "params"}
+                       f"(and params, version), got {type(value).__name__}")
+    unknown = set(value) - {"family", "index", "seed", "params", "version"}
     if unknown or "family" not in value:
-        raise EnvError(f"option scenario: keys family (required), index, seed, params; got "
-                       f"{sorted(value)}")
+        raise EnvError(f"option scenario: keys family (required), index, seed, params, "
+                       f"version; got {sorted(value)}")
     if value["family"] == ARENA:
         raise EnvError("option scenario: the arena is the 'family' setting's, not an option")
+    version = value.get("version")
+    if version is None and cfg is not None:
+        try:
+            version = cfg.version_of(resolve_family(value["family"]))
+        except ScenarioError as exc:
+            raise EnvError(f"option scenario: {exc}") from None
     return WORLDS.family(value["family"], value.get("index", 1), value.get("seed", 0),
-                         value.get("params"))
+                         value.get("params"), version)
 
 
 def render_rgb(batch: FlightBatch, i: int, px: int) -> np.ndarray:
@@ -195,18 +202,19 @@ class NavigateEnv(Env):
     """One vehicle flying to a goal in a benchmark scenario (or hovering at one in the
     arena), through the flight controller's cascade. Settings: :data:`~ft_sitl.gym.config.
     ENV_SCHEMA` as keyword arguments, ``reward`` (:data:`~ft_sitl.gym.config.
-    REWARD_SCHEMA`), ``scenario_params`` (the family generator's) and ``movers``;
+    REWARD_SCHEMA`), ``scenario_params`` (the family generator's), ``movers`` and
+    ``scenario_versions`` (``{family: generator version}``; unnamed families: the newest);
     ``render_mode`` one of ``rgb_array``, ``depth_array`` (``depth``: the same)."""
 
     metadata = {"render_modes": list(RENDER_MODES), "render_fps": 50}
 
     def __init__(self, render_mode: str | None = None, *, reward: dict | None = None,
                  scenario_params: dict | None = None, movers: dict | None = None,
-                 **settings):
+                 scenario_versions: dict | None = None, **settings):
         if render_mode is not None and render_mode not in RENDER_MODES:
             raise EnvError(f"render_mode: {render_mode!r} is not one of "
                            f"{', '.join(RENDER_MODES)} (or None)")
-        self.cfg = make_config(settings, reward, scenario_params, movers)
+        self.cfg = make_config(settings, reward, scenario_params, movers, scenario_versions)
         self.render_mode = render_mode
         self.metadata = {**self.metadata, "render_fps": self.cfg["control_hz"]}
         self.batch = FlightBatch(self.cfg, 1)
@@ -268,7 +276,8 @@ class NavigateVectorEnv(VectorEnv):
     def __init__(self, num_envs: int, render_mode: str | None = None, *,
                  autoreset_mode: AutoresetMode | str = AutoresetMode.NEXT_STEP,
                  reward: dict | None = None, scenario_params: dict | None = None,
-                 movers: dict | None = None, **settings):
+                 movers: dict | None = None, scenario_versions: dict | None = None,
+                 **settings):
         if isinstance(num_envs, bool) or not isinstance(num_envs, (int, np.integer)) \
                 or num_envs < 1:
             raise EnvError(f"num_envs: a positive integer, got {num_envs!r}")
@@ -280,7 +289,7 @@ class NavigateVectorEnv(VectorEnv):
         except ValueError:
             raise EnvError(f"autoreset_mode: {autoreset_mode!r} is not one of "
                            f"{', '.join(m.value for m in AutoresetMode)}") from None
-        self.cfg = make_config(settings, reward, scenario_params, movers)
+        self.cfg = make_config(settings, reward, scenario_params, movers, scenario_versions)
         self.num_envs = int(num_envs)
         self.render_mode = render_mode
         self.autoreset_mode = mode

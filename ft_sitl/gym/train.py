@@ -36,7 +36,7 @@ from gymnasium import spaces
 from tqdm import tqdm
 
 from ft_sitl.gym.batch import catalog_range
-from ft_sitl.gym.config import EnvError, make_config
+from ft_sitl.gym.config import ANY, ARENA, EnvError, make_config
 from ft_sitl.gym.envs import NavigateVectorEnv
 from ft_sitl.navigation.policy_io import MlpPolicy, policy_input
 from ft_sitl.provenance import software
@@ -132,14 +132,26 @@ def load_config(path: str | Path | None = None, overrides: dict | None = None) -
         raise TrainError(f"training config {p} [env]: the learned navigator flies velocity "
                          "actions from a ray scan (action = 'velocity', sensor = 'rays')")
     try:  # the environment checks its own settings
-        NavigateVectorEnv(1, reward=reward, **env).close()
+        venv = NavigateVectorEnv(1, reward=reward, **env)
     except EnvError as exc:
         raise TrainError(f"training config {p} [env]: {exc}") from None
+    venv.close()
+    # every family the training may draw, at an explicit generator version: the resolved
+    # configuration (config.json, the policy file) re-runs at a later commit
+    env["scenario_versions"] = drawn_versions(venv.cfg)
     if train_cfg["batch_size"] > train_cfg["n_steps"] * train_cfg["num_envs"]:
         raise TrainError(f"training config {p} [train]: batch_size {train_cfg['batch_size']} "
                          f"exceeds a rollout (n_steps x num_envs = "
                          f"{train_cfg['n_steps'] * train_cfg['num_envs']})")
     return {"train": train_cfg, "env": env, "reward": reward}
+
+
+def drawn_versions(cfg) -> dict:
+    """``{family: generator version}`` of every family an environment's episodes may be
+    drawn from (its ``family`` setting: one, all seven for 'any', none for the arena)."""
+    fam = cfg["family"]
+    families = list(REGISTRY) if fam == ANY else [] if fam == ARENA else [fam]
+    return {f: cfg.version_of(f) or REGISTRY[f].version for f in families}
 
 
 def _make_vec_env_base():
@@ -283,7 +295,7 @@ def policy_meta(cfg: dict, steps: int) -> dict:
     vector is normalised to, and how it was trained."""
     env = dict(cfg["env"])
     env_cfg = make_config(env, dict(cfg["reward"]), env.pop("scenario_params", None),
-                          env.pop("movers", None))
+                          env.pop("movers", None), env.pop("scenario_versions", None))
     v = env_cfg.values
     lo, hi = catalog_range(env_cfg.protocol)
     return {

@@ -16,7 +16,12 @@ import trimesh
 from ft_sitl.gym.config import ARENA, EnvError
 from ft_sitl.missions.resources import RESOURCES, scenario_key
 from ft_sitl.scenarios.camera import CameraConfig, DepthCamera
-from ft_sitl.scenarios.families import build_scenario, start_altitude
+from ft_sitl.scenarios.families import (
+    REGISTRY,
+    build_scenario,
+    resolve_family,
+    start_altitude,
+)
 from ft_sitl.scenarios.movers import MoverError, with_movers
 from ft_sitl.scenarios.scenario import Scenario, ScenarioError
 
@@ -160,12 +165,16 @@ class WorldCache:
             self._worlds.popitem(last=False)
         return world
 
-    def family(self, family: str, index: int, seed: int, params: dict | None) -> World:
-        """Configuration ``index`` of ``family`` for ``seed`` (generator ``params``)."""
+    def family(self, family: str, index: int, seed: int, params: dict | None,
+               version: int | None = None) -> World:
+        """Configuration ``index`` of ``family`` for ``seed`` (generator ``params``), built
+        by the family's generator ``version`` (None: the newest)."""
         try:
+            version = REGISTRY[resolve_family(family)].check_version(version)
             key = ("family", family, index, seed,
-                   json.dumps(params, sort_keys=True) if params else "")
-            return self._get(key, lambda: build_scenario(family, index, seed, params))
+                   json.dumps(params, sort_keys=True) if params else "", version)
+            return self._get(key, lambda: build_scenario(family, index, seed, params,
+                                                         version))
         except (ScenarioError, TypeError) as exc:  # (TypeError: params not JSON data)
             raise EnvError(f"scenario: {exc}") from None
 

@@ -154,6 +154,11 @@ def test_bad_actions_are_refused_by_name(action, match):
     ({"scenario_params": {"density": 0.1}}, "scenario family 'forest' has no parameter"),
     ({"movers": {"cuont": 2}}, "movers has no parameter 'cuont'"),
     ({"render_mode": "human"}, "render_mode: 'human' is not one of rgb_array"),
+    ({"scenario_versions": {"perlin": 9}}, r"scenario_versions: .*perlin: no generator "
+                                           r"version 9 \(versions: 1, 2\)"),
+    ({"scenario_versions": {"perlni": 1}}, "scenario_versions: unknown scenario family "
+                                           "'perlni'; did you mean 'perlin'"),
+    ({"scenario_versions": [1]}, "scenario_versions: a mapping of family to generator"),
 ])
 def test_bad_settings_are_refused_by_name(settings, match):
     with pytest.raises(EnvError, match=match):
@@ -175,6 +180,32 @@ def test_bad_reset_options_are_refused_by_name(options, match):
         env.reset(seed=0, options=options)
     with pytest.raises(EnvError, match="before reset"):
         NavigateEnv(**SMALL).step(np.zeros(4, np.float32))
+
+
+def test_pinned_generator_versions_build_the_older_worlds():
+    """scenario_versions (and a scenario option's version) build a family's older
+    generator; by default the newest. Maze has two versions with different layouts."""
+    from ft_sitl.scenarios.families import REGISTRY, build_scenario
+    assert REGISTRY["maze"].version == 2
+    old = build_scenario("maze", 2, 0, version=1).mesh_digest()
+    new = build_scenario("maze", 2, 0).mesh_digest()
+    assert old != new
+
+    def digest(env, options=None):
+        env.reset(seed=0, options=options)
+        return env.batch.world.scenario.mesh_digest()
+
+    settings = {"family": "maze", "scenario_index": (2, 2), "sensor": "none"}
+    assert digest(NavigateEnv(**settings)) == new
+    pinned = NavigateEnv(**settings, scenario_versions={"Maze": 1})
+    assert pinned.cfg.scenario_versions == {"maze": 1}
+    assert digest(pinned) == old
+    # a scenario option takes the environment's pinned version, or its own
+    assert digest(pinned, {"scenario": {"family": "maze", "index": 2}}) == old
+    assert digest(pinned, {"scenario": {"family": "maze", "index": 2, "version": 2}}) == new
+    with pytest.raises(EnvError, match="maze: no generator version 3"):
+        pinned.reset(seed=0, options={"scenario": {"family": "maze", "index": 2,
+                                                   "version": 3}})
 
 
 def test_reset_options_replace_the_episode_draws():

@@ -17,6 +17,7 @@ from ft_sitl.cli import main as cli_main
 from ft_sitl.gym.train import PRESET, TrainError, evaluate, load_config, policy_vec_env, train
 from ft_sitl.navigation.learned import load_policy
 from ft_sitl.navigation.policy_io import MlpPolicy
+from ft_sitl.scenarios.families import REGISTRY
 from tests.gym.gymutil import SMALL
 
 HAS_STACK = all(importlib.util.find_spec(m) is not None for m in ("torch", "stable_baselines3"))
@@ -30,7 +31,26 @@ def test_the_preset_is_the_shipped_policys_configuration():
     meta = load_policy().meta
     assert {k: list(v) if isinstance(v, tuple) else v
             for k, v in cfg["train"].items()} == meta["train"]
+    versions = cfg["env"].pop("scenario_versions")
     assert cfg["env"] == meta["env"]
+    # the families' generators it was trained with, pinned (Random Perlin-Noise's version 2
+    # came later): every family named, each version one the family has
+    assert set(versions) == set(REGISTRY) and versions["perlin"] == 1
+    assert all(REGISTRY[f].check_version(v) == v for f, v in versions.items())
+
+
+def test_a_configuration_records_the_generator_versions_it_draws(tmp_path):
+    """A training's resolved configuration names the version of every family it may draw
+    (its newest unless pinned), so config.json re-runs the same worlds later."""
+    newest = {f: fam.version for f, fam in REGISTRY.items()}
+    f = tmp_path / "any.toml"
+    f.write_text("[env]\nfamily = 'any'\nscenario_versions = { maze = 1 }\n")
+    assert load_config(f)["env"]["scenario_versions"] == {**newest, "maze": 1}
+    f.write_text("[env]\nfamily = 'narrow_gap'\n")
+    assert load_config(f)["env"]["scenario_versions"] == {"narrow_gap": newest["narrow_gap"]}
+    f.write_text("[env]\nfamily = 'any'\nscenario_versions = { perlin = 7 }\n")
+    with pytest.raises(TrainError, match=r"\[env\]: .*perlin: no generator version 7"):
+        load_config(f)
 
 
 @pytest.mark.parametrize("text,message", [
