@@ -618,6 +618,108 @@ def _segment_free(a, b, normals, offsets, first, lo, hi, free_lo, free_hi):
     return True
 
 
+#: the cells of :class:`PieceIndex` (m): a tauten step's segments are at most 0.5 m, and
+#: Perlin's grown voxel boxes 0.3-2 m across
+INDEX_CELL_M = 1.0
+#: how far a piece's box and a segment's footprint are widened when they are put into
+#: cells: a box that touches a cell's edge is in the cells on both sides
+_INDEX_PAD_M = 1e-6
+
+
+@dataclass(frozen=True)
+class PieceIndex:
+    """Which grown pieces' boxes overlap each ``cell`` x ``cell`` column of the plane
+    (x, y from ``origin``, ``nx`` x ``ny`` columns): the pieces of column (i, j) are
+    ``items[start[i * ny + j]:start[i * ny + j + 1]]``, in ascending order. Only a piece
+    whose box meets a segment can block it (:func:`_line_in_piece` clips to the box
+    first), and such a box overlaps a column the segment crosses, so testing the pieces of
+    those columns gives the answer of testing them all."""
+
+    origin: np.ndarray  # (2,)
+    inv_cell: float
+    dims: np.ndarray  # (2,) int64: nx, ny
+    start: np.ndarray  # (nx * ny + 1,) int64
+    items: np.ndarray  # int64
+
+    @classmethod
+    def build(cls, lo: np.ndarray, hi: np.ndarray, cell: float = INDEX_CELL_M):
+        if not len(lo):
+            return cls(np.zeros(2), 1.0 / cell, np.ones(2, np.int64), np.zeros(2, np.int64),
+                       np.zeros(0, np.int64))
+        origin = lo[:, :2].min(axis=0) - 2 * _INDEX_PAD_M
+        inv = 1.0 / cell
+        i0 = np.floor((lo[:, :2] - _INDEX_PAD_M - origin) * inv).astype(np.int64)
+        i1 = np.floor((hi[:, :2] + _INDEX_PAD_M - origin) * inv).astype(np.int64)
+        dims = i1.max(axis=0) + 1
+        start, items = _fill_index(i0, i1, int(dims[0]), int(dims[1]))
+        return cls(origin, inv, dims.astype(np.int64), start, items)
+
+
+@njit(cache=True)
+def _fill_index(i0, i1, nx, ny):
+    """CSR of the pieces per column (pieces in ascending order within a column)."""
+    count = np.zeros(nx * ny + 1, np.int64)
+    for k in range(i0.shape[0]):
+        for i in range(i0[k, 0], i1[k, 0] + 1):
+            for j in range(i0[k, 1], i1[k, 1] + 1):
+                count[i * ny + j + 1] += 1
+    start = np.cumsum(count)
+    fill = start[:-1].copy()
+    items = np.empty(start[-1], np.int64)
+    for k in range(i0.shape[0]):
+        for i in range(i0[k, 0], i1[k, 0] + 1):
+            for j in range(i0[k, 1], i1[k, 1] + 1):
+                items[fill[i * ny + j]] = k
+                fill[i * ny + j] += 1
+    return start, items
+
+
+@njit(cache=True)
+def _index_cell(x, origin, inv, n):
+    i = int(math.floor((x - origin) * inv))
+    return min(max(i, 0), n - 1)
+
+
+@njit(cache=True)
+def _segment_free_indexed(a, b, normals, offsets, first, lo, hi, free_lo, free_hi, i_origin,
+                          i_inv, i_dims, i_start, i_items):
+    """:func:`_segment_free` testing only the pieces of the index columns the segment's
+    footprint crosses (each column's x extent of the segment, row by row, widened by the
+    index's pad): the same answer."""
+    for ax in range(3):
+        if min(a[ax], b[ax]) < free_lo[ax] or max(a[ax], b[ax]) > free_hi[ax]:
+            return False
+    d = b - a
+    nx, ny = i_dims[0], i_dims[1]
+    pad = _INDEX_PAD_M
+    j0 = _index_cell(min(a[1], b[1]) - pad, i_origin[1], i_inv, ny)
+    j1 = _index_cell(max(a[1], b[1]) + pad, i_origin[1], i_inv, ny)
+    cell = 1.0 / i_inv
+    for j in range(j0, j1 + 1):
+        # the part of the segment within this row's y band (widened by pad)
+        y_lo = i_origin[1] + j * cell - pad
+        y_hi = y_lo + cell + 2 * pad
+        t0, t1 = 0.0, 1.0
+        if d[1] != 0.0:
+            ta = (y_lo - a[1]) / d[1]
+            tb = (y_hi - a[1]) / d[1]
+            if ta > tb:
+                ta, tb = tb, ta
+            t0, t1 = max(t0, ta), min(t1, tb)
+            if t0 > t1:
+                continue
+        xa, xb = a[0] + t0 * d[0], a[0] + t1 * d[0]
+        i0 = _index_cell(min(xa, xb) - pad, i_origin[0], i_inv, nx)
+        i1 = _index_cell(max(xa, xb) + pad, i_origin[0], i_inv, nx)
+        for i in range(i0, i1 + 1):
+            c = i * ny + j
+            for q in range(i_start[c], i_start[c + 1]):
+                if _line_in_piece(a, d, 0.0, 1.0, i_items[q], normals, offsets, first, lo,
+                                  hi)[0]:
+                    return False
+    return True
+
+
 @njit(cache=True)
 def _ray_length(p, u, tmax, normals, offsets, first, lo, hi, free_lo, free_hi, pieces):
     """How far the centre can move from p along the unit vector u (at most tmax) before
@@ -726,13 +828,17 @@ _MOVES = _unit_moves()
 
 
 @njit(cache=True)
-def _pair_free(a, w, b, normals, offsets, first, lo, hi, free_lo, free_hi):
-    return _segment_free(a, w, normals, offsets, first, lo, hi, free_lo, free_hi) and \
-        _segment_free(w, b, normals, offsets, first, lo, hi, free_lo, free_hi)
+def _pair_free(a, w, b, normals, offsets, first, lo, hi, free_lo, free_hi, i_origin, i_inv,
+               i_dims, i_start, i_items):
+    return _segment_free_indexed(a, w, normals, offsets, first, lo, hi, free_lo, free_hi,
+                                 i_origin, i_inv, i_dims, i_start, i_items) and \
+        _segment_free_indexed(w, b, normals, offsets, first, lo, hi, free_lo, free_hi,
+                              i_origin, i_inv, i_dims, i_start, i_items)
 
 
 @njit(cache=True)
-def _place(a, v, b, moves, normals, offsets, first, lo, hi, free_lo, free_hi):
+def _place(a, v, b, moves, normals, offsets, first, lo, hi, free_lo, free_hi, i_origin,
+           i_inv, i_dims, i_start, i_items):
     """A better place for the vertex v between a and b: |a - v| + |v - b| smaller, both
     segments free. First towards the segment a-b as far as free (bisection); where an
     obstacle stops that, a pattern search with steps halving to 1e-5 m lets the vertex
@@ -745,12 +851,14 @@ def _place(a, v, b, moves, normals, offsets, first, lo, hi, free_lo, free_hi):
     reach = math.sqrt((step * step).sum())
     if reach < 1e-12:
         return v
-    if _pair_free(a, v + step, b, normals, offsets, first, lo, hi, free_lo, free_hi):
+    index = (i_origin, i_inv, i_dims, i_start, i_items)
+    if _pair_free(a, v + step, b, normals, offsets, first, lo, hi, free_lo, free_hi, *index):
         return v + step
     good, bad = 0.0, 1.0
     for _ in range(30):
         mid = 0.5 * (good + bad)
-        if _pair_free(a, v + mid * step, b, normals, offsets, first, lo, hi, free_lo, free_hi):
+        if _pair_free(a, v + mid * step, b, normals, offsets, first, lo, hi, free_lo, free_hi,
+                      *index):
             good = mid
         else:
             bad = mid
@@ -772,7 +880,7 @@ def _place(a, v, b, moves, normals, offsets, first, lo, hi, free_lo, free_hi):
                     w = v + h * moves[k - 2]
                 c = math.sqrt(((a - w) ** 2).sum()) + math.sqrt(((b - w) ** 2).sum())
                 if c < cost - 1e-12 and _pair_free(a, w, b, normals, offsets, first, lo, hi,
-                                                   free_lo, free_hi):
+                                                   free_lo, free_hi, *index):
                     v, cost, moved = w, c, True
                     break
         h *= 0.5
@@ -780,7 +888,8 @@ def _place(a, v, b, moves, normals, offsets, first, lo, hi, free_lo, free_hi):
 
 
 @njit(cache=True)
-def _tauten(path, moves, normals, offsets, first, lo, hi, free_lo, free_hi, max_rounds):
+def _tauten(path, moves, normals, offsets, first, lo, hi, free_lo, free_hi, i_origin, i_inv,
+            i_dims, i_start, i_items, max_rounds):
     """Pull a free polyline tight, keeping every segment free: move each vertex to a
     better place between its neighbours (:func:`_place`), then drop the vertices whose
     neighbours see each other; repeat until the length stops falling. The ends stay where
@@ -790,15 +899,18 @@ def _tauten(path, moves, normals, offsets, first, lo, hi, free_lo, free_hi, max_
     for _ in range(max_rounds):
         for i in range(1, len(pts) - 1):
             pts[i] = _place(pts[i - 1], pts[i], pts[i + 1], moves, normals, offsets, first,
-                            lo, hi, free_lo, free_hi)
+                            lo, hi, free_lo, free_hi, i_origin, i_inv, i_dims, i_start,
+                            i_items)
         # shortcut: from each kept vertex, the farthest vertex in an unbroken run of sight
         keep = [0]
         i = 0
         n = len(pts)
         while i < n - 1:
             j = i + 1
-            while j + 1 < n and _segment_free(pts[i], pts[j + 1], normals, offsets, first,
-                                              lo, hi, free_lo, free_hi):
+            while j + 1 < n and _segment_free_indexed(pts[i], pts[j + 1], normals, offsets,
+                                                      first, lo, hi, free_lo, free_hi,
+                                                      i_origin, i_inv, i_dims, i_start,
+                                                      i_items):
                 j += 1
             keep.append(j)
             i = j
@@ -949,7 +1061,10 @@ def tauten(grown: GrownPieces, path, max_rounds: int = 200) -> np.ndarray:
     than a millionth). A local optimum: it goes round each obstacle on the side the
     polyline did."""
     path = np.ascontiguousarray(path, dtype=float)
-    args = (_MOVES, *_kernel_args(_pieces_within(grown, path)))
+    near = _pieces_within(grown, path)
+    index = PieceIndex.build(near.lo, near.hi)
+    args = (_MOVES, *_kernel_args(near), index.origin, index.inv_cell, index.dims,
+            index.start, index.items)
     pts = _tauten(path, *args, int(max_rounds))
     for _ in range(8):
         finer = _tauten(_densify(pts, TAUTEN_SPLIT_M), *args, int(max_rounds))

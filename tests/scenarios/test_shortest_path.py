@@ -67,6 +67,51 @@ def test_tauten_keeps_the_ends_and_every_segment_free():
     assert not segment_free(grown, (10.0, 3.0, 2.0), (10.0, 3.0, 3.8))
 
 
+def test_the_piece_index_gives_the_answers_of_testing_every_piece():
+    """tauten's segment test looks only at the pieces of the 1 m columns a segment crosses
+    (PieceIndex): on a Forest configuration's grown trunks it answers as the test of every
+    piece for random segments of every length and direction, the boxes' own diagonals and
+    segments ending exactly on their faces and corners."""
+    from ft_sitl.scenarios.families import build_scenario
+    from ft_sitl.scenarios.solvability import (
+        PieceIndex,
+        _kernel_args,
+        _segment_free,
+        _segment_free_indexed,
+    )
+    sc = build_scenario("forest", 3, 0)
+    grown = grow_pieces(sc.mesh, sc.bounds_min, sc.bounds_max, 0.3)
+    index = PieceIndex.build(grown.lo, grown.hi)
+    assert index.dims.prod() > 100 and len(index.items) >= len(grown.lo)
+    args = _kernel_args(grown)
+    lo, hi = grown.free_lo, grown.free_hi
+    rng = np.random.default_rng(0)
+    segments = []
+    for k in range(6000):
+        a = rng.uniform(lo, hi)
+        d = rng.normal(size=3)
+        if k % 3 == 0:
+            d[2] = 0.0  # level
+        if k % 7 == 0:
+            d = np.eye(3)[k % 2]  # along x or y
+        d /= np.linalg.norm(d)
+        segments.append((a, a + (0.0, 0.05, 0.5, 3.0, 60.0)[k % 5] * d))
+    for k in range(len(grown.lo)):
+        corner = np.array([grown.lo[k, 0], grown.hi[k, 1], grown.lo[k, 2]])
+        segments += [(grown.lo[k], grown.hi[k]), (grown.lo[k] - 0.5, corner),
+                     (corner + (0.0, 2.0, 0.0), corner)]
+    answers = []
+    for a, b in segments:
+        a, b = np.clip(a, lo, hi), np.clip(b, lo, hi)
+        plain = _segment_free(a, b, *args)
+        assert _segment_free_indexed(a, b, *args, index.origin, index.inv_cell, index.dims,
+                                     index.start, index.items) == plain
+        answers.append(plain)
+    assert 0.05 < 1.0 - np.mean(answers) < 0.95  # both answers are tested, many times
+    empty = PieceIndex.build(np.zeros((0, 3)), np.zeros((0, 3)))
+    assert len(empty.items) == 0
+
+
 def test_narrowest_passage_under_an_overhang():
     """A block from 1.5 m up across the whole area: the passage is its underside's 1.5 m
     above the floor, vertical; the body has its own height less to spare."""
