@@ -772,8 +772,8 @@ def _run_facts(df: pd.DataFrame, meta: Mapping) -> list[tuple[str, str]]:
     flown = n if not isinstance(flown, int) or isinstance(flown, bool) else flown
     if flown < n:
         facts.append(("trials flown by the recorded runs",
-                      f"{flown} (the other {n - flown}: runs stopped before they ended, "
-                      "which record no wall time)"))
+                      f"{flown} (the other {n - flown} were flown by runs with no record "
+                      "here: a run stopped before its end records none)"))
     if isinstance(wall, int | float) and math.isfinite(wall) and wall > 0:
         facts.append(("wall time", f"{wall:.1f} s"))
         facts.append(("trials per second", f"{flown / wall:.3g}"))
