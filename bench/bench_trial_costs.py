@@ -24,8 +24,8 @@ seconds in that cell. It is a single-process figure: two workers on this machine
 vCPUs each run slower than one alone (docs/benchmarks.md), so halving it is a lower bound
 of the two-worker campaign's elapsed time. Timings are never asserted.
 
-    .venv/bin/python bench/bench_trial_costs.py docs/results/paper            # ~6 min
-    .venv/bin/python bench/bench_trial_costs.py docs/results/paper --per-cell 2 --json
+    .venv/bin/python bench/bench_trial_costs.py docs/results/paper            # ~10 min
+    .venv/bin/python bench/bench_trial_costs.py docs/results/paper --per-cell 2 --json  # ~20 min
 """
 
 from __future__ import annotations
