@@ -46,7 +46,8 @@ from pathlib import Path  # noqa: E402
 import pandas as pd  # noqa: E402
 from benchutil import machine_info, pin_to_one_cpu  # noqa: E402
 
-from ft_sitl.cli.missions import _spec_of, differences  # noqa: E402
+from ft_sitl.cli.missions import differences  # noqa: E402
+from ft_sitl.missions.spec import TrialSpec  # noqa: E402
 from ft_sitl.missions.trial import run_trial  # noqa: E402
 
 #: cost centre -> (file suffix, function name) whose cumulative time it is
@@ -71,7 +72,7 @@ def centres(profile: cProfile.Profile) -> dict[str, float]:
 
 def measure(row) -> dict:
     """Fly one stored row three times (warm-up, timed, profiled); its costs."""
-    spec = _spec_of(json.loads(row["spec"]))
+    spec = TrialSpec.from_dict(json.loads(row["spec"]))
     run_trial(spec)
     t0 = time.perf_counter()
     new = run_trial(spec).row

@@ -606,11 +606,19 @@ def _line_in_piece(a, d, t0, t1, k, normals, offsets, first, lo, hi):
 
 
 @njit(cache=True)
-def _segment_free(a, b, normals, offsets, first, lo, hi, free_lo, free_hi):
-    """Is the segment a-b inside the free box and outside every grown piece?"""
+def _in_free_box(a, b, free_lo, free_hi):
+    """Is the segment a-b inside the box the centre must keep to?"""
     for ax in range(3):
         if min(a[ax], b[ax]) < free_lo[ax] or max(a[ax], b[ax]) > free_hi[ax]:
             return False
+    return True
+
+
+@njit(cache=True)
+def _segment_free(a, b, normals, offsets, first, lo, hi, free_lo, free_hi):
+    """Is the segment a-b inside the free box and outside every grown piece?"""
+    if not _in_free_box(a, b, free_lo, free_hi):
+        return False
     d = b - a
     for k in range(lo.shape[0]):
         if _line_in_piece(a, d, 0.0, 1.0, k, normals, offsets, first, lo, hi)[0]:
@@ -640,6 +648,10 @@ class PieceIndex:
     dims: np.ndarray  # (2,) int64: nx, ny
     start: np.ndarray  # (nx * ny + 1,) int64
     items: np.ndarray  # int64
+
+    def kernel_args(self) -> tuple:
+        """The index as the kernels take it (one tuple argument)."""
+        return (self.origin, self.inv_cell, self.dims, self.start, self.items)
 
     @classmethod
     def build(cls, lo: np.ndarray, hi: np.ndarray, cell: float = INDEX_CELL_M):
@@ -681,14 +693,13 @@ def _index_cell(x, origin, inv, n):
 
 
 @njit(cache=True)
-def _segment_free_indexed(a, b, normals, offsets, first, lo, hi, free_lo, free_hi, i_origin,
-                          i_inv, i_dims, i_start, i_items):
+def _segment_free_indexed(a, b, normals, offsets, first, lo, hi, free_lo, free_hi, index):
     """:func:`_segment_free` testing only the pieces of the index columns the segment's
     footprint crosses (each column's x extent of the segment, row by row, widened by the
-    index's pad): the same answer."""
-    for ax in range(3):
-        if min(a[ax], b[ax]) < free_lo[ax] or max(a[ax], b[ax]) > free_hi[ax]:
-            return False
+    index's pad): the same answer. ``index``: :meth:`PieceIndex.kernel_args`."""
+    if not _in_free_box(a, b, free_lo, free_hi):
+        return False
+    i_origin, i_inv, i_dims, i_start, i_items = index
     d = b - a
     nx, ny = i_dims[0], i_dims[1]
     pad = _INDEX_PAD_M
@@ -828,17 +839,14 @@ _MOVES = _unit_moves()
 
 
 @njit(cache=True)
-def _pair_free(a, w, b, normals, offsets, first, lo, hi, free_lo, free_hi, i_origin, i_inv,
-               i_dims, i_start, i_items):
+def _pair_free(a, w, b, normals, offsets, first, lo, hi, free_lo, free_hi, index):
     return _segment_free_indexed(a, w, normals, offsets, first, lo, hi, free_lo, free_hi,
-                                 i_origin, i_inv, i_dims, i_start, i_items) and \
-        _segment_free_indexed(w, b, normals, offsets, first, lo, hi, free_lo, free_hi,
-                              i_origin, i_inv, i_dims, i_start, i_items)
+                                 index) and \
+        _segment_free_indexed(w, b, normals, offsets, first, lo, hi, free_lo, free_hi, index)
 
 
 @njit(cache=True)
-def _place(a, v, b, moves, normals, offsets, first, lo, hi, free_lo, free_hi, i_origin,
-           i_inv, i_dims, i_start, i_items):
+def _place(a, v, b, moves, normals, offsets, first, lo, hi, free_lo, free_hi, index):
     """A better place for the vertex v between a and b: |a - v| + |v - b| smaller, both
     segments free. First towards the segment a-b as far as free (bisection); where an
     obstacle stops that, a pattern search with steps halving to 1e-5 m lets the vertex
@@ -851,14 +859,13 @@ def _place(a, v, b, moves, normals, offsets, first, lo, hi, free_lo, free_hi, i_
     reach = math.sqrt((step * step).sum())
     if reach < 1e-12:
         return v
-    index = (i_origin, i_inv, i_dims, i_start, i_items)
-    if _pair_free(a, v + step, b, normals, offsets, first, lo, hi, free_lo, free_hi, *index):
+    if _pair_free(a, v + step, b, normals, offsets, first, lo, hi, free_lo, free_hi, index):
         return v + step
     good, bad = 0.0, 1.0
     for _ in range(30):
         mid = 0.5 * (good + bad)
         if _pair_free(a, v + mid * step, b, normals, offsets, first, lo, hi, free_lo, free_hi,
-                      *index):
+                      index):
             good = mid
         else:
             bad = mid
@@ -880,7 +887,7 @@ def _place(a, v, b, moves, normals, offsets, first, lo, hi, free_lo, free_hi, i_
                     w = v + h * moves[k - 2]
                 c = math.sqrt(((a - w) ** 2).sum()) + math.sqrt(((b - w) ** 2).sum())
                 if c < cost - 1e-12 and _pair_free(a, w, b, normals, offsets, first, lo, hi,
-                                                   free_lo, free_hi, *index):
+                                                   free_lo, free_hi, index):
                     v, cost, moved = w, c, True
                     break
         h *= 0.5
@@ -888,8 +895,8 @@ def _place(a, v, b, moves, normals, offsets, first, lo, hi, free_lo, free_hi, i_
 
 
 @njit(cache=True)
-def _tauten(path, moves, normals, offsets, first, lo, hi, free_lo, free_hi, i_origin, i_inv,
-            i_dims, i_start, i_items, max_rounds):
+def _tauten(path, moves, normals, offsets, first, lo, hi, free_lo, free_hi, index,
+            max_rounds):
     """Pull a free polyline tight, keeping every segment free: move each vertex to a
     better place between its neighbours (:func:`_place`), then drop the vertices whose
     neighbours see each other; repeat until the length stops falling. The ends stay where
@@ -899,8 +906,7 @@ def _tauten(path, moves, normals, offsets, first, lo, hi, free_lo, free_hi, i_or
     for _ in range(max_rounds):
         for i in range(1, len(pts) - 1):
             pts[i] = _place(pts[i - 1], pts[i], pts[i + 1], moves, normals, offsets, first,
-                            lo, hi, free_lo, free_hi, i_origin, i_inv, i_dims, i_start,
-                            i_items)
+                            lo, hi, free_lo, free_hi, index)
         # shortcut: from each kept vertex, the farthest vertex in an unbroken run of sight
         keep = [0]
         i = 0
@@ -908,9 +914,7 @@ def _tauten(path, moves, normals, offsets, first, lo, hi, free_lo, free_hi, i_or
         while i < n - 1:
             j = i + 1
             while j + 1 < n and _segment_free_indexed(pts[i], pts[j + 1], normals, offsets,
-                                                      first, lo, hi, free_lo, free_hi,
-                                                      i_origin, i_inv, i_dims, i_start,
-                                                      i_items):
+                                                      first, lo, hi, free_lo, free_hi, index):
                 j += 1
             keep.append(j)
             i = j
@@ -1062,9 +1066,7 @@ def tauten(grown: GrownPieces, path, max_rounds: int = 200) -> np.ndarray:
     polyline did."""
     path = np.ascontiguousarray(path, dtype=float)
     near = _pieces_within(grown, path)
-    index = PieceIndex.build(near.lo, near.hi)
-    args = (_MOVES, *_kernel_args(near), index.origin, index.inv_cell, index.dims,
-            index.start, index.items)
+    args = (_MOVES, *_kernel_args(near), PieceIndex.build(near.lo, near.hi).kernel_args())
     pts = _tauten(path, *args, int(max_rounds))
     for _ in range(8):
         finer = _tauten(_densify(pts, TAUTEN_SPLIT_M), *args, int(max_rounds))

@@ -104,8 +104,7 @@ def test_the_piece_index_gives_the_answers_of_testing_every_piece():
     for a, b in segments:
         a, b = np.clip(a, lo, hi), np.clip(b, lo, hi)
         plain = _segment_free(a, b, *args)
-        assert _segment_free_indexed(a, b, *args, index.origin, index.inv_cell, index.dims,
-                                     index.start, index.items) == plain
+        assert _segment_free_indexed(a, b, *args, index.kernel_args()) == plain
         answers.append(plain)
     assert 0.05 < 1.0 - np.mean(answers) < 0.95  # both answers are tested, many times
     empty = PieceIndex.build(np.zeros((0, 3)), np.zeros((0, 3)))
