@@ -113,7 +113,8 @@ class OccupancyView:
         occ = np.asarray(self.occupied(pts), dtype=bool).reshape(pts.shape[0])
         if self.bounds is not None:
             lo, hi = self.bounds
-            occ = occ | np.any(pts < lo, axis=1) | np.any(pts > hi, axis=1)
+            occ = occ.copy()  # the callable's array may be its own
+            _or_outside(pts, lo, hi, occ)
         return occ
 
     def box_occupancy(self, lo, shape) -> np.ndarray:
@@ -178,6 +179,19 @@ class AStarResult:
 _OFFSETS = np.array([(dx, dy, dz) for dx in (-1, 0, 1) for dy in (-1, 0, 1) for dz in (-1, 0, 1)
                      if (dx, dy, dz) != (0, 0, 0)], dtype=np.int64)
 _STEP = np.sqrt(np.sum(_OFFSETS ** 2, axis=1)).astype(np.float64)
+
+
+@njit(cache=True)
+def _or_outside(pts, lo, hi, occ):
+    """``occ[i] |= pts[i]`` outside the box ``lo .. hi`` (a coordinate below ``lo`` or above
+    ``hi``; NaN is inside, as numpy's comparisons have it): the bounds of
+    :meth:`OccupancyView.is_occupied` without numpy's two reductions per call (10 us of
+    its 12 us on a 30-point spline)."""
+    for i in range(pts.shape[0]):
+        for a in range(3):
+            if pts[i, a] < lo[a] or pts[i, a] > hi[a]:
+                occ[i] = True
+                break
 
 
 @njit(cache=True, inline="always")

@@ -216,6 +216,23 @@ def test_view_of_a_local_map_uses_its_inflated_occupancy_and_resolution():
     np.testing.assert_array_equal(view.is_occupied([[0.5, 0, 0], [1.5, 0, 0]]), [False, True])
 
 
+def test_bounds_make_points_outside_the_box_occupied_on_every_axis_and_side():
+    # the rule is numpy's (a coordinate below lo or above hi; on the boundary is inside)
+    rng = np.random.default_rng(3)
+    lo, hi = np.array([-1.0, -2.0, 0.0]), np.array([1.0, 2.0, 3.0])
+    pts = rng.uniform(-3.0, 4.0, (500, 3))
+    pts[:6] = [lo, hi, [-1.0, 0, 1], [1.0, 2.0, 3.0], [0, 0, -1e-12], [0, 2.0 + 1e-12, 1]]
+    free = lambda p: np.zeros(len(p), bool)  # noqa: E731
+    view = OccupancyView(free, 0.1, bounds=(lo, hi))
+    want = np.any(pts < lo, axis=1) | np.any(pts > hi, axis=1)
+    np.testing.assert_array_equal(view.is_occupied(pts), want)
+    assert want.any() and not want.all() and list(want[:6]) == [False] * 4 + [True] * 2
+    # the callable's own array is not written into
+    mine = np.zeros(len(pts), bool)
+    OccupancyView(lambda p: mine, 0.1, bounds=(lo, hi)).is_occupied(pts)
+    assert not mine.any()
+
+
 def test_memo_answers_repeated_searches_as_a_new_search_would():
     from ft_sitl.navigation.astar import AStarMemo
 
