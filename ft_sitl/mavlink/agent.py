@@ -139,7 +139,6 @@ SENSORS = (
 )
 
 MAX_STREAM_HZ = 500.0  # SET_MESSAGE_INTERVAL: the fastest a message is streamed
-HEARTBEAT_MIN_HZ = 1.0  # ... and the slowest the heartbeat may be set to
 
 MISSION_TIMEOUT_US = 1_500_000  # wall time between re-requests during a transfer
 MISSION_RETRIES = 5
@@ -622,8 +621,8 @@ class VehicleAgent:
         if command == mav.MAV_CMD_REQUEST_MESSAGE:
             msg_id = int(p[0]) if math.isfinite(p[0]) else -1
             m = self.build(msg_id) if msg_id != mav.MAVLINK_MSG_ID_PARAM_VALUE else None
-            if m is None:
-                return Result.UNSUPPORTED, []
+            if m is None:  # as PX4: no stream for it, or nothing to send
+                return Result.DENIED, []
             return Result.ACCEPTED, [Outgoing(m, link, peer)]
         if command == mav.MAV_CMD_REQUEST_AUTOPILOT_CAPABILITIES:
             return Result.ACCEPTED, [Outgoing(self.autopilot_version(), link, peer)]
@@ -680,24 +679,27 @@ class VehicleAgent:
     def _set_message_interval(self, msg_id: float, interval_us: float, link: int) -> Result:
         """MAV_CMD_SET_MESSAGE_INTERVAL on this link: interval > 0 sets 1e6 / interval Hz (at
         most MAX_STREAM_HZ), 0 the link's default rate, a negative one (-1) stops the
-        message. DENIED: a message we cannot produce, a non-finite interval, and anything
-        that would send the heartbeat less than once a second (a client must not be able to
-        make the vehicle look dead to every other client on the link)."""
+        message. FAILED, as PX4's ``set_message_interval``: the heartbeat (its rate is not
+        a client's to change: one client must not make the vehicle look dead to the others)
+        and a message we cannot produce. DENIED: a non-finite message id or interval (PX4
+        reads a NaN interval as 0 and +-inf as "stop")."""
         if not math.isfinite(msg_id):
             return Result.DENIED
         msg_id = int(round(msg_id))  # PX4: (int)(param1 + 0.5f)
+        if not math.isfinite(interval_us):
+            return Result.DENIED
+        if msg_id == mav.MAVLINK_MSG_ID_HEARTBEAT:
+            return Result.FAILED
         streamable = msg_id == mav.MAVLINK_MSG_ID_ADSB_VEHICLE or \
             self.build_probe(msg_id) is not None  # (traffic: one message per mover)
-        if not math.isfinite(interval_us) or not streamable:
-            return Result.DENIED
+        if not streamable:
+            return Result.FAILED
         if interval_us == 0:
             hz = (ONBOARD_RATES if link == 0 else NORMAL_RATES).get(msg_id, 0.0)
         elif interval_us < 0:
             hz = 0.0
         else:
             hz = min(1e6 / interval_us, MAX_STREAM_HZ)
-        if msg_id == mav.MAVLINK_MSG_ID_HEARTBEAT and hz < HEARTBEAT_MIN_HZ:
-            return Result.DENIED
         self.rates[link][msg_id] = hz
         self.next_due[link].setdefault(msg_id, 0)
         return Result.ACCEPTED

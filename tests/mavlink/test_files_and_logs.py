@@ -180,13 +180,20 @@ def test_camera_gimbal_transponder_and_logs_fail_fast():
     with running_sitl(base_instance=INSTANCES[2]):
         # what those plugins send, and the gimbal commands of older clients, raw
         c = client(14540 + INSTANCES[2])
-        for command, params in (
-                (mav.MAV_CMD_REQUEST_MESSAGE, [mav.MAVLINK_MSG_ID_CAMERA_INFORMATION]),
-                (mav.MAV_CMD_REQUEST_MESSAGE, [mav.MAVLINK_MSG_ID_GIMBAL_MANAGER_INFORMATION]),
-                (mav.MAV_CMD_DO_MOUNT_CONTROL, [-45.0, 0.0, 0.0]),
-                (mav.MAV_CMD_DO_GIMBAL_MANAGER_PITCHYAW, [-45.0, 0.0])):
+        for command, params, want in (
+                (mav.MAV_CMD_REQUEST_MESSAGE, [mav.MAVLINK_MSG_ID_CAMERA_INFORMATION],
+                 mav.MAV_RESULT_DENIED),  # as PX4: a message it has no stream for
+                (mav.MAV_CMD_REQUEST_MESSAGE, [mav.MAVLINK_MSG_ID_GIMBAL_MANAGER_INFORMATION],
+                 mav.MAV_RESULT_DENIED),
+                (mav.MAV_CMD_DO_MOUNT_CONTROL, [-45.0, 0.0, 0.0], mav.MAV_RESULT_UNSUPPORTED),
+                (mav.MAV_CMD_DO_GIMBAL_MANAGER_PITCHYAW, [-45.0, 0.0],
+                 mav.MAV_RESULT_UNSUPPORTED)):
             c.mav.command_long_send(1, 1, command, 0, *(params + [0.0] * (7 - len(params))))
-            assert ack_of(c, command, timeout=3).result == mav.MAV_RESULT_UNSUPPORTED
+            assert ack_of(c, command, timeout=3).result == want
+        # a message it cannot produce is FAILED to SET_MESSAGE_INTERVAL, as PX4
+        c.mav.command_long_send(1, 1, mav.MAV_CMD_SET_MESSAGE_INTERVAL, 0,
+                                mav.MAVLINK_MSG_ID_CAMERA_INFORMATION, 1e6, 0, 0, 0, 0, 0)
+        assert ack_of(c, mav.MAV_CMD_SET_MESSAGE_INTERVAL, 3).result == mav.MAV_RESULT_FAILED
         c.mav.command_long_send(1, 1, mav.MAV_CMD_SET_MESSAGE_INTERVAL, 0,
                                 mav.MAVLINK_MSG_ID_ADSB_VEHICLE, 1e6, 0, 0, 0, 0, 0)
         assert ack_of(c, mav.MAV_CMD_SET_MESSAGE_INTERVAL, 3).result == mav.MAV_RESULT_ACCEPTED

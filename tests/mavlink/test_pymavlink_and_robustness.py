@@ -248,11 +248,13 @@ def test_hostile_input_never_crashes_the_vehicle():
         assert np.isfinite(server.fleet.sim.w_cmd).all()
         assert server.bad_packets > 0
         # nothing silenced the vehicle: heartbeats keep coming at least once a simulated
-        # second (and a wall second), and each silencer is refused
+        # second (and a wall second), and each silencer is refused: FAILED as PX4 answers
+        # every heartbeat interval, DENIED for a non-finite one
         for silencer in silencers:
             sock.sendto(silencer.pack(enc), dest)
-            assert ack_of(c, mav.MAV_CMD_SET_MESSAGE_INTERVAL).result == \
+            want = mav.MAV_RESULT_FAILED if math.isfinite(silencer.param2) else \
                 mav.MAV_RESULT_DENIED
+            assert ack_of(c, mav.MAV_CMD_SET_MESSAGE_INTERVAL).result == want
         sim0, wall0, beats, last = server.fleet.time_us, time.time(), 0, time.time()
         while time.time() - wall0 < 3.0:
             if c.recv_match(type="HEARTBEAT", blocking=True, timeout=0.2) is not None:
