@@ -58,6 +58,10 @@ MODE_NAMES = {
 MODE_BY_NAME = {v: k for k, v in MODE_NAMES.items()}
 
 
+#: the status text of an arming the geofence refused (Commander.arm_fence_check), PX4's
+FENCE_ARM_DENIAL = "Preflight Fail: Geofence violation"
+
+
 class Result(IntEnum):
     """MAV_RESULT values, so the MAVLink layer can send them as they are."""
 
@@ -222,6 +226,11 @@ class Commander:
     fence_events: list = field(default_factory=list)
     #: injected failures in force: unit name -> (type name, instance) (autopilot.failures)
     failures: dict = field(default_factory=dict)
+    #: PX4's arming check on the geofence (HealthAndArmingChecks/checks/geofenceCheck.cpp):
+    #: with GF_ACTION not 0 ("none"), a vehicle breaching the fence where it stands is
+    #: refused arming, "Preflight Fail: Geofence violation". False: arm anyway (the rule of
+    #: trial protocols before 8, missions.spec.PROTOCOLS)
+    arm_fence_check: bool = True
 
     def __post_init__(self):
         self._nav = _Nav()
@@ -294,6 +303,8 @@ class Commander:
                 return self._deny("Arming denied: no valid mission")
             if self._follow_active():
                 return self._deny("Arming denied: mode not suitable for arming")
+            if self.arm_fence_check and self.fence_breach_here() is not None:
+                return self._deny(FENCE_ARM_DENIAL)
             why = self._manual_arm_check()
             if why:
                 return self._deny(why)
@@ -974,6 +985,14 @@ class Commander:
     @property
     def fence_breached(self) -> bool:
         return self._fence_breached
+
+    def fence_breach_here(self) -> str | None:
+        """Why the vehicle where it is now breaches the geofence, when a breach would act
+        (GF_ACTION not 0, as PX4's navigator only checks then); None otherwise."""
+        if int(self.params["GF_ACTION"]) == 0:
+            return None
+        return self.fence.breach(self._pos(), self.home, self.params["GF_MAX_HOR_DIST"],
+                                 self.params["GF_MAX_VER_DIST"])
 
     def _geofence_check(self, s: VehicleState) -> None:
         """PX4's geofence: in the air, a breach (entering it, not staying in it) takes

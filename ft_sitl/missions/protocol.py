@@ -177,6 +177,17 @@ def check_flight(fleet, n_events: int, s) -> None:
         raise failure
 
 
+def arming_failure(cmd, result_name: str = "refused") -> TrialFailure:
+    """How a refused arming ends the trial (the flight controller's last status text in
+    the detail): ``geofence`` when the fence refused it (protocol 8 on:
+    ``Commander.arm_fence_check``), ``loss_of_control`` otherwise."""
+    texts = [t for _, t in cmd.statustexts]
+    detail = f"arming refused: {texts[-1] if texts else result_name}"
+    if cmd.arm_fence_check and cmd.fence_breach_here() is not None:
+        return TrialFailure(Outcome.GEOFENCE, detail)
+    return TrialFailure(Outcome.LOSS_OF_CONTROL, detail)
+
+
 def flight_failure(finite: bool, tilt: float, on_ground: bool) -> TrialFailure | None:
     """How the vehicle's true state ends the flight, if it does: a non-finite state or a
     tilt beyond :data:`MAX_TILT_RAD` (loss of control), touching the floor (out of
@@ -605,6 +616,7 @@ def trial_vehicle(spec, scenario, platform, resources: TrialResources = RESOURCE
                            spec.limits, spec.protocol, spec.gains)
     fleet = Fleet([platform], params=[params], spawn=[scenario.takeoff],
                   spawn_yaw=[scenario.start_yaw], physics_hz=spec.physics_hz, guard=guard)
+    fleet.commanders[0].arm_fence_check = PROTOCOLS[spec.protocol].arm_fence_check
     if spec.fence is not None:  # the flight controller's, from the start (PX4: uploaded)
         fleet.commanders[0].set_fence(fence_of(spec.fence))
     if spec.wind is not None:  # from the trial's first step (the gust timed from it)

@@ -71,6 +71,10 @@ class ProtocolRules:
     #: and tracker feed its dynamic-obstacle input, its shield and its map's free regions,
     #: ``dynamic_obstacles = "tracked"``); before, NavRL flew with that input off
     moving_obstacles: bool = False
+    #: the flight controller refuses to arm a vehicle that breaches its geofence where it
+    #: stands (GF_ACTION not 0), as PX4 does (Commander.arm_fence_check); before, it armed
+    #: and the breach acted once in the air
+    arm_fence_check: bool = False
 
 
 #: the versions of the trial protocol this code flies; a trial's spec names its version
@@ -116,6 +120,15 @@ PROTOCOLS = {
                      offboard_acc_clamp=False, benchmark_camera_hz=None,
                      observe_approach=True, max_acc_m_s2=3.0, footprint_inflation=True,
                      vehicle_body=True, map_fusion_hz=20.0, moving_obstacles=True),
+    8: ProtocolRules(8, "PX4's arming check on the geofence: a vehicle that breaches the "
+                        "trial's fence on the ground (GF_ACTION not none) is refused arming, "
+                        "\"Preflight Fail: Geofence violation\", and the trial ends as "
+                        "geofence (before, it armed and the breach acted after take-off); "
+                        "the rest as in 7",
+                     offboard_acc_clamp=False, benchmark_camera_hz=None,
+                     observe_approach=True, max_acc_m_s2=3.0, footprint_inflation=True,
+                     vehicle_body=True, map_fusion_hz=20.0, moving_obstacles=True,
+                     arm_fence_check=True),
 }
 #: the version new trials and campaigns fly unless they name another
 PROTOCOL_VERSION = max(PROTOCOLS)

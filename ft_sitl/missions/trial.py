@@ -39,6 +39,7 @@ from ft_sitl.missions.protocol import (
     TrialFailure,
     TrialOutcome,
     TrialReferee,
+    arming_failure,
     navigator_params,
     trial_task,
     trial_vehicle,
@@ -211,9 +212,7 @@ def _approach(fleet, sc, ref: TrialReferee, observer, eyes: _Eyes) -> None:
     cmd = fleet.commanders[0]
     res = cmd.arm()
     if res.name != "ACCEPTED":
-        texts = [t for _, t in cmd.statustexts]
-        raise TrialFailure(Outcome.LOSS_OF_CONTROL,
-                           f"arming refused: {texts[-1] if texts else res.name}")
+        raise arming_failure(cmd, res.name)
     cmd.takeoff(float(sc.start[2]))
     t_arm_us = fleet.time_us
     ref.approach.start(t_arm_us)

@@ -38,6 +38,7 @@ from pathlib import Path
 import numpy as np
 
 from ft_sitl import frames
+from ft_sitl.autopilot.commander import FENCE_ARM_DENIAL
 from ft_sitl.bus.broker import EmbeddedBroker
 from ft_sitl.bus.codec import EventType
 from ft_sitl.bus.publisher import BusPublisher
@@ -48,6 +49,7 @@ from ft_sitl.missions.protocol import (
     TrialFailure,
     TrialOutcome,
     TrialReferee,
+    arming_failure,
     footprint_m,
     navigator_params,
     trial_vehicle,
@@ -261,7 +263,14 @@ async def _serve(server, fleet, ref: TrialReferee, proc, spec, speed_factor: flo
             if ref.outcome is not None:
                 continue
             code = proc.poll()
-            if code is not None and code != 0 and ref.outcome is None:
+            cmd = fleet.commanders[0]
+            if ref.phase is Phase.APPROACH and not cmd.armed and any(
+                    t == FENCE_ARM_DENIAL for _, t in cmd.statustexts):
+                # the fence refused the client's arming (protocol 8 on): as in-process
+                f = arming_failure(cmd)
+                ref.end(f.reason, f.detail)
+                server.stop()
+            elif code is not None and code != 0 and ref.outcome is None:
                 # ft-sitl navigate exits 1 when it gives up (or times out by its own
                 # clock): the protocol's "no plan" timeout; anything else is an error
                 res = _client_result(out_path) if code == 1 else {}

@@ -177,6 +177,32 @@ def test_a_geofence_breach_takes_gf_action(action, mode):
     assert len(c.fence_events) == 1  # one breach, one action
 
 
+@pytest.mark.parametrize("action", [1, 2, 5])
+def test_arming_where_the_fence_is_breached_is_refused_unless_gf_action_is_none(action):
+    from ft_sitl.autopilot.geofence import Fence, circle
+
+    # PX4 (geofenceCheck.cpp): any action but "none", warning included, fails the check
+    f = Fleet(P, params=[ParamSet({"GF_ACTION": action})])
+    c = f.commanders[0]
+    f.run(0.5)
+    c.set_fence(Fence([circle([0.0, 0.0], 2.0, False, "test")]))  # keep out: we stand in it
+    assert c.fence_breach_here() == "outside the fence"
+    assert c.arm() == Result.DENIED and not c.armed
+    assert texts(c)[-1] == cm.FENCE_ARM_DENIAL == "Preflight Fail: Geofence violation"
+    assert c.arm(force=True) == Result.ACCEPTED and c.armed  # force skips the checks
+    c.disarm(force=True)
+    c.arm_fence_check = False  # the rule of trial protocols before 8
+    assert c.arm() == Result.ACCEPTED
+    c.disarm(force=True)
+    c.arm_fence_check = True
+    c.set_fence(Fence([circle([0.0, 0.0], 8.0, True, "test")]))  # now inside: arms
+    assert c.fence_breach_here() is None and c.arm() == Result.ACCEPTED
+    c.disarm(force=True)
+    c.set_fence(Fence([circle([0.0, 0.0], 2.0, False, "test")]))
+    c.params.set("GF_ACTION", 0)  # none: PX4's navigator does not check at all
+    assert c.fence_breach_here() is None and c.arm() == Result.ACCEPTED
+
+
 def test_max_distance_and_height_fences_and_rtl_to_the_nearest_rally_point():
     f, c = _flying({"GF_MAX_VER_DIST": 4.0, "GF_ACTION": 3, "RTL_RETURN_ALT": 3.5})
     c.set_rally([np.array([6.0, 6.0, 0.0]), np.array([-30.0, 0.0, 0.0])])

@@ -7,6 +7,7 @@ The yard (conftest): start (5, 2, 1.5), goal (5, 18, 1.5), a wall across y = 10.
 straight navigator flies north along x = 5 and leaves the box y < 6 about 1.6 s into the
 navigation."""
 
+import dataclasses
 import json
 import math
 
@@ -94,6 +95,23 @@ def test_an_exclusion_circle_and_a_height_limit_breach_as_px4_says(yard):
         "geofence", "breached: more than 1 m above home (GF_ACTION land) before navigation "
                     "started")
     assert (row["nav_time_s"], row["fence_breaches"]) == (0.0, 0)
+
+
+def test_from_protocol_8_a_fence_breached_on_the_ground_refuses_arming_as_px4(yard):
+    keep_out = {"action": "hold", "circles": [  # around the take-off point
+        {"inclusion": False, "center": [5, 2], "radius_m": 1.0}]}
+    spec = fenced(yard, keep_out)
+    assert spec.protocol == 8
+    row, _ = fly(spec)
+    assert (row["reason"], row["detail"]) == (
+        "geofence", "arming refused: Preflight Fail: Geofence violation")
+    assert (row["nav_time_s"], row["fence_breaches"]) == (0.0, 0)
+    assert row["sim_time_s"] == 0.0  # nothing flew
+    # protocol 7 armed, and the breach acted in the air, as every older row says
+    row7, _ = fly(dataclasses.replace(spec, protocol=7))
+    assert (row7["reason"], row7["detail"]) == (
+        "geofence", "breached: outside the fence (GF_ACTION hold) before navigation started")
+    assert row7["sim_time_s"] > 0.0
 
 
 FENCED = """\

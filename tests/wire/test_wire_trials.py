@@ -117,6 +117,26 @@ def test_user_scripts_crashing_hanging_or_flying(tmp_path):
     assert flown["path_length_m"] > 3.0
 
 
+def test_a_fence_that_refuses_arming_ends_a_wire_trial_as_in_process(tmp_path):
+    from ft_sitl.missions.resources import RESOURCES
+    from ft_sitl.missions.trial import run_trial
+
+    argv = [sys.executable, str(REPO / "examples" / "user_navigator.py")]
+    takeoff = RESOURCES.scenario(_command_spec(argv)).takeoff
+    fence = {"action": "hold", "circles": [  # keep out of where it stands
+        {"inclusion": False, "center": [float(takeoff[0]), float(takeoff[1])],
+         "radius_m": 1.0}]}
+    row = run_trial_wire(_command_spec(argv, fence=fence), arm_timeout_s=20.0,
+                         log_dir=tmp_path, **worker_bus(None)).row
+    assert (row["reason"], row["detail"]) == (
+        "geofence", "arming refused: Preflight Fail: Geofence violation")
+    assert row["nav_time_s"] == 0.0
+    # the same rule in-process (with a navigator of ours: the outcome comes before it flies)
+    spec = TrialSpec(algorithm="straight", platform=AGILE, family="forest", scenario_index=2,
+                     fence=fence)
+    assert run_trial(spec).row["detail"] == row["detail"]
+
+
 def test_bad_placeholder_in_a_command_fails_only_its_trial(tmp_path):
     row = run_trial_wire(_command_spec(["python", "{nope}"]), log_dir=tmp_path,
                          **worker_bus(None)).row
