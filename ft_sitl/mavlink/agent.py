@@ -19,7 +19,7 @@ from pymavlink.dialects.v20 import common as mav
 from ft_sitl import frames
 from ft_sitl.autopilot import commander as cm
 from ft_sitl.autopilot.commander import MissionItem, Result
-from ft_sitl.autopilot.geofence import Fence, FenceError, circle, fits, polygon
+from ft_sitl.autopilot.geofence import Fence, FenceError, Polygon, circle, fits, polygon
 from ft_sitl.autopilot.params import PARAMS, ParamError
 from ft_sitl.autopilot.setpoints import Setpoint, SetpointError
 from ft_sitl.mavlink import files
@@ -227,6 +227,10 @@ class VehicleAgent:
         self._download_items: list = []
         #: MISSION_ITEM_INT messages as uploaded, per mission type (mission, fence, rally)
         self._stored: dict[int, list] = {t: [] for t in MISSION_TYPES}
+        #: the commander's fence as the last fence upload set it, and the items made for a
+        #: fence it got otherwise (a trial's), with that fence (see _fence_download)
+        self._fence_uploaded: Fence | None = None
+        self._fence_made: tuple[Fence, list] | None = None
         self._last_mission_current: tuple | None = None
         self._snap: _Snapshot | None = None
         # PARAM_REQUEST_LIST answers in progress: (link, peer) -> next index to send
@@ -1030,6 +1034,7 @@ class VehicleAgent:
             self.cmd.set_mission([self._to_mission_item(it) for it in items])
         elif mtype == mav.MAV_MISSION_TYPE_FENCE:
             self.cmd.set_fence(self._to_fence(items))
+            self._fence_uploaded = self.cmd.fence
         else:
             self.cmd.set_rally([self._to_rally_point(it) for it in items])
         self._stored[mtype] = list(items)
@@ -1112,15 +1117,55 @@ class VehicleAgent:
             p[2] = self.cmd.home[2]
         return p
 
+    def _download(self, mtype: int) -> list | None:
+        """The items a download of ``mtype`` returns (None: not a type we keep)."""
+        if mtype == mav.MAV_MISSION_TYPE_FENCE:
+            return self._fence_download()
+        return self._stored.get(mtype)
+
+    def _fence_download(self) -> list:
+        """The fence items: as uploaded; for a fence the commander got otherwise (a
+        trial's ``fence``, set before the first step, as PX4 loads a fence file at boot
+        into the store a download reads), its areas and return point as PX4 stores them
+        (vertex and circle items in MAV_FRAME_GLOBAL, altitude 0), made once per fence."""
+        fence = self.cmd.fence
+        if fence is self._fence_uploaded:
+            return self._stored[mav.MAV_MISSION_TYPE_FENCE]
+        if self._fence_made is None or self._fence_made[0] is not fence:
+            self._fence_made = (fence, self._fence_items(fence))
+        return self._fence_made[1]
+
+    def _fence_items(self, fence: Fence) -> list:
+        items: list = []
+
+        def add(command: int, xy, param1: float) -> None:
+            lat, lon, _ = self.geo.to_global((float(xy[0]), float(xy[1]), 0.0))
+            items.append(mav.MAVLink_mission_item_int_message(
+                0, 0, len(items), mav.MAV_FRAME_GLOBAL, command, 0, 1, float(param1), 0.0,
+                0.0, 0.0, _deg_e7(lat), _deg_e7(lon), 0.0, mav.MAV_MISSION_TYPE_FENCE))
+
+        for a in fence.areas:
+            if isinstance(a, Polygon):
+                command = mav.MAV_CMD_NAV_FENCE_POLYGON_VERTEX_INCLUSION if a.inclusion else \
+                    mav.MAV_CMD_NAV_FENCE_POLYGON_VERTEX_EXCLUSION
+                for v in a.vertices:
+                    add(command, v, len(a.vertices))
+            else:
+                add(mav.MAV_CMD_NAV_FENCE_CIRCLE_INCLUSION if a.inclusion else
+                    mav.MAV_CMD_NAV_FENCE_CIRCLE_EXCLUSION, a.center, a.radius_m)
+        if fence.return_point is not None:
+            add(mav.MAV_CMD_NAV_FENCE_RETURN_POINT, fence.return_point[:2], 0.0)
+        return items
+
     def _on_mission_request_list(self, m, link, peer, wall_us):
         mtype = getattr(m, "mission_type", 0)
-        count = len(self._stored.get(mtype, []))
+        count = len(self._download(mtype) or [])
         return [Outgoing(mav.MAVLink_mission_count_message(
             m.get_srcSystem(), m.get_srcComponent(), count, mtype), link, peer)]
 
     def _on_mission_request(self, m, link, peer, wall_us):
         mtype = getattr(m, "mission_type", 0)
-        stored = self._stored.get(mtype)
+        stored = self._download(mtype)
         if stored is None:
             return []
         if not 0 <= m.seq < len(stored):

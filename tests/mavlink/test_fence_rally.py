@@ -160,3 +160,40 @@ def test_bad_fence_and_mission_items_get_a_mavlink_result_never_a_crash():
         assert item.position[2] == pytest.approx(5.0)
         hb = wait_msg(c, "HEARTBEAT")  # still alive
         assert hb.autopilot == mav.MAV_AUTOPILOT_PX4
+
+
+def test_a_fence_the_vehicle_was_given_without_an_upload_downloads_as_px4_stores_it():
+    # a trial's fence (missions.protocol.trial_vehicle sets it on the commander before the
+    # first step), as PX4 loads a fence file at boot: a ground station downloads its items
+    from ft_sitl.autopilot.geofence import Fence, circle, polygon
+
+    given = Fence([polygon([[-15.0, -15.0], [15.0, -15.0], [15.0, 15.0], [-15.0, 15.0]],
+                           True, "trial"),
+                   circle([-10.0, 0.0], 3.0, False, "trial")])
+
+    async def run():
+        m, drone = await connect(14540 + INSTANCE)
+        fence = GeofenceAsync(drone)
+        down = await fence.download_geofence()
+        assert [p.fence_type for p in down.polygons] == [FenceType.INCLUSION]
+        got = [(p.latitude_deg, p.longitude_deg) for p in down.polygons[0].points]
+        # ENU (x east, y north) -> latlon(north, east)
+        want = [latlon(-15, -15), latlon(-15, 15), latlon(15, 15), latlon(15, -15)]
+        assert got == [pytest.approx(w, abs=2e-7) for w in want]
+        (c,) = down.circles
+        assert (c.fence_type, c.radius) == (FenceType.EXCLUSION, pytest.approx(3.0))
+        assert (c.point.latitude_deg, c.point.longitude_deg) == pytest.approx(
+            latlon(0, -10), abs=2e-7)
+        # uploaded back, the same fence (to the 1e-7 degree of the items, ~1 cm)
+        await fence.upload_geofence(down)
+        m.destroy()
+
+    with running_sitl(base_instance=INSTANCE) as server:
+        cmd = server.fleet.commanders[0]
+        cmd.set_fence(given)
+        asyncio.run(run())
+        back = cmd.fence
+        assert back is not given and len(back.areas) == 2
+        assert back.areas[0].vertices == pytest.approx(given.areas[0].vertices, abs=0.02)
+        assert back.areas[1].center == pytest.approx(given.areas[1].center, abs=0.02)
+        assert (back.areas[0].inclusion, back.areas[1].inclusion) == (True, False)
