@@ -567,7 +567,8 @@ def footprint_m(spec, platform) -> float | None:
 def navigator_params(spec) -> dict:
     """The navigator's parameters in this trial: the spec's, plus what the trial's protocol
     version fixed that the navigator's defaults have changed since (versions 1 and 2 flew
-    the benchmark camera at 15 Hz; before 7 NavRL saw no moving obstacles)."""
+    the benchmark camera at 15 Hz; before 7 NavRL saw no moving obstacles; before 8 its
+    shield clustered within 0.2 m)."""
     params = dict(spec.algorithm_params)
     rules = PROTOCOLS[spec.protocol]
     cls = available().get(spec.algorithm)
@@ -579,6 +580,9 @@ def navigator_params(spec) -> dict:
     if not rules.moving_obstacles and "dynamic_obstacles" in names and \
             "dynamic_obstacles" not in params:
         params["dynamic_obstacles"] = "off"
+    if rules.navrl_shield_cluster_m is not None and "shield_cluster_radius_m" in names and \
+            "shield_cluster_radius_m" not in params:
+        params["shield_cluster_radius_m"] = rules.navrl_shield_cluster_m
     return params
 
 

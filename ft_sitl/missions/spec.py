@@ -75,6 +75,10 @@ class ProtocolRules:
     #: stands (GF_ACTION not 0), as PX4 does (Commander.arm_fence_check); before, it armed
     #: and the breach acted once in the air
     arm_fence_check: bool = False
+    #: NavRL's shield clusters its ray hits within this radius (m) when the spec does not
+    #: set ``shield_cluster_radius_m`` (None: the navigator's default, the deployment's
+    #: sqrt(0.2) m: its DBSCAN compares squared distances with 0.2)
+    navrl_shield_cluster_m: float | None = 0.2
 
 
 #: the versions of the trial protocol this code flies; a trial's spec names its version
@@ -124,11 +128,12 @@ PROTOCOLS = {
                         "trial's fence on the ground (GF_ACTION not none) is refused arming, "
                         "\"Preflight Fail: Geofence violation\", and the trial ends as "
                         "geofence (before, it armed and the breach acted after take-off); "
-                        "the rest as in 7",
+                        "NavRL's shield clusters its ray hits as the deployment does, "
+                        "within sqrt(0.2) = 0.447 m (0.2 m before); the rest as in 7",
                      offboard_acc_clamp=False, benchmark_camera_hz=None,
                      observe_approach=True, max_acc_m_s2=3.0, footprint_inflation=True,
                      vehicle_body=True, map_fusion_hz=20.0, moving_obstacles=True,
-                     arm_fence_check=True),
+                     arm_fence_check=True, navrl_shield_cluster_m=None),
 }
 #: the version new trials and campaigns fly unless they name another
 PROTOCOL_VERSION = max(PROTOCOLS)

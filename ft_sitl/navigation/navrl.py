@@ -40,8 +40,9 @@ What it does, as the authors' ROS deployment does (control at 20 Hz, simulated t
    world.
    Otherwise it flies straight at the goal at ``L``. ``L`` = ``action_limit_m_s`` = 1.0 m/s,
    the released deployment's value (why the paper saw NavRL capped near 1 m/s).
-4. **Safety shield.** The ray end points are clustered (DBSCAN, eps 0.2 m, 2 points); each
-   cluster becomes a sphere (1.5 x its largest horizontal extent, pushed that extent away
+4. **Safety shield.** The ray end points are clustered (DBSCAN, 2 points, neighbours within
+   sqrt(0.2) m: the deployment squares its 0.2; ``shield_cluster_radius_m``); each cluster
+   becomes a sphere (1.5 x its largest horizontal extent, pushed that extent away
    from the vehicle); ORCA half-spaces with a 2 s horizon (0.05 s inside an obstacle) are
    built around the command, and only if the command lies in a velocity obstacle the
    closest velocity satisfying all of them (speed <= sqrt(3) L) replaces it; when none
@@ -105,7 +106,10 @@ DEFAULT_LATENCY_S = 0.01
 ROBOT_RADIUS_M = 0.3
 SHIELD_HORIZON_S = 2.0
 SHIELD_STEP_S = 0.05
-DBSCAN_EPS_M = 0.2
+#: the shield's clustering radius (m): the deployment's ``DBSCAN(2, 0.2, points)``
+#: (safeAction.cpp, getClusters) compares the *squared* distance with 0.2, so points up to
+#: sqrt(0.2) = 0.447 m apart are neighbours (trial protocols before 8 flew 0.2 m)
+DBSCAN_EPS_M = math.sqrt(0.2)
 DBSCAN_MIN_POINTS = 2
 YAW_TOLERANCE_RAD = 0.1
 SETTLE_PERIODS = 10
@@ -210,12 +214,13 @@ def dbscan(points: np.ndarray, eps: float = DBSCAN_EPS_M,
     return navrl_detector.dbscan(points, eps, min_points)
 
 
-def cluster_spheres(points: np.ndarray, position: np.ndarray) -> list[tuple[np.ndarray, float]]:
-    """NavRL's static obstacles: per cluster of ray end points a sphere of radius 1.5 x the
-    largest horizontal distance from the cluster's box centre, centred that distance
-    beyond the box centre (seen from the vehicle)."""
+def cluster_spheres(points: np.ndarray, position: np.ndarray,
+                    eps: float = DBSCAN_EPS_M) -> list[tuple[np.ndarray, float]]:
+    """NavRL's static obstacles: per cluster of ray end points (neighbours within
+    ``eps``) a sphere of radius 1.5 x the largest horizontal distance from the cluster's
+    box centre, centred that distance beyond the box centre (seen from the vehicle)."""
     out = []
-    for idx in dbscan(points):
+    for idx in dbscan(points, eps):
         c = points[idx]
         centre = 0.5 * (c.min(axis=0) + c.max(axis=0))
         extent = float(np.max(np.linalg.norm((c - centre)[:, :2], axis=1)))
@@ -336,17 +341,18 @@ def dynamic_spheres(obstacles: ObstacleStates) -> list[tuple[np.ndarray, np.ndar
 
 
 def shield(position, preferred, ray_points, max_speed, agent_radius: float = 0.0,
-           dynamic: ObstacleStates | None = None, dynamic_radius: float = 0.0):
+           dynamic: ObstacleStates | None = None, dynamic_radius: float = 0.0,
+           cluster_radius: float = DBSCAN_EPS_M):
     """NavRL's safe action for the static ray hits and the moving obstacles ``dynamic``;
     returns (velocity, whether it solved). ``agent_radius``: the vehicle's radius in the
     static velocity obstacles (m); ``dynamic_radius``: in the moving ones (the original's
-    robot size plus its safety distance)."""
+    robot size plus its safety distance); ``cluster_radius``: the hits' DBSCAN radius."""
     planes = []
     need = False
     obstacles = [] if dynamic is None else [
         (c, v, r, dynamic_radius) for c, v, r in dynamic_spheres(dynamic)]
     obstacles += [(c, np.zeros(3), r, agent_radius)
-                  for c, r in cluster_spheres(ray_points, position)]
+                  for c, r in cluster_spheres(ray_points, position, cluster_radius)]
     for centre, vel, radius, mine in obstacles:
         pl = orca_plane(position, preferred, mine, centre, vel, radius)
         if pl is None:
@@ -413,6 +419,9 @@ class NavRL(Navigator):
         LATENCY,
         MEASURED_LATENCY,
         Param("use_shield", True, doc="correct the policy's action with the ORCA safety shield"),
+        Param("shield_cluster_radius_m", DBSCAN_EPS_M, "m", (0.05, 2.0),
+              doc="the shield's DBSCAN neighbour radius for the ray hits (the deployment's "
+                  "squared-distance 0.2; trials before protocol 8 fly 0.2 m)"),
         Param("dynamic_obstacles", "tracked", choices=DYNAMIC_MODES,
               doc="moving obstacles for the policy's dynamic input, the shield and the map's "
                   "free regions: 'tracked' by the deployment's depth detector and tracker, "
@@ -440,6 +449,7 @@ class NavRL(Navigator):
         self.latency = float(p["latency_s"])
         self.measured_latency = bool(p["measured_latency"])
         self.use_shield = bool(p["use_shield"])
+        self.cluster_radius = float(p["shield_cluster_radius_m"])
         self.dynamic_mode = p["dynamic_obstacles"]
         self.needs_mover_truth = self.dynamic_mode == "truth"
         self.camera = camera_of(p)
@@ -516,7 +526,8 @@ class NavRL(Navigator):
         if self.use_shield:
             ends = pos + self.rays * dist[..., None]
             cmd, solved = shield(pos, cmd, ends.reshape(-1, 3), math.sqrt(3.0) * self.limit,
-                                 self.agent_radius, self.dynamic_seen, self.dynamic_radius)
+                                 self.agent_radius, self.dynamic_seen, self.dynamic_radius,
+                                 self.cluster_radius)
             self.shield_solves += int(solved)
         goal_dist = float(np.linalg.norm(pos - self.goal))
         speed = float(np.linalg.norm(cmd))

@@ -226,6 +226,26 @@ def test_dbscan_groups_near_points_and_drops_noise():
     np.testing.assert_allclose(centre, [0.15 + 0.15, 0, 0])  # pushed away from the vehicle
 
 
+def test_the_shield_clusters_hits_as_the_deployment_does_and_older_protocols_keep_0_2_m():
+    # safeAction.cpp: DBSCAN(2, 0.2) on the *squared* distance: neighbours within 0.447 m
+    pair = np.array([[2.0, 0.0, 1.0], [2.0, 0.3, 1.0]])
+    pos = np.zeros(3)
+    assert [list(c) for c in dbscan(pair)] == [[0, 1]]
+    assert cluster_spheres(pair, pos)[0][1] == pytest.approx(1.5 * 0.15)
+    assert dbscan(pair, 0.2) == [] and cluster_spheres(pair, pos, 0.2) == []  # both noise
+    assert dbscan(np.array([[0.0, 0, 0], [math.sqrt(0.2) - 1e-9, 0, 0]])) != []
+    # the navigator's parameter; a trial of protocol 7 or older pins what its rows flew
+    from ft_sitl.missions.protocol import navigator_params
+    from ft_sitl.missions.spec import TrialSpec
+
+    spec = TrialSpec("navrl", "0.98kg-EGO Planner DIY", "forest")
+    assert spec.protocol == 8 and "shield_cluster_radius_m" not in navigator_params(spec)
+    old = dataclasses.replace(spec, protocol=7)
+    assert navigator_params(old)["shield_cluster_radius_m"] == 0.2
+    mine = dataclasses.replace(old, algorithm_params={"shield_cluster_radius_m": 0.3})
+    assert navigator_params(mine)["shield_cluster_radius_m"] == 0.3  # the spec's wins
+
+
 def test_dbscan_finds_random_separated_clusters_in_input_order():
     rng = np.random.default_rng(5)
     blobs, pts = [], []

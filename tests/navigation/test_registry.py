@@ -1,5 +1,6 @@
 """The navigators' declared parameters: defaults, validation, display."""
 
+import math
 from pathlib import Path
 
 import pytest
@@ -23,7 +24,8 @@ DEFAULTS = {
             "no_replan_threshold_m": 2.0, "stop_distance_m": 0.5, "ctrl_pt_dist_m": 0.3,
             "latency_s": 0.03, "measured_latency": False, **CAMERA},
     "navrl": {"checkpoint": None, "action_limit_m_s": 1.0, "latency_s": 0.01,
-              "measured_latency": False, "use_shield": True, "dynamic_obstacles": "tracked",
+              "measured_latency": False, "use_shield": True,
+              "shield_cluster_radius_m": math.sqrt(0.2), "dynamic_obstacles": "tracked",
               **CAMERA},
 }
 
