@@ -21,6 +21,7 @@ from ft_sitl.cli.common import (
     wind_option,
 )
 from ft_sitl.frames import PX4_SITL_HOME, GeoReference, enu_to_ned, yaw_enu_to_ned
+from ft_sitl.mavlink.instances import InstanceBusy, instances_held
 from ft_sitl.mavlink.server import SitlServer
 from ft_sitl.physics.actuators import Actuators
 from ft_sitl.scenarios.io import scenario_from_spec
@@ -87,6 +88,18 @@ def cmd_sitl(args) -> int:
     # each option's own range is checked as it is parsed (cli.common.number)
     if args.instance > 1000 - args.instances:
         raise CliError(f"--instance: {args.instance} must be within 0..{1000 - args.instances}")
+    try:  # its instance numbers, so that no trial over MAVLink of this machine takes them
+        held = instances_held(args.instance, args.instances)
+        held.__enter__()
+    except InstanceBusy as exc:
+        raise CliError(f"--instance: {exc}") from None
+    try:
+        return _serve(args)
+    finally:
+        held.__exit__(None, None, None)
+
+
+def _serve(args) -> int:
     geo = _parse_home(args.home) if args.home else GeoReference(*PX4_SITL_HOME)
     try:
         loopback = ipaddress.ip_address(args.bind).is_loopback

@@ -24,7 +24,6 @@ that hangs runs into the protocol's timeout; one that never arms fails after
 from __future__ import annotations
 
 import asyncio
-import fcntl
 import json
 import os
 import shlex
@@ -42,6 +41,7 @@ from ft_sitl.autopilot.commander import FENCE_ARM_DENIAL
 from ft_sitl.bus.broker import EmbeddedBroker
 from ft_sitl.bus.codec import EventType
 from ft_sitl.bus.publisher import BusPublisher
+from ft_sitl.mavlink.instances import InstanceLock
 from ft_sitl.mavlink.server import SitlServer
 from ft_sitl.missions.protocol import (
     APPROACH_TIMEOUT_S,
@@ -67,38 +67,7 @@ COMMAND = "command"  # the pseudo-navigator: a user's program
 PERCEPTION_WIRE = ("perception: latency, state noise and dropped frames are applied by the "
                    "in-process driver; over MAVLink the navigator runs in its own process "
                    "with the transport's own timing (fly this campaign in-process)")
-INSTANCE_BASE = 20
-INSTANCE_SLOTS = 40
 ARM_TIMEOUT_S = 90.0
-
-
-class InstanceLock:
-    """An exclusive instance number (ports 14580+i, 14540+i, 18570+i) among the processes
-    of this machine, held with a lock file."""
-
-    def __init__(self, base: int = INSTANCE_BASE, slots: int = INSTANCE_SLOTS):
-        self.base, self.slots = base, slots
-        self.instance = None
-        self._fh = None
-
-    def __enter__(self) -> int:
-        d = Path(tempfile.gettempdir()) / "ft-sitl-instances"
-        d.mkdir(exist_ok=True)
-        for i in range(self.base, self.base + self.slots):
-            fh = open(d / f"{i}.lock", "w")  # noqa: SIM115 - held until __exit__
-            try:
-                fcntl.flock(fh, fcntl.LOCK_EX | fcntl.LOCK_NB)
-            except OSError:
-                fh.close()
-                continue
-            self._fh, self.instance = fh, i
-            return i
-        raise RuntimeError(f"no free SITL instance in {self.base}..{self.base + self.slots - 1}")
-
-    def __exit__(self, *exc) -> None:
-        if self._fh is not None:
-            self._fh.close()
-            self._fh = None
 
 
 _BROKER = None  # this process's embedded broker, started on first use

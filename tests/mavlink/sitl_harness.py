@@ -5,6 +5,7 @@ import threading
 from contextlib import contextmanager
 
 from ft_sitl import frames
+from ft_sitl.mavlink.instances import instances_held
 from ft_sitl.mavlink.server import SitlServer
 from ft_sitl.physics.catalog import get_platform
 from ft_sitl.sim.fleet import Fleet
@@ -13,8 +14,18 @@ PLATFORM = "0.98kg-EGO Planner DIY"
 
 
 @contextmanager
-def running_sitl(instances: int = 1, speed_factor: float = 1.0, params=None, scenario=None,
-                 estimator=None, platform: str = PLATFORM, **kwargs):
+def running_sitl(instances: int = 1, *args, **kwargs):
+    """A SitlServer on instance numbers ``base_instance ..`` (default 0), holding them
+    (ft_sitl.mavlink.instances) so that no trial over MAVLink on this machine binds the
+    same ports meanwhile; it waits for one that holds them to finish."""
+    with instances_held(kwargs.get("base_instance", 0), instances, wait_s=300.0):
+        with _running_sitl(instances, *args, **kwargs) as server:
+            yield server
+
+
+@contextmanager
+def _running_sitl(instances: int = 1, speed_factor: float = 1.0, params=None, scenario=None,
+                  estimator=None, platform: str = PLATFORM, **kwargs):
     p = get_platform(platform)
     if scenario is None:
         spawn, yaw = [[0.0, 2.0 * i, 0.0] for i in range(instances)], None
