@@ -4,6 +4,7 @@ the training stack."""
 
 from __future__ import annotations
 
+import dataclasses
 import json
 import math
 import sys
@@ -14,7 +15,7 @@ import pytest
 from ft_sitl.autopilot.cascade import SP_POS, SP_VEL, SP_YAW
 from ft_sitl.gym.batch import platform_vector
 from ft_sitl.gym.envs import NavigateEnv
-from ft_sitl.missions.spec import PROTOCOL_VERSION, vehicle_half_span_m
+from ft_sitl.missions.spec import PROTOCOL_VERSION, PROTOCOLS, vehicle_half_span_m
 from ft_sitl.missions.trial import TrialSpec, run_trial
 from ft_sitl.navigation.base import Limits, Observation, Task
 from ft_sitl.navigation.learned import Learned, load_policy, shipped
@@ -83,7 +84,13 @@ def test_the_shipped_policy_says_how_it_was_trained():
     assert m["env"]["platform"] == "generated" and m["env"]["family"] == "any"
     assert m["env"]["scenario_seed"][0] >= 1  # the benchmark's configurations held out
     assert m["trained_steps"] >= 1_000_000 and m["train"]["seed"] == 0
-    assert m["protocol"] == PROTOCOL_VERSION and json.loads(m["software"])["torch"]
+    assert json.loads(m["software"])["torch"]
+    # trained under protocol 7, whose rules the environment still has: 8 changed only the
+    # geofence arming check and NavRL's shield, neither of which a Gym episode has
+    trained = PROTOCOLS[m["protocol"]]
+    assert m["protocol"] == 7 and PROTOCOL_VERSION == 8
+    assert dataclasses.replace(PROTOCOLS[8], version=7, summary=trained.summary,
+                               arm_fence_check=False, navrl_shield_cluster_m=0.2) == trained
 
 
 def _gym_and_navigator():
