@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import asyncio
+import contextlib
 import ipaddress
 import json
 import math
@@ -88,15 +89,12 @@ def cmd_sitl(args) -> int:
     # each option's own range is checked as it is parsed (cli.common.number)
     if args.instance > 1000 - args.instances:
         raise CliError(f"--instance: {args.instance} must be within 0..{1000 - args.instances}")
-    try:  # its instance numbers, so that no trial over MAVLink of this machine takes them
-        held = instances_held(args.instance, args.instances)
-        held.__enter__()
-    except InstanceBusy as exc:
-        raise CliError(f"--instance: {exc}") from None
-    try:
+    with contextlib.ExitStack() as held:
+        try:  # its instance numbers, so that no trial over MAVLink of this machine takes them
+            held.enter_context(instances_held(args.instance, args.instances))
+        except InstanceBusy as exc:
+            raise CliError(f"--instance: {exc}") from None
         return _serve(args)
-    finally:
-        held.__exit__(None, None, None)
 
 
 def _serve(args) -> int:
