@@ -25,6 +25,7 @@ from .sitl_harness import running_sitl
 from .test_pymavlink_and_robustness import client, wait_msg
 
 INSTANCE = 62  # (ports of its own: a test's leftover client cannot starve the next)
+GIVEN = 68  # (the last test's own: the pymavlink client before it keeps 62's port)
 
 LAT0, LON0 = 47.397742, 8.545594
 M_PER_DEG_LAT = 111195.0
@@ -172,7 +173,7 @@ def test_a_fence_the_vehicle_was_given_without_an_upload_downloads_as_px4_stores
                    circle([-10.0, 0.0], 3.0, False, "trial")])
 
     async def run():
-        m, drone = await connect(14540 + INSTANCE)
+        m, drone = await connect(14540 + GIVEN)
         fence = GeofenceAsync(drone)
         down = await fence.download_geofence()
         assert [p.fence_type for p in down.polygons] == [FenceType.INCLUSION]
@@ -188,7 +189,7 @@ def test_a_fence_the_vehicle_was_given_without_an_upload_downloads_as_px4_stores
         await fence.upload_geofence(down)
         m.destroy()
 
-    with running_sitl(base_instance=INSTANCE) as server:
+    with running_sitl(base_instance=GIVEN) as server:
         cmd = server.fleet.commanders[0]
         cmd.set_fence(given)
         asyncio.run(run())
