@@ -17,10 +17,12 @@ import functools
 import json
 import os
 import platform as pyplatform
+import signal
 import sys
 import time
 import traceback
 from collections import defaultdict
+from contextlib import contextmanager
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -187,6 +189,19 @@ class RunSummary:
     wall_s: float
 
 
+@contextmanager
+def _signals_deferred():
+    """Ctrl-C and SIGTERM wait (blocked, then delivered) while a finished row is written
+    and counted: the KeyboardInterrupt they raise between the write and the count left a
+    row in trials.jsonl that runs.json did not count."""
+    signals = {signal.SIGINT, signal.SIGTERM}
+    old = signal.pthread_sigmask(signal.SIG_BLOCK, signals)
+    try:
+        yield
+    finally:
+        signal.pthread_sigmask(signal.SIG_SETMASK, old)
+
+
 def run_campaign(campaign: Campaign, out_dir: str | Path, *, workers: int = 1,
                  executor: Executor | None = None, progress: bool = True,
                  limit: int | None = None, transport: Transport | None = None) -> RunSummary:
@@ -239,8 +254,9 @@ def run_campaign(campaign: Campaign, out_dir: str | Path, *, workers: int = 1,
                 if row is not None:
                     if tid not in store.done:  # (a chunk Dask ran twice: written once)
                         per_worker[worker].append(float(row.get("wall_time_s") or 0.0))
-                        store.append(row)
-                        ran += 1
+                        with _signals_deferred():  # the row and its count, or neither
+                            store.append(row)
+                            ran += 1
                 else:
                     errors.append((tid, err))
                 if bar is not None:
