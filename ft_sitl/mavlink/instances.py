@@ -23,6 +23,18 @@ def _lock_file(i: int) -> Path:
     return d / f"{i}.lock"
 
 
+def _try_lock(i: int):
+    """Instance i's lock file, locked for this process (held until closed), or None when
+    another holds it."""
+    fh = open(_lock_file(i), "w")  # noqa: SIM115 - held by the caller
+    try:
+        fcntl.flock(fh, fcntl.LOCK_EX | fcntl.LOCK_NB)
+    except OSError:
+        fh.close()
+        return None
+    return fh
+
+
 class InstanceBusy(RuntimeError):
     """A SITL instance number another process of this machine holds."""
 
@@ -37,20 +49,14 @@ def instances_held(first: int, count: int = 1, wait_s: float = 0.0):
     held = []
     try:
         for i in range(first, first + count):
-            fh = open(_lock_file(i), "w")  # noqa: SIM115 - held until the end
             deadline = time.monotonic() + wait_s
-            while True:
-                try:
-                    fcntl.flock(fh, fcntl.LOCK_EX | fcntl.LOCK_NB)
-                    break
-                except OSError:
-                    if time.monotonic() >= deadline:
-                        fh.close()
-                        raise InstanceBusy(
-                            f"SITL instance {i} (ports {14540 + i}, {14580 + i}, "
-                            f"{18570 + i}) is in use by another ft-sitl process on this "
-                            f"machine (a trial over MAVLink or a sitl)") from None
-                    time.sleep(0.1)
+            while (fh := _try_lock(i)) is None:
+                if time.monotonic() >= deadline:
+                    raise InstanceBusy(
+                        f"SITL instance {i} (ports {14540 + i}, {14580 + i}, "
+                        f"{18570 + i}) is in use by another ft-sitl process on this "
+                        f"machine (a trial over MAVLink or a sitl)")
+                time.sleep(0.1)
             held.append(fh)
         yield list(range(first, first + count))
     finally:
@@ -69,14 +75,10 @@ class InstanceLock:
 
     def __enter__(self) -> int:
         for i in range(self.base, self.base + self.slots):
-            fh = open(_lock_file(i), "w")  # noqa: SIM115 - held until __exit__
-            try:
-                fcntl.flock(fh, fcntl.LOCK_EX | fcntl.LOCK_NB)
-            except OSError:
-                fh.close()
-                continue
-            self._fh, self.instance = fh, i
-            return i
+            fh = _try_lock(i)
+            if fh is not None:
+                self._fh, self.instance = fh, i
+                return i
         raise RuntimeError(f"no free SITL instance in {self.base}..{self.base + self.slots - 1}")
 
     def __exit__(self, *exc) -> None:
