@@ -89,15 +89,18 @@ def cmd_sitl(args) -> int:
     # each option's own range is checked as it is parsed (cli.common.number)
     if args.instance > 1000 - args.instances:
         raise CliError(f"--instance: {args.instance} must be within 0..{1000 - args.instances}")
+    vehicles = _vehicles(args)  # every option checked before the ports are taken
     with contextlib.ExitStack() as held:
         try:  # its instance numbers, so that no trial over MAVLink of this machine takes them
             held.enter_context(instances_held(args.instance, args.instances))
         except InstanceBusy as exc:
             raise CliError(f"--instance: {exc}") from None
-        return _serve(args)
+        return _serve(args, *vehicles)
 
 
-def _serve(args) -> int:
+def _vehicles(args):
+    """The options turned into the fleet to serve (a CliError naming a bad one); nothing
+    is bound yet."""
     geo = _parse_home(args.home) if args.home else GeoReference(*PX4_SITL_HOME)
     try:
         loopback = ipaddress.ip_address(args.bind).is_loopback
@@ -122,6 +125,10 @@ def _serve(args) -> int:
                                     seed=args.wind_seed + i)
         except SchemaError as exc:
             raise CliError(str(exc)) from None
+    return geo, loopback, p, scenario, spawn, fleet, wind, estimator, actuators
+
+
+def _serve(args, geo, loopback, p, scenario, spawn, fleet, wind, estimator, actuators) -> int:
     try:
         server = SitlServer(fleet, geo, bind=args.bind, speed_factor=args.speed_factor,
                             tlog=args.tlog, signing_key=args.signing_key,

@@ -58,3 +58,17 @@ def test_sitl_on_a_number_another_process_holds_is_a_one_line_error(capsys):
     assert err.startswith(f"ft-sitl: error: --instance: SITL instance {FIRST} (ports "
                           f"{14540 + FIRST}, {14580 + FIRST}, {18570 + FIRST}) is in use by "
                           "another ft-sitl process") and err.count("\n") == 1, err
+
+
+def test_a_bad_option_is_named_before_a_held_number(capsys):
+    """Every option is checked before the instance numbers are taken: a bad one is the
+    error even while another SITL holds the number (the user fixes the option first)."""
+    from ft_sitl.cli import main
+
+    with instances_held(FIRST):
+        for option, value, named in (("--home", "nan,8.5,488", "--home: home latitude"),
+                                     ("--platform", "no-such-platform", "no-such-platform")):
+            assert main(["sitl", "--instance", str(FIRST), option, value]) == 2
+            err = capsys.readouterr().err
+            assert err.startswith("ft-sitl: error: ") and named in err \
+                and "in use" not in err and err.count("\n") == 1, err
