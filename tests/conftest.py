@@ -38,3 +38,33 @@ def navrl_checkpoint() -> Path:
                     f"checkpoint from the team's shared data (set {SHARED_ENV} to the directory "
                     "holding data/navrl/)")
     return NAVRL_CHECKPOINT
+
+
+# Parallel runs (pytest-xdist; pyproject's addopts run `-n 3`, `-n 0` runs in this process
+# alone). Each test file is run whole by one worker, so a file's module fixtures are built
+# once. The files that serve or fly on the SITL's fixed MAVLink ports (an `ft-sitl sitl`
+# process, a server on a given instance, clients listening on 14540 + N) go to one worker
+# together: two of them at once would take the same ports. Trials over MAVLink pick free
+# instance numbers under a machine-wide lock (ft_sitl.mavlink.instances) and the bridge
+# tests use instance numbers of their own file, so those need nothing more. (xdist's own
+# `--dist loadgroup` cannot do this under pytest 9.2: it renames the tests through an
+# attribute pytest no longer reads.)
+FIXED_PORTS_GROUP = "sitl-ports"
+FIXED_PORTS = ("tests/mavlink/", "tests/wire/", "tests/cli/test_cli.py",
+               "tests/missions/test_axes.py", "tests/scenarios/test_movers_spec.py")
+
+
+def group_of(nodeid: str) -> str:
+    """The unit a worker runs whole: the test's file, or the fixed-ports group."""
+    path = nodeid.split("::", 1)[0]
+    return FIXED_PORTS_GROUP if path.startswith(FIXED_PORTS) else path
+
+
+def pytest_xdist_make_scheduler(config, log):
+    from xdist.scheduler import LoadScopeScheduling
+
+    class ByGroup(LoadScopeScheduling):
+        def _split_scope(self, nodeid: str) -> str:
+            return group_of(nodeid)
+
+    return ByGroup(config, log)
