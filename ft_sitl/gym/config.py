@@ -221,7 +221,6 @@ def make_config(settings: Mapping, reward: Mapping | None = None,
                        "lasts whole physics steps)")
     platform_choice(values["platform"])
     scenario_versions = check_versions(scenario_versions, f"{owner}: scenario_versions")
-    versions = EnvConfig(values, rewards, None, None, scenario_versions=scenario_versions)
     if scenario_params is not None:
         if values["family"] in (ANY, ARENA):
             raise EnvError(f"{owner}: scenario_params need one benchmark family, not "
@@ -231,7 +230,7 @@ def make_config(settings: Mapping, reward: Mapping | None = None,
                            f"{type(scenario_params).__name__}")
         try:
             REGISTRY[values["family"]].resolve(
-                scenario_params, versions.version_of(values["family"]))
+                scenario_params, (scenario_versions or {}).get(values["family"]))
         except ScenarioError as exc:
             raise EnvError(f"{owner}: scenario_params: {exc}") from None
         scenario_params = json.loads(json.dumps(dict(scenario_params)))
