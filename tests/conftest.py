@@ -40,7 +40,7 @@ def navrl_checkpoint() -> Path:
     return NAVRL_CHECKPOINT
 
 
-# Parallel runs (pytest-xdist; pyproject's addopts run `-n 3`, `-n 0` runs in this process
+# Parallel runs (pytest-xdist; pyproject's addopts run `-n 2`, `-n 0` runs in this process
 # alone). Each test file is run whole by one worker, so a file's module fixtures are built
 # once. The files that serve or fly on the SITL's fixed MAVLink ports (an `ft-sitl sitl`
 # process, a server on a given instance, clients listening on 14540 + N) go to one worker
