@@ -6,7 +6,9 @@ calls from another module does: run_steps (sim/lockstep.py) inlines the controll
 optimisers call navigation/lbfgs.py; an edit of a callee would leave stale machine code in
 use. So every kernel caches into one directory named after a hash of every module of the
 package (a hand-kept list of kernel modules missed lbfgs.py once): any edit starts a fresh
-cache. Set NUMBA_CACHE_DIR to move the root.
+cache. The key also holds numba's target (``ft_sitl.numeric_env``: the pinned x86-64-v3, or
+the host's name and features), so code compiled under one pin is never loaded under
+another. Set NUMBA_CACHE_DIR to move the root.
 """
 
 from __future__ import annotations
@@ -30,8 +32,20 @@ def source_hash(pkg: Path) -> str:
     return h.hexdigest()
 
 
+def target_key() -> bytes:
+    """numba's code-generation target as ft_sitl.numeric_env left it (or the host's)."""
+    import llvmlite.binding as ll  # numba's own dependency, loaded with it
+
+    cfg = numba.config
+    name = cfg.CPU_NAME or ll.get_host_cpu_name()
+    features = cfg.CPU_FEATURES if cfg.CPU_FEATURES is not None else \
+        ll.get_host_cpu_features().flatten()
+    return f"{name}\0{features}\0svml={int(not cfg.DISABLE_INTEL_SVML)}".encode()
+
+
 def configure() -> Path:
-    digest = source_hash(Path(__file__).resolve().parent)
+    digest = hashlib.sha256(source_hash(Path(__file__).resolve().parent).encode()
+                            + b"\0" + target_key()).hexdigest()
     user_root = os.environ.get("NUMBA_CACHE_DIR")
     root = (os.path.join(user_root, "ft-sitl") if user_root else os.path.join(
         os.environ.get("XDG_CACHE_HOME") or os.path.expanduser("~/.cache"), "ft-sitl", "numba"

@@ -11,7 +11,7 @@ import sys
 from importlib import metadata
 from pathlib import Path
 
-from ft_sitl import __version__
+from ft_sitl import __version__, numeric_env
 
 #: distributions whose versions can change a trial's floating-point results
 NUMERIC_PACKAGES = ("numpy", "numba", "llvmlite", "scipy", "trimesh", "python-fcl",
@@ -39,9 +39,11 @@ def code_digest() -> str:
 @functools.cache
 def software() -> str:
     """The ``software`` column: JSON of ft_sitl's version and code digest (16 hex), Python's
-    version and the installed versions of :data:`NUMERIC_PACKAGES` (absent ones left out)."""
+    version, the installed versions of :data:`NUMERIC_PACKAGES` (absent ones left out), the
+    instruction-set level the numeric libraries computed at (``isa``: x86-64-v3 or host,
+    :mod:`ft_sitl.numeric_env`) and the processor (``cpu``)."""
     out = {"ft_sitl": __version__, "code": code_digest()[:16],
-           "python": ".".join(map(str, sys.version_info[:3]))}
+           "python": ".".join(map(str, sys.version_info[:3])), **numeric_env.record()}
     for name in NUMERIC_PACKAGES:
         try:
             out[name] = metadata.version(name)

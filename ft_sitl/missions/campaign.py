@@ -28,7 +28,7 @@ from pathlib import Path
 
 from tqdm import tqdm
 
-from ft_sitl import __version__
+from ft_sitl import __version__, numeric_env
 from ft_sitl.missions.campaign_file import Campaign, CampaignError
 from ft_sitl.missions.durable import durable_replace
 from ft_sitl.missions.executors import (
@@ -278,6 +278,7 @@ def run_campaign(campaign: Campaign, out_dir: str | Path, *, workers: int = 1,
             **{k: v for k, v in described.items() if k != "workers"},
             "throughput": throughput(per_worker),
             "machine": machine_info(),
+            "numeric": numeric_env.in_force(),
             "transport": (transport or Transport()).kind,
             "code_version": __version__})
     if store.done:

@@ -30,6 +30,8 @@ import numpy as np
 from numba import njit
 from trimesh.graph import connected_component_labels
 
+from ft_sitl import numeric_env
+
 __all__ = ["PacketScene", "packet_scene"]
 
 _U64 = ctypes.c_uint64
@@ -109,7 +111,9 @@ def _library():
 def _device(lib):
     global _DEVICE
     if _DEVICE is None:
-        dev = lib.rtcNewDevice(None)
+        # the instruction set ft_sitl.numeric_env pins (None: Embree's choice)
+        config = numeric_env.embree_config()
+        dev = lib.rtcNewDevice(config.encode() if config else None)
         _DEVICE = dev or 0
     return _DEVICE or None
 
