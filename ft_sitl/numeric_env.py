@@ -148,12 +148,37 @@ def requested(environ: MutableMapping[str, str] | None = None) -> str:
     return level
 
 
+#: what :func:`pin` set in ``os.environ`` (a child at another level must not inherit it)
+_SET: dict[str, str] = {}
+
+
 def pin(environ: MutableMapping[str, str] | None = None,
         flags: set[str] | None = None) -> dict[str, str]:
     """Set the settings above in ``environ`` (``os.environ``) where unset; returns what
     was set. The level is ``FT_SITL_ISA``'s; on a processor without x86-64-v3 nothing but
     the threads is pinned (with a warning), and :func:`in_force` says ``host``."""
-    environ = os.environ if environ is None else environ
+    if environ is None:
+        done = _pin(os.environ, flags)
+        _SET.update(done)
+        return done
+    return _pin(environ, flags)
+
+
+def chosen_by_user(environ: MutableMapping[str, str] | None = None) -> bool:
+    """Whether ``FT_SITL_ISA`` was set by the user (pin() never sets it)."""
+    return LEVEL_VAR in (os.environ if environ is None else environ)
+
+
+def child_env(level: str) -> dict[str, str]:
+    """This process's environment for a child that computes at ``level``: what pin() set
+    here is left out, so the child pins afresh; what the user set stays."""
+    requested({LEVEL_VAR: level})
+    env = {k: v for k, v in os.environ.items() if k not in _SET}
+    env[LEVEL_VAR] = level
+    return env
+
+
+def _pin(environ: MutableMapping[str, str], flags: set[str] | None) -> dict[str, str]:
     done = {}
     for var in THREAD_VARS:
         if var not in environ:

@@ -13,25 +13,73 @@ PROBE = ("import json, ft_sitl, numpy, threadpoolctl; "
          "for i in threadpoolctl.threadpool_info()]))")
 
 
+V3_HOST = set(numeric_env.V3_FLAGS) | {"sse2", "avx512f"}
+
+
 def test_pin_sets_only_what_is_unset():
-    env = {"OMP_NUM_THREADS": "4"}
-    done = numeric_env.pin(env, flags={"avx2", "fma", "sse4_2"})
-    assert env == {"OMP_NUM_THREADS": "4", "OPENBLAS_NUM_THREADS": "1",
-                   "MKL_NUM_THREADS": "1", "OPENBLAS_CORETYPE": "Haswell"}
-    assert "OMP_NUM_THREADS" not in done
+    env = {"OMP_NUM_THREADS": "4", "NPY_DISABLE_CPU_FEATURES": "AVX512_SPR"}
+    done = numeric_env.pin(env, flags=V3_HOST)
+    assert env["OMP_NUM_THREADS"] == "4" and "OMP_NUM_THREADS" not in done
+    assert env["NPY_DISABLE_CPU_FEATURES"] == "AVX512_SPR"  # the user's
+    assert {k: env[k] for k in ("OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS", "OPENBLAS_CORETYPE",
+                                "NUMBA_CPU_NAME", numeric_env.EMBREE_VAR)} == {
+        "OPENBLAS_NUM_THREADS": "1", "MKL_NUM_THREADS": "1", "OPENBLAS_CORETYPE": "Haswell",
+        "NUMBA_CPU_NAME": "x86-64-v3", numeric_env.EMBREE_VAR: "isa=avx2"}
+    assert env["NUMBA_CPU_FEATURES"] == numeric_env.V3_LLVM_FEATURES
+    assert numeric_env.LEVEL_VAR not in env  # (so a set FT_SITL_ISA is the user's)
     env = {"OPENBLAS_CORETYPE": "Zen"}
-    numeric_env.pin(env, flags={"avx2", "fma"})
+    numeric_env.pin(env, flags=V3_HOST)
     assert env["OPENBLAS_CORETYPE"] == "Zen"
 
 
-def test_no_kernel_pinned_without_avx2():
+def test_host_pins_only_the_blas():
+    env = {numeric_env.LEVEL_VAR: "host"}
+    numeric_env.pin(env, flags=V3_HOST)
+    assert env == {numeric_env.LEVEL_VAR: "host", "OMP_NUM_THREADS": "1",
+                   "OPENBLAS_NUM_THREADS": "1", "MKL_NUM_THREADS": "1",
+                   "OPENBLAS_CORETYPE": "Haswell"}
+
+
+def test_a_bad_level_is_refused_by_name(tmp_path):
+    import pytest
+
+    with pytest.raises(numeric_env.NumericEnvError, match=r"FT_SITL_ISA='v4' is not a level"):
+        numeric_env.pin({numeric_env.LEVEL_VAR: "v4"}, flags=V3_HOST)
+    env = {**os.environ, numeric_env.LEVEL_VAR: "avx512"}
+    out = subprocess.run([sys.executable, "-m", "ft_sitl", "platforms", "list"], env=env,
+                         capture_output=True, text=True, timeout=120)
+    assert out.returncode != 0 and out.stderr.strip().splitlines() == [
+        "ft-sitl: FT_SITL_ISA='avx512' is not a level ft-sitl pins: give x86-64-v3 (the "
+        "default: rows equal on every processor that has it) or host (the processor's own "
+        "instruction sets, as rows made before 2026-12-07)"]
+
+
+def test_no_kernel_pinned_without_v3():
+    import warnings
+
     env: dict = {}
-    numeric_env.pin(env, flags={"sse4_2"})
-    assert "OPENBLAS_CORETYPE" not in env
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        numeric_env.pin(env, flags={"sse4_2", "avx"})
+    assert "OPENBLAS_CORETYPE" not in env and "NUMBA_CPU_NAME" not in env
+    assert "lacks" in str(caught[0].message) and "avx2" in str(caught[0].message)
+
+
+def test_the_test_process_computes_at_the_pinned_level():
+    """Every process of the suite computes at x86-64-v3 (conftest imports ft_sitl before
+    numpy), and records it."""
+    from ft_sitl.provenance import software
+
+    if numeric_env.V3_FLAGS <= numeric_env.cpu_flags() and \
+            not numeric_env.chosen_by_user():
+        force = numeric_env.in_force()
+        assert force["level"] == "x86-64-v3", force
+        assert force["numpy_dispatch"] == "X86_V3" or "512" not in force["numpy_dispatch"]
+        assert json.loads(software())["isa"] == "x86-64-v3"
 
 
 def test_a_fresh_import_runs_one_thread_of_the_pinned_kernels():
-    env = {k: v for k, v in os.environ.items()
+    env = {k: v for k, v in numeric_env.child_env(numeric_env.requested()).items()
            if k not in numeric_env.THREAD_VARS + (numeric_env.CORETYPE_VAR,)}
     out = subprocess.run([sys.executable, "-c", PROBE], env=env, capture_output=True,
                          text=True, timeout=120)
@@ -77,3 +125,83 @@ def test_the_test_process_runs_the_pinned_kernels():
     if {"avx2", "fma"} <= numeric_env.cpu_flags() and \
             os.environ.get(numeric_env.CORETYPE_VAR) == numeric_env.OPENBLAS_CORE:
         assert all(p["architecture"] == numeric_env.OPENBLAS_CORE for p in blas), blas
+
+
+# --- the pins across processors (issue 41) ------------------------------------------------
+#: a committed paper row (EGO, Forest 3) whose flight numpy's AVX-512 loops change
+PAPER_ROW = "a2a810500c424167"
+
+#: flies PAPER_ROW's spec and prints the row's digest and what computed it. With
+#: "emulate", this process behaves as on another processor: LLVM reports a Haswell
+#: (AVX2, FMA, no AVX-512) as the host, numpy's AVX-512 loops are off as they are on such a
+#: processor, and Embree picks AVX2.
+FLY = """
+import sys
+if sys.argv[1] == "emulate":
+    import llvmlite.binding as ll
+
+    class _Features(dict):
+        def flatten(self, sort=True):
+            return HASWELL
+
+    ll.get_host_cpu_name = lambda: "haswell"
+    ll.get_host_cpu_features = lambda: _Features()
+import ft_sitl  # first: the pins are set before numpy loads
+import hashlib, json
+import pandas as pd
+from ft_sitl import numeric_env
+from ft_sitl.cli.missions import _NONDETERMINISTIC
+from ft_sitl.missions.spec import TrialSpec
+from ft_sitl.missions.trial import run_trial
+df = pd.read_parquet(sys.argv[2])
+spec = TrialSpec.from_dict(json.loads(df[df.trial_id == sys.argv[3]].iloc[0]["spec"]))
+row = run_trial(spec).row
+keep = {k: v for k, v in sorted(row.items()) if k not in _NONDETERMINISTIC}
+print(json.dumps({"digest": hashlib.sha256(json.dumps(keep, default=str).encode()).hexdigest(),
+                  "path": row["path_length_m"], "force": numeric_env.in_force()}))
+"""
+HASWELL = ("+64bit,+avx,+avx2,+bmi,+bmi2,+cmov,+crc32,+cx16,+cx8,+f16c,+fma,+fxsr,+lzcnt,"
+           "+mmx,+movbe,+popcnt,+sahf,+sse,+sse2,+sse3,+sse4.1,+sse4.2,+ssse3,+xsave,"
+           "+aes,+pclmul,+rdrnd,+fsgsbase,+xsaveopt,+invpcid,-avx512f,-avx512bw,-avx512dq,"
+           "-avx512vl,-avx512cd")
+
+
+def _fly(mode: str, level: str, tmp_path) -> dict:
+    from pathlib import Path
+
+    env = numeric_env.child_env(level)
+    env["NUMBA_CACHE_DIR"] = str(tmp_path / "numba")  # compiled here, for this target
+    if mode == "emulate":  # what such a processor's numpy and Embree choose themselves
+        env["NPY_DISABLE_CPU_FEATURES"] = numeric_env.v3_settings()["NPY_DISABLE_CPU_FEATURES"]
+        env[numeric_env.EMBREE_VAR] = numeric_env.EMBREE_V3
+    table = Path(__file__).resolve().parents[1] / "docs" / "results" / "paper" / \
+        "trials.parquet"
+    out = subprocess.run([sys.executable, "-c", f"HASWELL = {HASWELL!r}\n" + FLY, mode,
+                          str(table), PAPER_ROW], env=env, capture_output=True, text=True,
+                         timeout=900)
+    assert out.returncode == 0, out.stderr[-3000:]
+    return json.loads(out.stdout.strip().splitlines()[-1])
+
+
+def test_pinned_rows_are_equal_on_another_processor_and_unpinned_ones_need_not_be(tmp_path):
+    """The same trial compiled and flown in processes that see two processors: this one,
+    and one that tells numba it runs on a Haswell (a target this machine can run; numpy's
+    and Embree's choices as there). Under the pins both give the same row to the last bit,
+    and both say x86-64-v3 is in force; at FT_SITL_ISA=host each library takes what its
+    processor offers, so on a processor with AVX-512 the two rows differ (numpy's
+    AVX-512 loops, measured: docs/results/README.md)."""
+    here = _fly("native", numeric_env.PINNED, tmp_path)
+    there = _fly("emulate", numeric_env.PINNED, tmp_path)
+    assert here["force"]["level"] == there["force"]["level"] == numeric_env.PINNED
+    assert here["force"]["numba_cpu"] == there["force"]["numba_cpu"] == "x86-64-v3"
+    assert here["digest"] == there["digest"], (here, there)
+
+    host_here = _fly("native", numeric_env.HOST, tmp_path)
+    host_there = _fly("emulate", numeric_env.HOST, tmp_path)
+    assert host_here["force"]["level"] == host_there["force"]["level"] == numeric_env.HOST
+    assert host_there["force"]["numba_cpu"] == "host"
+    if "avx512f" in numeric_env.cpu_flags():
+        # this processor's own loops are not the other's: the unpinned rows part
+        assert host_here["digest"] != host_there["digest"], (host_here, host_there)
+        # ... and the emulated processor's unpinned row is the pinned row
+        assert host_there["digest"] == here["digest"]

@@ -6,9 +6,11 @@ import json
 import math
 import random
 import signal
+import subprocess
 import sys
 from pathlib import Path
 
+from ft_sitl import numeric_env
 from ft_sitl.autopilot.params import DEFAULT_GAINS, GAIN_MODES
 from ft_sitl.bus.options import parse_broker_url
 from ft_sitl.cli.common import CliError, option_value
@@ -392,6 +394,8 @@ def _rerun_sample(args) -> int:
         raise CliError(f"--sample: {args.sample} must be within 1..{len(rows)} (the trials "
                        f"in {args.dir})")
     picked = sample_stratified(rows, args.sample, args.sample_seed)
+    if (code := _at_rows_level(args, picked)) is not None:
+        return code
     same = 0
     for stored in picked:
         spec = _spec_of(json.loads(stored["spec"]))
@@ -407,10 +411,67 @@ def _rerun_sample(args) -> int:
     return 0 if same == len(picked) else 1
 
 
+def level_of(stored: dict) -> str:
+    """The instruction-set level a stored row was made at (ft_sitl.numeric_env): its
+    ``software`` column's ``isa``; rows made before the pins (2026-12-07) record none and
+    were made at ``host``."""
+    try:
+        sw = json.loads(stored.get("software") or "{}")
+    except (TypeError, ValueError):
+        sw = {}
+    return sw.get("isa", numeric_env.HOST) if isinstance(sw, dict) else numeric_env.HOST
+
+
+def _argv_of(args) -> list[str]:
+    argv = ["trial", "rerun"]
+    argv += [str(a) for a in (args.dir, args.trial_id) if a is not None]
+    for flag, value in (("--spec", args.spec), ("--trajectory", args.trajectory),
+                        ("--render", args.render), ("--sample", args.sample),
+                        ("--sample-seed", args.sample_seed if args.sample else None)):
+        if value is not None:
+            argv += [flag, str(value)]
+    return argv
+
+
+def _at_rows_level(args, rows: list[dict]) -> int | None:
+    """Re-run in a child process at the rows' instruction-set level when this process
+    computes at another one (None: this process flies them). A level the user chose with
+    FT_SITL_ISA is kept, with a note."""
+    levels = {level_of(r) for r in rows}
+    here = numeric_env.in_force()["level"]
+    if levels == {here}:
+        return None
+    if len(levels) > 1:
+        raise CliError(f"these rows were made at different instruction-set levels "
+                       f"({', '.join(sorted(levels))}): rerun them one level at a time "
+                       f"(FT_SITL_ISA, docs/results/README.md)")
+    (level,) = levels
+    made = f"made at instruction-set level {level}" + (
+        " (before ft-sitl pinned one, 2026-12-07)" if level == numeric_env.HOST else "")
+    if numeric_env.chosen_by_user():
+        print(f"note: these rows were {made}; FT_SITL_ISA gives {here} here, so they "
+              f"need not re-run identically",
+              flush=True)
+        return None
+    print(f"these rows were {made}: re-running them at that level (FT_SITL_ISA={level})"
+          + (f"; at {numeric_env.HOST} a row re-runs bit for bit only on the processor that "
+             f"made it (docs/results/README.md)" if level == numeric_env.HOST else ""),
+          flush=True)
+    child = subprocess.Popen([sys.executable, "-m", "ft_sitl", *_argv_of(args)],
+                             env=numeric_env.child_env(level), stdout=subprocess.PIPE,
+                             text=True)
+    assert child.stdout is not None
+    for line in child.stdout:
+        print(line, end="", flush=True)
+    return child.wait()
+
+
 def cmd_trial_rerun(args) -> int:
     if args.sample is not None:
         return _rerun_sample(args)
     spec, stored = _find_spec(args)
+    if stored is not None and (code := _at_rows_level(args, [stored])) is not None:
+        return code
     outcome = _rerun(spec, record=bool(args.trajectory or args.render))
     row = outcome.row
     print(f"trial {spec.trial_id}: {row['algorithm']} on {row['platform']} in "
