@@ -9,6 +9,7 @@ import json
 import os
 import shutil
 import sys
+from pathlib import Path
 
 import numpy as np
 import pandas as pd
@@ -481,10 +482,13 @@ def test_workers_stop_when_the_campaign_process_is_killed(tmp_path):
                 os.kill(w, signal.SIGKILL)
 
 
-def test_rerun_of_a_row_built_by_an_older_generator_rebuilds_that_scene(capsys, tmp_path):
+def test_rerun_of_a_row_built_by_an_older_generator_rebuilds_that_scene(capsys, tmp_path,
+                                                                          monkeypatch):
     """A committed protocol-5 Maze row was built by Maze's first generator (no version in
     its spec): rerun rebuilds that maze, says so, and gives the stored row, although new
-    trials now fly a newer Maze."""
+    trials now fly a newer Maze. (The row was made before the instruction-set pins; the
+    straight baseline's flight is the same under them, so it is flown here under the pins,
+    which the user's FT_SITL_ISA asks for, with a note.)"""
     from pathlib import Path
 
     from ft_sitl.scenarios.families import REGISTRY
@@ -497,9 +501,47 @@ def test_rerun_of_a_row_built_by_an_older_generator_rebuilds_that_scene(capsys, 
     out = tmp_path / "v5"
     out.mkdir()
     df[df.trial_id == row.trial_id].to_parquet(out / "trials.parquet", index=False)
+    monkeypatch.setenv("FT_SITL_ISA", "x86-64-v3")
     rc, text, err = cli(capsys, "trial", "rerun", out, row.trial_id)
     assert (rc, err) == (0, "")
     lines = text.splitlines()
-    assert lines[2] == (f"  scenario built by generator version 1 of maze (newest: "
+    assert lines[0].startswith("note: these rows were made at instruction-set level host")
+    assert lines[3] == (f"  scenario built by generator version 1 of maze (newest: "
                         f"{REGISTRY['maze'].version}): {REGISTRY['maze'].changes[1]}")
     assert "  identical to the stored result (all but wall-clock columns)" in lines
+
+
+def test_rerun_flies_rows_at_the_instruction_set_level_they_were_made_at(capsys, tmp_path,
+                                                                          monkeypatch):
+    """A row made before the pins (no ``isa`` in its software column) is re-run by a child
+    process at ``host``, the level it was made at, which says so; rows made at two levels
+    are refused together; a row that records x86-64-v3 flies in this process."""
+    src = Path(__file__).parents[2] / "docs" / "results" / "paper-sample-v5"
+    df = pd.read_parquet(src / "trials.parquet")
+    row = df[(df.family == "maze") & (df.algorithm == "straight")].iloc[0]
+    monkeypatch.delenv("FT_SITL_ISA", raising=False)
+    out = tmp_path / "old"
+    out.mkdir()
+    df[df.trial_id == row.trial_id].to_parquet(out / "trials.parquet", index=False)
+    rc, text, err = cli(capsys, "trial", "rerun", out, row.trial_id)
+    lines = text.splitlines()
+    assert rc == 0, (text, err)
+    assert lines[0] == ("these rows were made at instruction-set level host (before ft-sitl "
+                        "pinned one, 2026-12-07): re-running them at that level "
+                        "(FT_SITL_ISA=host); at host a row re-runs bit for bit only on the "
+                        "processor that made it (docs/results/README.md)")
+    assert "  identical to the stored result (all but wall-clock columns)" in lines
+
+    two = df[(df.algorithm == "straight")].head(2).copy()
+    two["software"] = ['{"isa": "x86-64-v3"}', ""]
+    mixed = tmp_path / "mixed"
+    mixed.mkdir()
+    two.to_parquet(mixed / "trials.parquet", index=False)
+    rc, text, err = cli(capsys, "trial", "rerun", mixed, "--sample", "2")
+    assert rc == 2 and "made at different instruction-set levels (host, x86-64-v3)" in err
+
+    new = mixed / "new"
+    new.mkdir()
+    two.head(1).to_parquet(new / "trials.parquet", index=False)
+    rc, text, err = cli(capsys, "trial", "rerun", new, "--sample", "1")
+    assert "instruction-set level" not in text and "1 of 1 identical" in text, (text, err)
