@@ -20,6 +20,10 @@ Timings are never asserted: this is a script, not a test.
 
 from __future__ import annotations
 
+# isort: off
+import ft_sitl  # noqa: F401  (first: its numeric pins before numpy loads)
+# isort: on
+
 import os
 
 for _var in ("NUMBA_NUM_THREADS", "OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS"):

@@ -27,6 +27,10 @@ Timings are never asserted: this is a script, not a test.
 
 from __future__ import annotations
 
+# isort: off
+import ft_sitl  # noqa: F401  (first: its numeric pins before numpy loads)
+# isort: on
+
 import argparse
 import asyncio
 import dataclasses

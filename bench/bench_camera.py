@@ -22,6 +22,10 @@ leave it free) and numpy's BLAS to one thread. Timings are never asserted.
 
 from __future__ import annotations
 
+# isort: off
+import ft_sitl  # noqa: F401  (first: its numeric pins before numpy loads)
+# isort: on
+
 import os
 
 # One thread everywhere, set before numpy is imported (OpenBLAS idle threads otherwise spin

@@ -22,6 +22,10 @@ machine) are reported alongside. Timings are never asserted: this is a script, n
 
 from __future__ import annotations
 
+# isort: off
+import ft_sitl  # noqa: F401  (first: its numeric pins before numpy loads)
+# isort: on
+
 import os
 
 # One thread everywhere, set before numpy / numba are imported.

@@ -35,6 +35,10 @@ import os
 for _var in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS", "NUMBA_NUM_THREADS"):
     os.environ.setdefault(_var, "1")
 
+# isort: off
+import ft_sitl  # noqa: F401, E402  (first: its numeric pins before numpy loads)
+# isort: on
+
 import argparse  # noqa: E402
 import cProfile  # noqa: E402
 import json  # noqa: E402

@@ -2,6 +2,10 @@
 
 from __future__ import annotations
 
+# isort: off
+import ft_sitl  # noqa: F401  (first: its numeric pins before numpy loads)
+# isort: on
+
 import datetime
 import gc
 import os

@@ -205,3 +205,31 @@ def test_pinned_rows_are_equal_on_another_processor_and_unpinned_ones_need_not_b
         assert host_here["digest"] != host_there["digest"], (host_here, host_there)
         # ... and the emulated processor's unpinned row is the pinned row
         assert host_there["digest"] == here["digest"]
+
+
+def test_every_script_imports_ft_sitl_before_the_numeric_libraries():
+    """A benchmark or script that loads numpy (or pandas, numba, ...) before ft_sitl runs
+    without the pins (numpy's AVX-512 loops on such a processor): its timings and rows are
+    of other arithmetic. Every module-level import of one comes after ``import ft_sitl``."""
+    import ast
+    from pathlib import Path
+
+    heavy = {"numpy", "pandas", "scipy", "numba", "llvmlite", "trimesh", "matplotlib",
+             "statsmodels", "torch", "benchutil"}
+    root = Path(__file__).resolve().parents[1]
+    bad = []
+    for path in sorted([*root.glob("bench/*.py"), *root.glob("scripts/*.py"),
+                        root / "tests" / "conftest.py"]):
+        for node in ast.parse(path.read_text()).body:
+            if isinstance(node, ast.Import):
+                names = [a.name.split(".")[0] for a in node.names]
+            elif isinstance(node, ast.ImportFrom) and node.module:
+                names = [node.module.split(".")[0]]
+            else:
+                continue
+            if "ft_sitl" in names:
+                break
+            if heavy & set(names):
+                bad.append(f"{path.relative_to(root)}:{node.lineno}")
+                break
+    assert not bad, bad
