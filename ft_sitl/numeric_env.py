@@ -203,6 +203,19 @@ def _pin(environ: MutableMapping[str, str], flags: set[str] | None) -> dict[str,
     return done
 
 
+def expected_level(environ: MutableMapping[str, str] | None = None,
+                   flags: set[str] | None = None) -> str:
+    """The level a process started now with ``environ`` computes at: x86-64-v3 when it asks
+    for it, the processor has it and no pinned variable is set to another value; else host.
+    (From the environment alone: :func:`in_force` asks the loaded libraries.)"""
+    environ = os.environ if environ is None else environ
+    flags = cpu_flags() if flags is None else flags
+    if requested(environ) == HOST or not V3_FLAGS <= flags:
+        return HOST
+    same = all(environ.get(k, v) == v for k, v in v3_settings().items())
+    return PINNED if same else HOST
+
+
 def embree_config() -> str | None:
     """The config string for ``rtcNewDevice`` (None: Embree's own choice)."""
     return os.environ.get(EMBREE_VAR) or None

@@ -233,3 +233,26 @@ def test_every_script_imports_ft_sitl_before_the_numeric_libraries():
                 bad.append(f"{path.relative_to(root)}:{node.lineno}")
                 break
     assert not bad, bad
+
+
+def test_the_level_a_child_will_compute_at_is_read_from_its_environment():
+    v3 = numeric_env.v3_settings()
+    assert numeric_env.expected_level({}, flags=V3_HOST) == "x86-64-v3"
+    assert numeric_env.expected_level(dict(v3), flags=V3_HOST) == "x86-64-v3"
+    assert numeric_env.expected_level({"FT_SITL_ISA": "host"}, flags=V3_HOST) == "host"
+    assert numeric_env.expected_level({"NUMBA_CPU_NAME": "znver4"}, flags=V3_HOST) == "host"
+    assert numeric_env.expected_level({}, flags={"sse4_2", "avx"}) == "host"
+
+
+def test_a_dask_worker_refuses_chunks_of_a_campaign_at_another_level():
+    import pytest
+
+    from ft_sitl.missions.executors import ExecutorError, dask_chunk
+    from ft_sitl.provenance import code_digest
+
+    other = "host" if numeric_env.expected_level() == "x86-64-v3" else "x86-64-v3"
+    with pytest.raises(ExecutorError, match=rf"would fly at instruction-set level "
+                                            rf"{numeric_env.expected_level()}, the campaign "
+                                            rf"at {other}: start every worker with "
+                                            rf"FT_SITL_ISA={other}"):
+        dask_chunk(lambda c: c, [], code_digest(), None, other)

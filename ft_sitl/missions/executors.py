@@ -46,7 +46,7 @@ from pathlib import Path
 
 from pebble import ProcessExpired, ProcessPool
 
-from ft_sitl import __version__
+from ft_sitl import __version__, numeric_env
 from ft_sitl.missions.resources import RESOURCES
 from ft_sitl.missions.spec import TrialSpec
 from ft_sitl.provenance import code_digest
@@ -89,6 +89,7 @@ def trial_id(d: dict) -> str:
 def worker_info() -> dict:
     """What a worker must share with the campaign process (and what it is)."""
     return {"version": __version__, "code": code_digest(),
+            "isa": numeric_env.expected_level(),
             "python": ".".join(map(str, sys.version_info[:3])),
             "host": socket.gethostname(), "pid": os.getpid(),
             "can_spawn": not mp.current_process().daemon}
@@ -248,16 +249,23 @@ _DASK_POOL_LOCK = threading.Lock()
 
 
 def dask_chunk(fn: Callable, chunk: list[dict], code: str,
-               budget_s: float | None) -> tuple[str, list]:
+               budget_s: float | None, isa: str | None = None) -> tuple[str, list]:
     """The task a Dask worker runs: fly ``chunk`` under :func:`supervise` in a process of
     its own (started once per worker; it keeps its scenes between chunks), so a crash or a
-    kill ends that process, not the worker. Refuses to run other code than the client's."""
+    kill ends that process, not the worker. Refuses to run other code than the client's,
+    or at another instruction-set level (ft_sitl.numeric_env: its rows would differ)."""
     global _DASK_POOL
     mine = code_digest()
     if mine != code:
         raise ExecutorError(f"worker {worker_label()} runs ft-sitl {__version__} with code "
                             f"digest {mine[:12]}, the campaign {code[:12]}: install the same "
                             f"ft-sitl on every worker")
+    # (the trials fly in a child process that pins afresh from this environment)
+    level = numeric_env.expected_level()
+    if isa is not None and level != isa:
+        raise ExecutorError(f"worker {worker_label()} would fly at instruction-set level "
+                            f"{level}, the campaign at {isa}: start every worker with "
+                            f"{numeric_env.LEVEL_VAR}={isa} (docs/distributed.md)")
     from distributed import get_worker  # (distributed loads only where Dask is used)
     label = get_worker().address
     with _DASK_POOL_LOCK:
@@ -350,12 +358,13 @@ class DaskExecutor(Executor):
 
         client = self.client
         code = code_digest()
+        isa = numeric_env.in_force()["level"]
         tag = uuid.uuid4().hex[:8]
         pending = dict(enumerate(chunks))
         new_id = itertools.count(len(chunks))
         attempt = 0
         while pending:
-            futures = {client.submit(dask_chunk, fn, c, code, self.budget_s, pure=False,
+            futures = {client.submit(dask_chunk, fn, c, code, self.budget_s, isa, pure=False,
                                      key=f"ft-sitl-{tag}-{attempt}-{i}"): i
                        for i, c in pending.items()}
             attempt += 1
