@@ -231,16 +231,20 @@ def _loaded_numpy() -> dict:
     return {"dispatch": on[-1] if on else "baseline", "active": on}
 
 
-def _cpu_model() -> str:
-    model = ""
+def cpu_model_name(path: str = "/proc/cpuinfo") -> str:
+    """The processor's model name ('' where /proc/cpuinfo is not readable)."""
     try:
-        with open("/proc/cpuinfo") as fh:
+        with open(path) as fh:
             for line in fh:
                 if line.lower().startswith("model name"):
-                    model = line.split(":", 1)[1].strip()
-                    break
+                    return line.split(":", 1)[1].strip()
     except OSError:
         pass
+    return ""
+
+
+def _cpu_model() -> str:
+    model = cpu_model_name()
     try:
         # llvmlite comes with numba, which loads only after pin()
         import llvmlite.binding as ll

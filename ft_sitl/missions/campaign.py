@@ -127,15 +127,7 @@ def died_row(d: dict, detail: str = DIED_DETAIL) -> dict:
 def machine_info() -> dict:
     """CPU model, cores, OS and Python of this machine (for reports)."""
 
-    model = pyplatform.processor() or ""
-    try:
-        with open("/proc/cpuinfo") as fh:
-            for line in fh:
-                if line.lower().startswith("model name"):
-                    model = line.split(":", 1)[1].strip()
-                    break
-    except OSError:
-        pass
+    model = numeric_env.cpu_model_name() or pyplatform.processor()
     return {"cpu_model": model or "unknown", "n_cpus": os.cpu_count(),
             "os": f"{pyplatform.system()} {pyplatform.release()}",
             "python": pyplatform.python_version()}

@@ -542,9 +542,12 @@ def test_trial_with_movers_ends_by_the_protocol_with_each_option(with_checkpoint
     assert (nav.dynamic_steps > 20) == (mode != "off")
 
 
-V6 = REPO / "docs" / "results" / "paper-slice-v6" / "trials.parquet"
-#: a stored protocol-6 NavRL trial (the Maze, 4.50kg-T-MOTOR: a collision after 3.3 s)
-V6_TRIAL = "65af5f4189332b4c"
+#: rows made under the instruction-set pins (x86-64-v3: they re-run on any processor with
+#: AVX2 and FMA; docs/results/README.md)
+V6 = REPO / "docs" / "results" / "paper-pinned-sample" / "trials.parquet"
+#: a stored protocol-6 NavRL trial (Maze 6, 3.50kg-SunnySky: a collision after 3.5 s of
+#: navigation)
+V6_TRIAL = "c83b28442a7a0881"
 
 
 def _stored(trial_id: str) -> tuple[TrialSpec, dict]:
@@ -558,6 +561,7 @@ def test_rows_of_earlier_protocols_fly_as_they_were_stored(with_checkpoint):
     dynamic_obstacles = "off" (pinned by their protocol) and give the stored row bit for
     bit."""
     spec, stored = _stored(V6_TRIAL)
+    assert json.loads(stored["software"])["isa"] == "x86-64-v3"
     assert spec.protocol == 6 and "dynamic_obstacles" not in spec.algorithm_params
     assert navigator_params(spec)["dynamic_obstacles"] == "off"
     assert differences(run_trial(spec).row, stored) == []
