@@ -11,7 +11,7 @@ the trial time per simulated second, and each stage's seconds (camera, map fusio
 planner, the loop), at both levels and their ratio. Timings are never asserted.
 
     .venv/bin/python bench/bench_pins.py docs/results/paper            # ~25 min
-    .venv/bin/python bench/bench_pins.py docs/results/paper --rounds 1 --json
+    .venv/bin/python bench/bench_pins.py docs/results/paper --families forest,maze,urban
 """
 
 from __future__ import annotations
@@ -35,9 +35,11 @@ STAGES = ("camera", "fusion", "planner", "loop")
 LEVELS = (numeric_env.HOST, numeric_env.PINNED)
 
 
-def one_round(level: str, directory: Path, seed: int, cpu: int | None) -> list[dict]:
+def one_round(level: str, directory: Path, seed: int, cpu: int | None,
+              families: str | None) -> list[dict]:
     cmd = [sys.executable, str(HERE / "bench_trial_costs.py"), str(directory), "--json",
-           "--seed", str(seed)] + ([] if cpu is None else ["--cpu", str(cpu)])
+           "--seed", str(seed)] + ([] if cpu is None else ["--cpu", str(cpu)]) + \
+        ([] if families is None else ["--families", families])
     out = subprocess.run(cmd, env=numeric_env.child_env(level), capture_output=True,
                          text=True)
     if not out.stdout.strip():
@@ -61,6 +63,8 @@ def main(argv=None) -> int:
     ap.add_argument("--rounds", type=int, default=2, help="rounds of (host, pinned)")
     ap.add_argument("--seed", type=int, default=0, help="which rows (default 0)")
     ap.add_argument("--cpu", type=int, default=None, help="CPU to pin to (default: the last)")
+    ap.add_argument("--families", default=None,
+                    help="comma-separated families to sample (default: all)")
     ap.add_argument("--json", action="store_true", help="print JSON instead of a table")
     args = ap.parse_args(argv)
     if args.rounds < 1:
@@ -69,11 +73,12 @@ def main(argv=None) -> int:
     for k in range(args.rounds):
         for level in LEVELS:
             print(f"round {k + 1}/{args.rounds}: {level}", file=sys.stderr, flush=True)
-            runs[level].append(totals(one_round(level, args.dir, args.seed, args.cpu)))
+            runs[level].append(totals(one_round(level, args.dir, args.seed, args.cpu,
+                                                args.families)))
     best = {lv: {key: min(r[key] for r in runs[lv]) for key in runs[lv][0]}
             for lv in LEVELS}
     info = machine_info(args.cpu, directory=str(args.dir), rounds=args.rounds,
-                        seed=args.seed)
+                        seed=args.seed, families=args.families)
     if args.json:
         print(json.dumps({"machine": info, "rounds": runs, "best": best}, indent=1))
         return 0

@@ -122,6 +122,8 @@ def main(argv=None) -> int:
                     help="rows flown per (algorithm, family) (default 1)")
     ap.add_argument("--seed", type=int, default=0, help="which rows (default 0)")
     ap.add_argument("--cpu", type=int, default=None, help="CPU to pin to (default: the last)")
+    ap.add_argument("--families", default=None,
+                    help="comma-separated families to sample (default: all)")
     ap.add_argument("--json", action="store_true", help="print JSON instead of tables")
     args = ap.parse_args(argv)
     if args.per_cell < 1:
@@ -131,6 +133,13 @@ def main(argv=None) -> int:
         ap.error(f"{table}: no such file (give a campaign's result directory)")
     df = pd.read_parquet(table)
     df = df[df.spec.notna()]
+    if args.families:
+        wanted = args.families.split(",")
+        unknown = sorted(set(wanted) - set(df.family))
+        if unknown:
+            ap.error(f"--families: {', '.join(unknown)} not in {table} "
+                     f"(it has {', '.join(sorted(set(df.family)))})")
+        df = df[df.family.isin(wanted)]
     cpu = pin_to_one_cpu(args.cpu)
     picked = pd.concat([g.sample(min(args.per_cell, len(g)), random_state=args.seed)
                         for _, g in df.groupby(["algorithm", "family"])])
