@@ -62,6 +62,19 @@ def fbm3(x, y, z, perm, frequency: float, octaves: int = 4, lacunarity: float = 
     return total
 
 
+def mockamap_noise(x, y, z, perm, complexity_per_m: float, fractal: int,
+                   attenuation: float) -> np.ndarray:
+    """The noise of mockamap's Perlin map (HKUST-Aerial-Robotics/mockamap, src/maps.cpp):
+    the sum over octaves it = 1..``fractal`` of (attenuation / it) x Perlin noise at
+    2^it x complexity -- with ``complexity_per_m`` its complexity per cell over the cell
+    edge -- at the point (x, y, z in metres)."""
+    total = np.zeros(np.broadcast(x, y, z).shape)
+    for it in range(1, fractal + 1):
+        f = 2 ** it * complexity_per_m
+        total += (attenuation / it) * perlin3(x * f, y * f, z * f, perm)
+    return total
+
+
 def column_runs(filled: np.ndarray):
     """The runs of filled voxels in each voxel column (along z): index arrays i, j, k0, k1
     (k1 exclusive), in C order (column by column, bottom up)."""
@@ -105,16 +118,3 @@ def voxel_boxes(filled: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     lo = np.column_stack([i0[order][first], j[order][first], k0[order][first]])
     hi = np.column_stack([i1[order][first], j[order][last] + 1, k1[order][first]])
     return lo, hi
-
-
-def mockamap_noise(x, y, z, perm, complexity_per_m: float, fractal: int,
-                   attenuation: float) -> np.ndarray:
-    """The noise of mockamap's Perlin map (HKUST-Aerial-Robotics/mockamap, src/maps.cpp):
-    the sum over octaves it = 1..``fractal`` of (attenuation / it) x Perlin noise at
-    2^it x complexity -- with ``complexity_per_m`` its complexity per cell over the cell
-    edge -- at the point (x, y, z in metres)."""
-    total = np.zeros(np.broadcast(x, y, z).shape)
-    for it in range(1, fractal + 1):
-        f = 2 ** it * complexity_per_m
-        total += (attenuation / it) * perlin3(x * f, y * f, z * f, perm)
-    return total
