@@ -103,6 +103,7 @@ def test_no_private_name_is_imported_from_another_module():
     assert not bad, "\n".join(bad)
 
 
+@pytest.mark.e2e
 @pytest.mark.parametrize("layer,forbidden", [
     ("physics", ("sim", "autopilot", "missions", "navigation", "mavlink", "wire", "cli")),
     ("autopilot", ("sim", "missions", "navigation", "mavlink", "wire", "cli")),

@@ -86,6 +86,7 @@ def assert_compact_json(raw: bytes) -> dict:
 
 
 # --- protocol -------------------------------------------------------------------------------
+@pytest.mark.e2e
 def test_lockstep_one_answer_per_packet_and_time_advances_by_one_frame(platform):
     with serving(platform) as (bridge, peer):
         half_step_s = 0.5 / bridge.physics_hz
@@ -109,6 +110,7 @@ def test_lockstep_one_answer_per_packet_and_time_advances_by_one_frame(platform)
         assert (c.packets, c.frames, c.replies, c.repeats, c.bad_packets) == (13, 13, 13, 0, 0)
 
 
+@pytest.mark.e2e
 def test_frame_rate_sets_the_step_and_a_change_continues_the_clock(platform):
     with serving(platform) as (bridge, peer):
         for k in range(5):
@@ -120,6 +122,7 @@ def test_frame_rate_sets_the_step_and_a_change_continues_the_clock(platform):
         assert bridge.vehicle.time_us == 7500
 
 
+@pytest.mark.e2e
 def test_repeated_frame_count_resends_the_answer_without_stepping(platform):
     up = [1700] * 4
     with serving(platform) as (bridge, peer):
@@ -135,6 +138,7 @@ def test_repeated_frame_count_resends_the_answer_without_stepping(platform):
         assert bridge.counters.frames == count + 2
 
 
+@pytest.mark.e2e
 def test_decreasing_frame_count_is_a_restart_vehicle_back_at_spawn(platform):
     with serving(platform) as (bridge, peer):
         count, st = peer.fly(100, 900, [1900] * 4)  # 0.75 s at full-ish power: climbing
@@ -150,6 +154,7 @@ def test_decreasing_frame_count_is_a_restart_vehicle_back_at_spawn(platform):
         assert st.timestamp == pytest.approx(2 / COPTER_RATE_HZ, abs=1e-12)
 
 
+@pytest.mark.e2e
 def test_16_and_32_channel_packets_fly_the_same(platform):
     pwm = [1650, 1640, 1660, 1655]
     states = []
@@ -166,6 +171,7 @@ def test_16_and_32_channel_packets_fly_the_same(platform):
     assert raws == states[0]
 
 
+@pytest.mark.e2e
 def test_bad_packets_are_counted_logged_and_not_fatal(platform, caplog):
     caplog.set_level("WARNING", logger="ft_sitl.bridge.ardupilot")
     good = servo_packet(0, OFF)
@@ -222,6 +228,7 @@ def test_peer_parser_rejects_what_ardupilot_cannot_read():
 
 
 # --- the plant as ArduPilot sees it -----------------------------------------------------------
+@pytest.mark.e2e
 def test_at_rest_the_accelerometer_reads_one_g_up(platform):
     with serving(platform) as (bridge, peer):
         _, st = peer.fly(0, 60, OFF)
@@ -233,6 +240,7 @@ def test_at_rest_the_accelerometer_reads_one_g_up(platform):
     np.testing.assert_allclose(st.quaternion, [1.0, 0.0, 0.0, 0.0], atol=1e-12)
 
 
+@pytest.mark.e2e
 def test_the_spawn_heading_is_north_unless_told_otherwise(platform):
     from ft_sitl.scenarios.families import build_scenario
 
@@ -248,6 +256,7 @@ def test_the_spawn_heading_is_north_unless_told_otherwise(platform):
         ArduPilotBridge(platform, port=0, spawn_heading_deg=math.nan)
 
 
+@pytest.mark.e2e
 def test_accel_noise_is_seeded_and_off_by_default(platform):
     answers = []
     for seed in (3, 3, 4):
@@ -266,6 +275,7 @@ def _airborne_rates(bridge, peer, count, pwm, n_frames):
     return st
 
 
+@pytest.mark.e2e
 @pytest.mark.parametrize("layout, table", [("quad_x", QUAD_X), ("quad_plus", QUAD_PLUS)])
 def test_one_ardupilot_motor_up_turns_the_way_its_mixer_factors_say(platform, layout, table):
     p = dataclasses.replace(platform, layout=layout)
@@ -356,6 +366,7 @@ def test_param_file_for_a_plus_quad_and_refusals(platform):
         ardupilot_params(high_idle)
 
 
+@pytest.mark.e2e
 @pytest.mark.parametrize("name", ["1.50kg-DJI", "0.75kg-UAV 2", "4.00kg-SunnySky"])
 def test_hover_pwm_from_the_param_file_holds_altitude(name):
     p = get_platform(name)
@@ -371,6 +382,7 @@ def test_hover_pwm_from_the_param_file_holds_altitude(name):
     np.testing.assert_allclose(st1.quaternion, [1, 0, 0, 0], atol=1e-9)  # level, no turn
 
 
+@pytest.mark.e2e
 def test_a_failed_motor_behind_ardupilots_outputs_tumbles_the_vehicle(platform):
     # ft-sitl bridge ardupilot --actuators: the imperfection sits between the autopilot's
     # motor outputs and the rotors (ft_sitl.physics.actuators)
@@ -388,6 +400,7 @@ def test_a_failed_motor_behind_ardupilots_outputs_tumbles_the_vehicle(platform):
     assert rates[0] < 0.05 and rates[1] > 1.0  # rad/s: level, then tumbling
 
 
+@pytest.mark.e2e
 def test_in_a_scenario_position_is_from_the_spawn_and_a_crash_lasts_until_restart(platform):
     from ft_sitl.scenarios.families import build_scenario
 
@@ -417,6 +430,7 @@ def test_in_a_scenario_position_is_from_the_spawn_and_a_crash_lasts_until_restar
 
 
 # --- running it --------------------------------------------------------------------------------
+@pytest.mark.e2e
 def test_run_ardupilot_bridge_writes_params_serves_and_stops(tmp_path):
     started = threading.Event()
     holder = {}
@@ -459,6 +473,7 @@ def test_run_ardupilot_bridge_names_a_bad_scenario_or_platform():
         run_ardupilot_bridge("no-such-quad", None, 0)
 
 
+@pytest.mark.e2e
 def test_constructor_rejects_bad_arguments(platform):
     with pytest.raises(ValueError, match="speed_factor: 0 must be a positive number"):
         ArduPilotBridge(platform, speed_factor=0)

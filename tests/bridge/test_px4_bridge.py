@@ -78,6 +78,7 @@ def sensor_array(frames_, *names):
 
 
 # --- lockstep ---------------------------------------------------------------------------
+@pytest.mark.e2e
 def test_lockstep_one_frame_per_answer_time_steps_and_pause():
     with bridge_and_peer() as (bridge, peer):
         first = into_lockstep(bridge, peer)
@@ -109,6 +110,7 @@ def test_lockstep_one_frame_per_answer_time_steps_and_pause():
         assert bridge.stats.bad_packets == 0 and bridge.stats.unexpected_messages == 0
 
 
+@pytest.mark.e2e
 def test_boot_frames_flow_before_the_first_answer_with_motors_off():
     with bridge_and_peer() as (bridge, peer):
         boot = [peer.recv_frame() for _ in range(5)]  # PX4 booting: no answers yet
@@ -132,6 +134,7 @@ def test_boot_frames_flow_before_the_first_answer_with_motors_off():
         assert s.sensor_frames == s.boot_frames + s.actuator_messages - s.stale_actuator_messages
 
 
+@pytest.mark.e2e
 def test_paced_lockstep_and_a_px4_without_lockstep():
     # at a speed factor the frames still go one per answer
     with bridge_and_peer(speed_factor=100.0) as (bridge, peer):
@@ -150,6 +153,7 @@ def test_paced_lockstep_and_a_px4_without_lockstep():
 
 
 # --- sensors ----------------------------------------------------------------------------
+@pytest.mark.e2e
 def test_sensors_at_rest_match_gravity_atmosphere_field_and_home():
     with bridge_and_peer(ground_truth=True) as (bridge, peer):
         frames_ = into_lockstep(bridge, peer, n=750)  # 3 s on the ground, motors off
@@ -198,6 +202,7 @@ def test_sensors_at_rest_match_gravity_atmosphere_field_and_home():
     assert st.zacc == -1000 and st.xacc == 0
 
 
+@pytest.mark.e2e
 def test_the_spawn_heading_is_north_unless_told_otherwise():
     # --spawn-yaw 90: the vehicle PX4 meets faces east, in the truth and in its compass
     with bridge_and_peer(ground_truth=True, spawn_heading_deg=90.0) as (bridge, peer):
@@ -214,6 +219,7 @@ def test_the_spawn_heading_is_north_unless_told_otherwise():
         assert says in lines[0]
 
 
+@pytest.mark.e2e
 def test_sensor_values_never_repeat_from_frame_to_frame():
     with bridge_and_peer() as (bridge, peer):
         frames_ = into_lockstep(bridge, peer, n=1250)
@@ -278,6 +284,7 @@ def test_quad_x_maps_px4_motors_one_to_one_and_other_layouts_are_refused():
         px4_motor_map(bridge.vehicle.motor_positions_flu(), -bridge.vehicle.motor_spins())
 
 
+@pytest.mark.e2e
 @pytest.mark.parametrize("motor, signs", [
     (0, (-1, +1, +1)),  # motor 1 front right: roll left, pitch up, yaw moment +
     (1, (+1, -1, +1)),  # motor 2 rear left: roll right, pitch down, yaw +
@@ -299,6 +306,7 @@ def test_one_px4_motor_up_turns_the_vehicle_as_on_none_iris(motor, signs):
     assert np.all(np.abs(rate) > 0.02), rate
 
 
+@pytest.mark.e2e
 def test_a_hover_command_holds_altitude():
     """A PX4-like altitude loop on the ground truth: hover thrust plus PD, all four motors."""
     u0, target = hover_u(), 2.0
@@ -324,6 +332,7 @@ def test_a_hover_command_holds_altitude():
 
 
 # --- connections ------------------------------------------------------------------------
+@pytest.mark.e2e
 def test_disconnect_then_reconnect_resets_the_vehicle_and_time_runs_on():
     instance = next(_instances)
     with Px4Bridge(PLATFORM, instance=instance, ground_truth=True) as bridge:
@@ -357,6 +366,7 @@ def test_disconnect_then_reconnect_resets_the_vehicle_and_time_runs_on():
             assert bridge.stats.connections == 4
 
 
+@pytest.mark.e2e
 def test_malformed_and_unexpected_input_is_counted_not_fatal():
     with bridge_and_peer() as (bridge, peer):
         f = into_lockstep(bridge, peer, n=5)[-1]
@@ -386,6 +396,7 @@ def test_malformed_and_unexpected_input_is_counted_not_fatal():
         assert bridge.running and bridge.stats.connections == 1
 
 
+@pytest.mark.e2e
 def test_clients_that_vanish_or_talk_nonsense_do_not_stop_the_bridge():
     import socket
 
@@ -415,6 +426,7 @@ def roof_scenario() -> Scenario:
                     goal=[8.0, 0.0, 1.0], piece_first_face=[0], piece_names=["roof"])
 
 
+@pytest.mark.e2e
 def test_a_collision_crashes_the_vehicle_and_px4_cannot_restart_the_motors():
     instance = next(_instances)
     with Px4Bridge(PLATFORM, scenario=roof_scenario(), instance=instance,
@@ -473,6 +485,7 @@ def test_px4_parameters_describe_our_geometry_and_thrust_model():
     assert hover_output(PLATFORM) == pytest.approx(hover_u())
 
 
+@pytest.mark.e2e
 def test_run_px4_bridge_serves_prints_and_returns_its_counters():
     lines = []
     instance = next(_instances)

@@ -28,6 +28,7 @@ def vehicle() -> str:
     return f"t{secrets.token_hex(4)}"
 
 
+@pytest.mark.e2e
 def test_round_trip_every_kind(broker_url, vehicle, depth_sample):
     frame, config = depth_sample
     with BusPublisher(broker_url, vehicle) as pub:
@@ -80,6 +81,7 @@ def test_round_trip_every_kind(broker_url, vehicle, depth_sample):
     assert stats.connects == 1 and stats.reconnects == 0 and stats.last_error is None
 
 
+@pytest.mark.e2e
 def test_status_online_then_closed(broker_url, vehicle):
     pub = BusPublisher(broker_url, vehicle).start()
     assert pub.wait_connected(DEADLINE_S), pub.stats()
@@ -110,6 +112,7 @@ time.sleep(600)
 """
 
 
+@pytest.mark.e2e
 def test_last_will_when_the_publisher_dies(broker_url, vehicle):
     async def scenario(proc):
         async with BusClient(broker_url, vehicle, kinds=("status",)) as client:
@@ -136,6 +139,7 @@ def test_last_will_when_the_publisher_dies(broker_url, vehicle):
     assert late.retained and not late.data.online and late.data.reason == "connection lost"
 
 
+@pytest.mark.e2e
 def test_config_requests_accepted_and_rejected(broker_url, vehicle, caplog):
     caplog.set_level(logging.INFO, logger="ft_sitl.bus")
     configs: queue.SimpleQueue = queue.SimpleQueue()
@@ -188,6 +192,7 @@ def test_config_requests_accepted_and_rejected(broker_url, vehicle, caplog):
                for r in caplog.records if r.name == "ft_sitl.bus")
 
 
+@pytest.mark.e2e
 def test_client_skips_malformed_messages(broker_url, vehicle, caplog):
     caplog.set_level(logging.WARNING, logger="ft_sitl.bus")
 
@@ -262,6 +267,7 @@ def tls_files(tmp_path_factory):
             "key": str(d / "server.key")}
 
 
+@pytest.mark.e2e
 def test_tls_round_trip(mosquitto_factory, tls_files, vehicle):
     broker = mosquitto_factory(tls=tls_files).start()
     tls = TlsOptions(ca_file=tls_files["ca"])

@@ -184,6 +184,7 @@ KEYS = st.sampled_from(["v", "t", "time_usec", "type", "p_world_m", "motors", "q
                         "speed_m_s", "x"])
 
 
+@pytest.mark.slow
 @settings(max_examples=300, deadline=None)
 @given(st.dictionaries(KEYS, JSON_VALUES, max_size=8))
 def test_json_objects_never_raise_anything_but_bus_payload_error(obj):

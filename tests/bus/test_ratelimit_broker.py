@@ -60,6 +60,7 @@ def test_rate_gate_rejects_bad_rates(rate):
 
 
 # --- EmbeddedBroker -----------------------------------------------------------------------------
+@pytest.mark.e2e
 def test_embedded_broker_life_cycle():
     broker = EmbeddedBroker()
     with pytest.raises(RuntimeError, match="not running: call start"):
@@ -80,6 +81,7 @@ def test_embedded_broker_life_cycle():
     broker.stop()  # idempotent
 
 
+@pytest.mark.e2e
 def test_embedded_broker_given_port_and_port_in_use():
     first = EmbeddedBroker().start()
     port = first.port

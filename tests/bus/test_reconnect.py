@@ -7,9 +7,13 @@ import asyncio
 import logging
 import threading
 
+import pytest
+
 from ft_sitl.bus import BusClient, BusPublisher, EmbeddedBroker
 
 from .busutil import DEADLINE_S, free_port, receive_until, telemetry, wait_until
+
+pytestmark = pytest.mark.e2e  # (tests/lanes.py)
 
 
 def bus_thread_alive(vehicle: str) -> bool:

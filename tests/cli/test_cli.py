@@ -31,6 +31,7 @@ def _help(capsys, *args) -> str:
     return capsys.readouterr().out
 
 
+@pytest.mark.e2e
 def test_help_lists_every_subcommand(capsys):
     out = run("--help").stdout  # (the installed command, once)
     for cmd in ("demo", "platforms", "params", "campaign", "navigators", "train"):
@@ -42,6 +43,7 @@ def test_help_lists_every_subcommand(capsys):
     assert "--json" in _help(capsys, "platforms", "show")
 
 
+@pytest.mark.e2e
 def test_platforms_list_json_has_the_36_with_recomputed_indicators(table1_rows):
     rows = json.loads(run("platforms", "list", "--json").stdout)
     assert [r["name"] for r in rows] == [r["name"] for r in table1_rows]
@@ -52,6 +54,7 @@ def test_platforms_list_json_has_the_36_with_recomputed_indicators(table1_rows):
     assert len(virt) == 18
 
 
+@pytest.mark.e2e
 def test_platforms_show_text_and_json():
     out = run("platforms", "show", "0.98kg-EGO Planner DIY").stdout
     assert "TWR_max 4.600" in out and "inertia_kg_m2" in out
@@ -60,6 +63,7 @@ def test_platforms_show_text_and_json():
     assert round(data["indicators"]["alpha_xy_max_rad_s2"], 1) == 1083.3
 
 
+@pytest.mark.e2e
 def test_unknown_platform_is_a_one_line_error_with_suggestions():
     proc = run("platforms", "show", "0.98kg-EGO Planer DIY", check=False)
     assert proc.returncode == 2
@@ -67,6 +71,7 @@ def test_unknown_platform_is_a_one_line_error_with_suggestions():
     assert "unknown platform" in proc.stderr and "0.98kg-EGO Planner DIY" in proc.stderr
 
 
+@pytest.mark.e2e
 def test_check_and_use_a_user_platform_file(tmp_path):
     f = tmp_path / "mine.yaml"
     f.write_text("platform:\n  name: mine\n  layout: quad_plus\n  mass_kg: 2.0\n"
@@ -81,6 +86,7 @@ def test_check_and_use_a_user_platform_file(tmp_path):
     assert proc.returncode == 2 and "'colour'" in proc.stderr and str(bad) in proc.stderr
 
 
+@pytest.mark.e2e
 def test_generate_is_reproducible_and_writes_a_loadable_file(tmp_path):
     a = run("platforms", "generate", "--count", "3", "--seed", "4", "--json").stdout
     b = run("platforms", "generate", "--count", "3", "--seed", "4", "--json").stdout
@@ -92,6 +98,7 @@ def test_generate_is_reproducible_and_writes_a_loadable_file(tmp_path):
     assert proc.returncode == 2 and "exists" in proc.stderr
 
 
+@pytest.mark.e2e
 def test_params_list_json():
     rows = {r["name"]: r for r in json.loads(run("params", "list", "--json").stdout)}
     assert rows["MPC_XY_VEL_MAX"]["default"] == 4.0
@@ -133,6 +140,7 @@ def test_params_filters_and_show(capsys):
     assert exc.value.code == 2 and "not allowed with" in capsys.readouterr().err
 
 
+@pytest.mark.e2e
 def test_demo_flies_and_lands(tmp_path):
     png = tmp_path / "demo.png"
     data = json.loads(run("demo", "--json", "--plot", str(png)).stdout)
@@ -146,11 +154,13 @@ def test_demo_flies_and_lands(tmp_path):
     assert png.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
 
 
+@pytest.mark.e2e
 def test_bad_arguments_exit_2():
     assert run("platforms", "generate", "--count", "zero", check=False).returncode == 2
     assert run("nonsense", check=False).returncode == 2
 
 
+@pytest.mark.e2e
 def test_sitl_serves_prints_urls_and_stops_cleanly_on_ctrl_c(tmp_path):
     import signal
     import time
@@ -213,6 +223,7 @@ BAD_NUMBERS = [
 ]
 
 
+@pytest.mark.e2e
 def test_non_finite_and_out_of_range_numbers_are_one_line_errors(capsys):
     # `sitl --duration nan` used to serve forever and `--duration -5` to exit 0 at once.
     # The real command for one case of each command (in parallel: each start costs a
@@ -239,6 +250,7 @@ def test_non_finite_and_out_of_range_numbers_are_one_line_errors(capsys):
         assert err.startswith(f"ft-sitl: error: {needle}") and err.count("\n") == 1, err
 
 
+@pytest.mark.e2e
 def test_mavsdk_is_a_dependency_and_its_absence_is_one_line(tmp_path):
     # the README's first command installs no extra, yet `navigate` and `campaign run
     # --transport mavlink` fly MAVSDK clients: it is a core dependency, and if it cannot be
@@ -266,6 +278,7 @@ def test_mavsdk_is_a_dependency_and_its_absence_is_one_line(tmp_path):
     assert not (tmp_path / "out").exists()
 
 
+@pytest.mark.e2e
 def test_bridge_spawn_heading_is_north_unless_given():
     out = run("bridge", "px4", "--spawn-yaw", "45", "--duration", "0.3", "--instance", "777")
     assert "no scenario, spawn heading 45.0 deg" in out.stdout.splitlines()[0]
@@ -276,6 +289,7 @@ def test_bridge_spawn_heading_is_north_unless_given():
     assert proc.stderr == "ft-sitl: error: --spawn-yaw: 400 must be within -360..360\n"
 
 
+@pytest.mark.e2e
 def test_sitl_bad_arguments_are_one_line_errors():
     for args, needle in ((["--home", "1,2"], "--home"), (["--home", "95,0,0"], "latitude"),
                          (["--instances", "0"], "--instances"), (["--speed-factor", "0"],

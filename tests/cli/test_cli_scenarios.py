@@ -32,6 +32,7 @@ def cli(capsys, *args):
     return rc, out, err
 
 
+@pytest.mark.e2e
 def test_help_and_list_json_from_the_installed_script():
     assert "scenarios" in run_exe("--help").stdout
     helptext = run_exe("scenarios", "--help").stdout
@@ -68,6 +69,7 @@ def test_show_prints_a_familys_generator_parameters(capsys):
     assert "unknown scenario family 'forst'; did you mean 'forest'?" in err
 
 
+@pytest.mark.slow
 def test_list_text(capsys):
     rc, out, _ = cli(capsys, "list")
     assert rc == 0
@@ -136,6 +138,7 @@ def test_bad_input_is_one_line_exit_2(capsys, tmp_path, monkeypatch, args, needl
     assert not list(tmp_path.glob("*.png"))
 
 
+@pytest.mark.e2e
 def test_bad_family_from_the_installed_script():
     proc = run_exe("scenarios", "render", "Narow-Gap")
     assert proc.returncode == 2 and proc.stderr.count("\n") == 1

@@ -182,6 +182,7 @@ def test_bad_reset_options_are_refused_by_name(options, match):
         NavigateEnv(**SMALL).step(np.zeros(4, np.float32))
 
 
+@pytest.mark.slow
 def test_pinned_generator_versions_build_the_older_worlds():
     """scenario_versions (and a scenario option's version) build a family's older
     generator; by default the newest. Maze has two versions with different layouts."""

@@ -71,6 +71,7 @@ def test_bad_configurations_name_what_is_wrong(tmp_path, text, message):
         load_config(f)
 
 
+@pytest.mark.e2e
 def test_the_command_checks_and_refuses_by_name(tmp_path, capsys):
     ok = subprocess.run(CLI + ["train", "--out", str(tmp_path / "o"), "--check",
                                "--steps", "5000"], capture_output=True, text=True)
@@ -83,6 +84,7 @@ def test_the_command_checks_and_refuses_by_name(tmp_path, capsys):
     assert code == 2 and "hidden" in err and not (tmp_path / "o").exists()
 
 
+@pytest.mark.e2e
 def test_without_the_stack_training_says_what_to_install(tmp_path):
     code = ("import sys; sys.modules['torch'] = None; sys.modules['stable_baselines3'] = None\n"
             "from ft_sitl.gym.train import load_config, train, TrainError\n"

@@ -8,6 +8,8 @@ import pytest
 
 from .sitl_harness import running_sitl
 
+pytestmark = pytest.mark.e2e  # (tests/lanes.py)
+
 EXAMPLES = Path(__file__).resolve().parents[2] / "examples"
 
 

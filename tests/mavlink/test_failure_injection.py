@@ -6,6 +6,7 @@ SYS_STATUS."""
 
 import asyncio
 
+import pytest
 from mavsdk.asyncio.plugins.action import ActionAsync
 from mavsdk.asyncio.plugins.failure import FailureAsync
 from mavsdk.asyncio.plugins.offboard import OffboardAsync
@@ -20,6 +21,8 @@ from ft_sitl.autopilot.params import ParamSet
 from .mavsdk_util import connect, first
 from .sitl_harness import running_sitl
 from .test_pymavlink_and_robustness import ack_of, client, wait_msg
+
+pytestmark = pytest.mark.e2e  # (tests/lanes.py)
 
 INSTANCE = 61  # (ports of its own: a test's leftover client cannot starve the next)
 

@@ -24,6 +24,8 @@ from .mavsdk_util import connect, first
 from .sitl_harness import running_sitl
 from .test_pymavlink_and_robustness import client, wait_msg
 
+pytestmark = pytest.mark.e2e  # (tests/lanes.py)
+
 INSTANCE = 62  # (ports of its own: a test's leftover client cannot starve the next)
 GIVEN = 68  # (the last test's own: the pymavlink client before it keeps 62's port)
 

@@ -27,6 +27,8 @@ from .mavsdk_util import connect
 from .sitl_harness import running_sitl
 from .test_pymavlink_and_robustness import ack_of, client, wait_msg
 
+pytestmark = pytest.mark.e2e  # (tests/lanes.py)
+
 INSTANCES = (64, 65, 66)  # (ports of their own)
 
 

@@ -25,6 +25,8 @@ from ft_sitl.sim.fleet import Fleet
 from .mavsdk_util import connect, first
 from .sitl_harness import running_sitl
 
+pytestmark = pytest.mark.e2e  # (tests/lanes.py)
+
 INSTANCE = 50  # ports 14590 (MAVSDK) and 14630 (the vehicle's API link)
 LAT0, LON0 = 47.397742, 8.545594
 M_PER_DEG_LAT = 111195.0

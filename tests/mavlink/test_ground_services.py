@@ -14,6 +14,8 @@ from mavsdk.plugins.shell import Device
 from .mavsdk_util import connect
 from .sitl_harness import running_sitl
 
+pytestmark = pytest.mark.e2e  # (tests/lanes.py)
+
 INSTANCE = 60  # (ports of its own: other sessions use the default ones)
 
 

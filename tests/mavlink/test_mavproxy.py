@@ -12,9 +12,13 @@ import sys
 import time
 from pathlib import Path
 
+import pytest
+
 from ft_sitl.autopilot.params import PARAMS
 
 from .sitl_harness import running_sitl
+
+pytestmark = pytest.mark.e2e  # (tests/lanes.py)
 
 MAVPROXY = shutil.which("mavproxy.py", path=str(Path(sys.executable).parent))
 

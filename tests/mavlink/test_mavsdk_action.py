@@ -10,6 +10,8 @@ from mavsdk.asyncio.plugins.telemetry import TelemetryAsync
 from .mavsdk_util import connect, first
 from .sitl_harness import running_sitl
 
+pytestmark = pytest.mark.e2e  # (tests/lanes.py)
+
 
 def test_arm_takeoff_goto_hold_rtl_land_with_telemetry():
     async def fly():

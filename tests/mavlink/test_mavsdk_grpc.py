@@ -11,6 +11,8 @@ from mavsdk_grpc.offboard import PositionNedYaw, VelocityNedYaw
 from .mavsdk_util import first
 from .sitl_harness import running_sitl
 
+pytestmark = pytest.mark.e2e  # (tests/lanes.py)
+
 
 def test_grpc_api_takeoff_offboard_mission_params_land():
     async def fly():

@@ -15,6 +15,8 @@ from ft_sitl.autopilot.params import ParamSet
 from .mavsdk_util import connect, first
 from .sitl_harness import running_sitl
 
+pytestmark = pytest.mark.e2e  # (tests/lanes.py)
+
 INSTANCE = 43  # ports of PX4 SITL instance 43 (API 14583), clear of other tests
 
 

@@ -15,6 +15,8 @@ from ft_sitl.autopilot.params import PARAMS
 from .mavsdk_util import connect, first
 from .sitl_harness import running_sitl
 
+pytestmark = pytest.mark.e2e  # (tests/lanes.py)
+
 LAT0, LON0 = 47.397742, 8.545594
 M_PER_DEG_LAT = 111195.0
 

@@ -18,6 +18,8 @@ from mavsdk.plugins.offboard import (
 from .mavsdk_util import connect, first
 from .sitl_harness import running_sitl
 
+pytestmark = pytest.mark.e2e  # (tests/lanes.py)
+
 
 async def pos_ned(tel):
     return (await first(tel.subscribe_position_velocity_ned())).position

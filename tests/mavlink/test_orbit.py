@@ -19,6 +19,8 @@ from .mavsdk_util import connect, first
 from .sitl_harness import running_sitl
 from .test_pymavlink_and_robustness import client, wait_msg
 
+pytestmark = pytest.mark.e2e  # (tests/lanes.py)
+
 INSTANCE = 63  # (ports of its own: a test's leftover client cannot starve the next)
 
 LAT0, LON0 = 47.397742, 8.545594

@@ -13,6 +13,8 @@ from ft_sitl.autopilot.params import PARAMS
 from .sitl_harness import running_sitl
 from .test_pymavlink_and_robustness import client, wait_msg
 
+pytestmark = pytest.mark.e2e  # (tests/lanes.py)
+
 #: instance 7 (ports 14587 and 14547): clear of the other MAVLink tests' instances
 BASE = 7
 INT32, REAL32 = mav.MAV_PARAM_TYPE_INT32, mav.MAV_PARAM_TYPE_REAL32

@@ -17,6 +17,8 @@ from ft_sitl.scenarios.families import build_scenario
 from .mavsdk_util import connect, first
 from .sitl_harness import running_sitl
 
+pytestmark = pytest.mark.e2e  # (tests/lanes.py)
+
 
 def test_mavsdk_flight_into_a_tree_crashes_then_a_reboot_respawns():
     sc = build_scenario("forest", 2)

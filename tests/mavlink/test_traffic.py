@@ -4,6 +4,7 @@ receiver's reports so), streamed on both links and recorded in the telemetry log
 import time
 
 import numpy as np
+import pytest
 from pymavlink import mavutil
 from pymavlink.dialects.v20 import common as mav
 
@@ -15,6 +16,8 @@ from ft_sitl.scenarios.io import load_scenario
 from ft_sitl.sim.fleet import Fleet
 
 from .sitl_harness import PLATFORM, running_sitl
+
+pytestmark = pytest.mark.e2e  # (tests/lanes.py)
 
 INSTANCE = 66  # (ports of its own)
 GEO = frames.GeoReference(*frames.PX4_SITL_HOME)

@@ -15,6 +15,8 @@ from .sitl_harness import running_sitl
 from .test_pymavlink_and_robustness import ack_of, wait_msg
 from .test_pymavlink_and_robustness import client as pymavlink_client
 
+pytestmark = pytest.mark.e2e  # (tests/lanes.py)
+
 INSTANCE = 30
 API_PORT = 14540 + INSTANCE  # where the vehicle's API link sends (MAVSDK's udpin port)
 VEHICLE_PORT = 14580 + INSTANCE  # where it listens

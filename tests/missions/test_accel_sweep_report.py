@@ -89,6 +89,7 @@ def test_a_spec_names_its_condition():
     assert math.isnan(acc) and gains == "bandwidth"
 
 
+@pytest.mark.slow
 def test_the_report_is_written(tmp_path):
     assert report.main([str(V1), str(V4), "--out", str(tmp_path)]) == 0
     text = (tmp_path / "summary.md").read_text()

@@ -34,6 +34,7 @@ timeout_s = 6.0
 """
 
 
+@pytest.mark.e2e
 def test_every_trial_flies_in_every_wind_with_one_seed(yard, tmp_path, cli_env):
     path = campaign_file(yard.parent, "windy.toml", WINDY)
     c = load_campaign(path)
@@ -201,6 +202,7 @@ timeout_s = 12.0
 """
 
 
+@pytest.mark.e2e
 def test_perception_is_an_axis_that_reruns_and_is_refused_over_mavlink(yard, tmp_path,
                                                                        cli_env):
     c = load_campaign(campaign_file(yard.parent, "perceiving.toml", PERCEIVING))
@@ -241,6 +243,7 @@ timeout_s = 6.0
 """
 
 
+@pytest.mark.e2e
 def test_the_estimator_is_an_axis_the_flight_judged_on_the_truth_and_reruns(yard, tmp_path,
                                                                             cli_env):
     c = load_campaign(campaign_file(yard.parent, "estimating.toml", ESTIMATING))
@@ -386,6 +389,7 @@ timeout_s = 8.0
 """
 
 
+@pytest.mark.e2e
 def test_movers_are_an_axis_rows_record_them_the_report_plots_them_and_they_rerun(
         yard, tmp_path, cli_env):
     c = load_campaign(campaign_file(yard.parent, "moving.toml", MOVING))

@@ -436,6 +436,7 @@ def _run_until_rows(campaign, out, n, env) -> subprocess.Popen:
     return proc
 
 
+@pytest.mark.e2e
 def test_a_killed_campaign_resumes_to_the_uninterrupted_result(tmp_path, cli_env, plugins):
     campaign = _resume_dir(tmp_path)
     out = tmp_path / "killed"
@@ -492,6 +493,7 @@ def test_a_killed_campaign_resumes_to_the_uninterrupted_result(tmp_path, cli_env
     assert trials.read_bytes() == before
 
 
+@pytest.mark.e2e
 def test_a_terminated_campaign_records_its_run_and_keeps_its_rows(tmp_path, cli_env, plugins):
     """SIGTERM (kill, a batch system's time limit) stops a campaign as Ctrl-C does: exit
     130 with a message, the workers gone, every finished row kept, and runs.json records
@@ -592,6 +594,7 @@ def killer_run(tmp_path_factory, cli_env):
     return proc, read_jsonl(root / "out" / "trials.jsonl")
 
 
+@pytest.mark.e2e
 def test_a_worker_killing_navigator_is_recorded_and_the_campaign_goes_on(killer_run):
     proc, rows = killer_run
     assert proc.returncode == 0, proc.stderr
@@ -608,6 +611,7 @@ def test_a_worker_killing_navigator_is_recorded_and_the_campaign_goes_on(killer_
                                                                  "hover": 2}
 
 
+@pytest.mark.e2e
 def test_trials_next_to_a_worker_killing_navigator_keep_their_outcome(killer_run):
     _, rows = killer_run
     innocent = {(r["algorithm"], r["trial"]): r["reason"] for r in rows
@@ -747,6 +751,7 @@ def test_every_file_is_replaced_durably(tmp_path, monkeypatch):
     assert ("fsync", str(out / "trials.jsonl")) in events
 
 
+@pytest.mark.e2e
 def test_a_directory_that_lost_campaign_json_resumes_only_its_own_campaign(tmp_path, cli_env):
     mine = _store_campaign(tmp_path, name="mine")
     out = tmp_path / "out"
@@ -796,6 +801,7 @@ def test_a_directory_that_lost_campaign_json_resumes_only_its_own_campaign(tmp_p
         run_campaign(other, out, progress=False)
 
 
+@pytest.mark.e2e
 def test_a_damaged_line_is_reported_and_its_trial_flown_again_once(tmp_path, cli_env):
     path = _store_campaign(tmp_path, trials=3)
     out = tmp_path / "out"
@@ -829,6 +835,7 @@ def test_a_damaged_line_is_reported_and_its_trial_flown_again_once(tmp_path, cli
     assert list(df["trial_id"]).count(lost) == 1
 
 
+@pytest.mark.e2e
 def test_a_bad_trial_wall_budget_is_one_error_line_from_the_cli(tmp_path, cli_env):
     path = _store_campaign(tmp_path)
     for bad in ("abc", "0"):
@@ -840,6 +847,7 @@ def test_a_bad_trial_wall_budget_is_one_error_line_from_the_cli(tmp_path, cli_en
     assert not (tmp_path / "out").exists()
 
 
+@pytest.mark.e2e
 def test_a_bad_navrl_checkpoint_variable_is_one_error_line_from_the_cli(tmp_path, cli_env):
     navrl = campaign_file(tmp_path, "navrl.toml", STORE.format(name="n", trials=1, seed=1)
                           .replace('["straight"]', '["navrl"]'))

@@ -31,6 +31,8 @@ from ft_sitl.provenance import code_digest
 from tests.missions.conftest import EXE, campaign_file, read_jsonl, run_exe, write_yard
 from tests.missions.test_campaign import WALL_CLOCK, same
 
+pytestmark = pytest.mark.e2e  # (tests/lanes.py)
+
 DASK = Path(sys.executable).parent / "dask"
 
 SPIN = """\

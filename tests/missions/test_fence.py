@@ -129,6 +129,7 @@ timeout_s = 6.0
 """
 
 
+@pytest.mark.e2e
 def test_a_fence_axis_gives_rows_that_carry_the_fence_and_rerun_bit_for_bit(yard, tmp_path,
                                                                            cli_env):
     c = load_campaign(campaign_file(yard.parent, "fenced.toml", FENCED))

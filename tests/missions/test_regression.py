@@ -82,6 +82,7 @@ def test_success_that_falls_with_the_footprint_is_read_as_falling():
     assert reg.reading(fit, "footprint_m").startswith("success falls with footprint: odds x")
 
 
+@pytest.mark.slow
 def test_without_any_dependence_the_interval_covers_1_about_95_percent_of_the_time():
     # the Wald intervals are calibrated: 60 tables with success independent of everything
     covered = {c: 0 for c in ("twr_max", "alpha_xy_max", "alpha_z_max", "footprint_m")}

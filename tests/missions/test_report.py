@@ -17,6 +17,8 @@ from ft_sitl.missions.results import COLUMNS, REASONS, to_frame
 from ft_sitl.physics.catalog import catalog
 from ft_sitl.scenarios.families import CATEGORY, FAMILIES
 
+pytestmark = pytest.mark.slow  # campaign reports: matplotlib figures, seconds each
+
 FIGURES = ("success_by_family", "success_vs_indicators", "success_partial_dependence",
            "platform_grid", "composite_score", "failures_by_algorithm", "failures_by_family")
 META = {"code_version": "0.1.0+g1234abc", "machine": {"cpu_model": "Test CPU 9000",

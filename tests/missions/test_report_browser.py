@@ -21,6 +21,8 @@ from ft_sitl.missions.results import to_frame
 from ft_sitl.scenarios.families import FAMILIES
 from tests.missions.test_report import META, SPEC, _real_platforms, _rows
 
+pytestmark = pytest.mark.e2e  # (tests/lanes.py)
+
 WIDTH = 1400
 ALGORITHMS = ["ego", "fast", "navrl", "pgo", "straight"]
 

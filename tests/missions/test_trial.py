@@ -705,6 +705,7 @@ def test_a_spec_of_an_unknown_protocol_version_is_refused_by_name(version):
         TrialSpec.from_dict(doc)
 
 
+@pytest.mark.slow
 def test_a_navigators_map_at_navigation_start_holds_what_it_saw_on_the_approach():
     """Protocol 3: the navigator is reset before arming and observes the approach, so its
     map at the first navigation step already holds the trees seen on the way (in protocol
@@ -764,6 +765,7 @@ def test_one_protocol_acceleration_limit_for_every_planner():
         Limits(max_acc_m_s2=-1.0)
 
 
+@pytest.mark.slow
 def test_navigators_keep_their_platforms_footprint_from_protocol_4():
     """Protocol 4: the task carries the platform's footprint; each planner's map is
     inflated by it (rounded up to whole voxels, as the originals' obstacles_inflation) and
@@ -823,6 +825,7 @@ def test_the_vehicles_half_span_is_its_bodys_from_protocol_5_its_spheres_before(
         vehicle_half_span_m(99, big)
 
 
+@pytest.mark.slow
 def test_protocol_5_flies_the_vehicle_body_and_tells_its_half_span():
     """Protocol 5: the guard checks the body (central box and rotor disks) inside the
     bounding sphere, the row's clearance is the body's, and the footprint a navigator

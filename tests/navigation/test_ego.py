@@ -24,6 +24,7 @@ def test_registered_with_parameters():
         camera_config("kinect", None, None, None)
 
 
+@pytest.mark.slow
 def test_flies_a_forest_configuration_to_the_goal():
     out = run_trial(TrialSpec(algorithm="ego", platform=AGILE, family="forest",
                               scenario_index=1), record=True)

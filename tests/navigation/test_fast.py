@@ -282,6 +282,7 @@ def test_gives_up_after_repeated_identical_failures():
     assert all("no path" in log["failed"] for log in nav.plan_log)
 
 
+@pytest.mark.slow
 def test_flies_a_forest_configuration_to_the_goal():
     # (configuration 2: under protocol 3 configuration 1 ends on tree 26 at 3.9 m/s; with
     # its acceleration limit at 2 m/s^2 or its camera at 15 Hz it reaches the goal, a pass

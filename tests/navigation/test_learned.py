@@ -168,6 +168,7 @@ def test_it_turns_to_the_goal_then_holds_that_heading():
     env.close()
 
 
+@pytest.mark.slow
 def test_it_flies_a_benchmark_trial_without_the_training_stack(monkeypatch):
     for name in ("torch", "stable_baselines3"):  # not importable while it flies
         monkeypatch.setitem(sys.modules, name, None)

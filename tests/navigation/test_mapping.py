@@ -187,6 +187,7 @@ def _person_leaving(early_stop: bool):
     return m, occupied, np.array(trace)
 
 
+@pytest.mark.slow
 def test_a_person_walking_out_of_the_view_is_cleared_by_the_misses_the_map_predicts():
     """With every ray traced in full, each voxel the standing person saturated is free
     misses_to_free() frames (2) after its first miss, and all get their misses once it has

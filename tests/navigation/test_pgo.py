@@ -74,6 +74,7 @@ PILLAR = _world(pillars=[(5.0, 0.0, 0.5)])
 
 
 # ---- the roadmap -------------------------------------------------------------------------
+@pytest.mark.slow
 def test_the_roadmap_goes_both_ways_around_a_pillar():
     for seed in (0, 1):
         found = find_topo_paths(S, E, [S], [E], PILLAR, np.random.default_rng(seed))
@@ -148,6 +149,7 @@ def _straight(speed=3.0, a=(0.0, 0.0, 1.5), b=(7.0, 0.0, 1.5)):
     return UniformBSpline.fit(pts, dt, *derivs), resample, derivs
 
 
+@pytest.mark.slow
 def test_path_guided_optimisation_avoids_the_pillar():
     grid = _world(pillars=[(3.5, 0.0, 0.5)])
     init, resample, derivs = _straight()
@@ -364,6 +366,7 @@ def test_never_commands_nan():
         nav.step(obs_at(0.01))
 
 
+@pytest.mark.slow
 def test_flies_a_forest_configuration_to_the_goal():
     nav = PgoPlanner()
     row = run_trial(TrialSpec(algorithm="straight", platform=AGILE, family="forest",

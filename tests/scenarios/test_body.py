@@ -129,6 +129,7 @@ def test_passing_closer_than_the_bounding_sphere_but_clear_of_the_body():
     assert guard.clearance_bound(0) <= c + 1e-9
 
 
+@pytest.mark.slow
 def test_guard_first_body_contact_is_the_first_touching_step():
     """The kernel's body anchor (translation plus rotation bound) never skips a touching
     pose: its first contact is the first recorded step whose body touches, found by

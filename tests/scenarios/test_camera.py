@@ -409,6 +409,7 @@ def test_one_instance_per_piece_sees_the_same_surfaces(family, version):
     assert np.sum(~((la == lb) | (np.isinf(la) & np.isinf(lb)))) <= 1
 
 
+@pytest.mark.slow
 def test_a_mesh_of_more_pieces_than_max_instances_is_one_scene():
     """Perlin version 2 (~40,000 boxes) is built as one Embree scene, not as one instance
     per box, and its frames are the one-scene camera's, pixel for pixel."""

@@ -75,6 +75,7 @@ def test_budget_rejects_bad_values(bad):
         FlightBudget(bad, 3.0, 90.0)
 
 
+@pytest.mark.slow
 def test_hand_built_configuration(gap_spec):
     sc = load_scenario(gap_spec)
     d = measure_difficulty(sc, BIG, BUDGET)
@@ -180,7 +181,9 @@ def test_the_cache(tmp_path, gap_spec):
     assert cached_difficulty(sc, BIG, BUDGET, None).path_m == first.path_m
 
 
-@pytest.mark.parametrize("family,index,version", [("maze", 2, None), ("perlin", 3, None),
+@pytest.mark.parametrize("family,index,version", [("maze", 2, None),
+                                                  pytest.param("perlin", 3, None,
+                                                               marks=pytest.mark.slow),
                                                   ("sudden_drop", 4, None),
                                                   ("random_angle_cylinder", 5, None)])
 def test_family_configurations(family, index, version):

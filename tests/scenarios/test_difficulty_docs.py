@@ -40,6 +40,7 @@ def test_the_tables_are_the_measurements(measured):
         assert (DOCS / "img" / f"difficulty-{family}.png").stat().st_size > 20_000
 
 
+@pytest.mark.slow
 def test_the_measurements_are_of_todays_configurations(measured):
     for family, entries in measured["families"].items():
         sc = build_scenario(family, 1, measured["seed"])

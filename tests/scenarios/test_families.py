@@ -45,7 +45,19 @@ from ft_sitl.scenarios.solvability import (
 
 R_MAX = max(p.collision_radius_m for p in catalog().values())
 INDICES = range(1, 11)
-ALL = [(f, i) for f in FAMILIES for i in INDICES]
+
+
+def perlin_slow(cases):
+    """Parameters of a test over families; Perlin's take seconds each to build and to
+    solve, so they are in the slow lane (tests/lanes.py)."""
+    def case(c):
+        values = c if isinstance(c, tuple) else (c,)
+        return pytest.param(*values, marks=pytest.mark.slow) if values[0] == "perlin" else c
+
+    return [case(c) for c in cases]
+
+
+ALL = perlin_slow([(f, i) for f in FAMILIES for i in INDICES])
 
 # family: (width, length, ceiling, category) -- benchmark-protocol.md, paper Sec. III-B
 PAPER = {
@@ -68,6 +80,7 @@ def test_largest_platform_radius():
     assert 0.38 < R_MAX < 0.39
 
 
+@pytest.mark.slow
 def test_registry_is_the_papers_seven_families():
     assert list(FAMILIES) == list(PAPER)
     for name, fn in FAMILIES.items():
@@ -124,7 +137,7 @@ def test_solvable_for_the_largest_platform(family, index):
     assert np.all(path <= sc.bounds_max - R_MAX + 1e-9)
 
 
-@pytest.mark.parametrize("family,index", [(f, i) for f in FAMILIES for i in (1, 10)])
+@pytest.mark.parametrize("family,index", perlin_slow([(f, i) for f in FAMILIES for i in (1, 10)]))
 def test_solvable_for_the_largest_body_at_the_start_yaw(family, index):
     """Protocol 5's vehicle is its body: the largest platform's, held level at the start
     yaw, has a path; an exact fcl check of the body along it confirms the grid."""
@@ -151,7 +164,7 @@ def test_narrow_gap_needs_the_largest_body_along_the_passage():
     assert body_path(sc, big.body(), yaws_deg=(45.0,)) is None
 
 
-@pytest.mark.parametrize("family", list(FAMILIES))
+@pytest.mark.parametrize("family", perlin_slow(list(FAMILIES)))
 def test_deterministic(family):
     a, b = built(family, 4), build_scenario(family, 4, 0)
     assert a.mesh_digest() == b.mesh_digest()
@@ -172,6 +185,7 @@ def test_no_global_rng():
     assert build_scenario("forest", 2, 7).mesh_digest() == a.mesh_digest()
 
 
+@pytest.mark.slow
 def test_other_seeds_build_and_are_solvable():
     for family in FAMILIES:
         sc = build_scenario(family, 7, 3)
@@ -641,6 +655,7 @@ def test_maze_v2_gets_harder_with_the_index():
     assert all(lo <= w <= hi for w, (lo, hi) in zip(waste, bands))
 
 
+@pytest.mark.slow
 def test_perlin_version_1():
     for i in INDICES:
         sc = build_scenario("perlin", i, version=1)
@@ -850,6 +865,7 @@ def test_segment_mesh_distance_cutoff():
 V1_DIGESTS = Path(__file__).parent / "data" / "generator_v1_digests.json"
 
 
+@pytest.mark.slow
 def test_every_family_rebuilds_its_version_1_configurations_byte_for_byte():
     """Results written with a family's first generator stay reproducible after the family
     gets a newer one: version 1 of every configuration (seed 0) builds the mesh it built
@@ -863,6 +879,7 @@ def test_every_family_rebuilds_its_version_1_configurations_byte_for_byte():
         assert sc.mesh_digest() == digest, key
 
 
+@pytest.mark.slow
 def test_a_family_builds_its_newest_version_by_default_and_refuses_unknown_ones():
     for name, fam in REGISTRY.items():
         assert fam.version == max(fam.versions) and fam.schema is fam.versions[fam.version][0]

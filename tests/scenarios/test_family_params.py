@@ -78,7 +78,8 @@ def test_provenance_parameters_are_unchanged(key):
                                                   PINNED_PARAMETERS[key].values()]
 
 
-@pytest.mark.parametrize("family", list(REGISTRY))
+@pytest.mark.parametrize("family", [pytest.param(f, marks=pytest.mark.slow) if f == "perlin"
+                                    else f for f in REGISTRY])  # (a Perlin world: seconds)
 def test_provenance_records_every_declared_parameter_in_order(family):
     fam = REGISTRY[family]
     prov = build_scenario(family, 2).provenance

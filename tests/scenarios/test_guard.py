@@ -44,6 +44,7 @@ def world_mesh(world):
 
 
 # --- the distance grid ---------------------------------------------------------------------
+@pytest.mark.slow
 @pytest.mark.parametrize("family", ["forest", "perlin", "maze", "random_angle_cylinder"])
 def test_grid_is_a_lower_bound_of_the_true_distance(family):
     sc = build_scenario(family, 4)
@@ -113,6 +114,7 @@ def test_flying_past_close_by_is_not_a_collision():
     assert guard.trips > 0  # it was close enough to need the exact check
 
 
+@pytest.mark.slow
 def test_guard_matches_the_monitor_on_recorded_flights():
     """The kernel's first contact is the step the exact monitor finds on the same flight."""
     sc = build_scenario("perlin", 6)
@@ -215,6 +217,7 @@ def fly_into_first_tree():
     return sc, fleet, path
 
 
+@pytest.mark.slow
 def test_fleet_crash_stops_motors_names_the_obstacle_and_the_vehicle_falls():
     sc, fleet, _ = fly_into_first_tree()
     cmd = fleet.commanders[0]
@@ -242,6 +245,7 @@ def arming_denied(cmd):
     return cmd.arm().name != "ACCEPTED"
 
 
+@pytest.mark.slow
 def test_respawn_after_a_crash():
     sc, fleet, _ = fly_into_first_tree()
     fleet.run(2.0)

@@ -219,6 +219,7 @@ def test_bad_listed_movers_are_refused_by_item(item, says):
 
 
 # --- trials ----------------------------------------------------------------------------------
+@pytest.mark.slow
 def test_a_trial_with_movers_reruns_identically_and_a_static_one_is_unchanged():
     base = dict(algorithm="straight", platform=PLATFORM, family="forest", scenario_index=3,
                 trial=1, seed=3)

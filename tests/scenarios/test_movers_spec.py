@@ -133,6 +133,7 @@ def test_spec_file_movers_and_a_dynamic_suffix_are_not_both_taken(tmp_path):
 
 # --- the vehicles of a scenario meet its movers ---------------------------------------------
 
+@pytest.mark.slow
 def test_a_fleet_built_in_a_scenario_checks_its_movers():
     sc = scenario_from_spec("forest:3+dynamic(count=4)")
     fleet = Fleet([get_platform(PLATFORM)], spawn=[sc.takeoff], scenario=sc)
@@ -162,6 +163,7 @@ def test_a_bridge_vehicle_is_knocked_down_by_a_mover(tmp_path):
     assert v.events[-1].kind == "mover_collision"
 
 
+@pytest.mark.e2e
 def test_cli_bad_dynamic_suffix_is_one_line(tmp_path):
     assert EXE, "the ft-sitl console script is not installed next to this Python"
     bad = subprocess.run([EXE, "sitl", "--scenario", "forest:3+dynamic(count=8,sped=1)"],

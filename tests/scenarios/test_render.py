@@ -141,6 +141,7 @@ def test_top_view_fills_obstacle_footprints(tmp_path):
     assert v.min() > 245  # open floor stays white
 
 
+@pytest.mark.slow
 def test_largest_family_renders(tmp_path):
     # (how long it takes is measured in bench/bench_scenarios.py, not asserted here)
     sc = build_scenario("perlin", 1, 0)

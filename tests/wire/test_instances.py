@@ -29,6 +29,7 @@ def test_a_trial_skips_held_numbers_and_a_second_holder_is_refused_by_name():
         pass
 
 
+@pytest.mark.e2e
 def test_another_process_holding_the_number_is_waited_for_then_released():
     hold = subprocess.Popen([sys.executable, "-c", (
         "import sys, time\n"

@@ -8,6 +8,7 @@ import sys
 from pathlib import Path
 
 import numpy as np
+import pytest
 import trimesh
 
 from ft_sitl.bus.client import BusClient
@@ -15,6 +16,8 @@ from ft_sitl.missions.trial import TrialSpec, run_trial
 from ft_sitl.missions.trial_wire import run_trial_wire, worker_bus
 
 from ..bus.conftest import Mosquitto
+
+pytestmark = pytest.mark.e2e  # (tests/lanes.py)
 
 AGILE = "0.98kg-EGO Planner DIY"
 FT_SITL = str(Path(sys.executable).parent / "ft-sitl")

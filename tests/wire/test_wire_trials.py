@@ -12,6 +12,7 @@ import time
 from pathlib import Path
 
 import numpy as np
+import pytest
 
 from ft_sitl.bus.client import BusClient
 from ft_sitl.missions.campaign import Transport, run_campaign
@@ -22,6 +23,8 @@ from ft_sitl.missions.trial import TrialSpec
 from ft_sitl.missions.trial_wire import run_trial_wire, worker_bus
 
 from ..bus.conftest import Mosquitto, free_port
+
+pytestmark = pytest.mark.e2e  # (tests/lanes.py)
 
 AGILE = "0.98kg-EGO Planner DIY"
 REPO = Path(__file__).resolve().parents[2]
