@@ -92,9 +92,22 @@ def pytest_collection_modifyitems(items):
 # process, a server on a given instance, clients listening on 14540 + N) go to one worker
 # together: two of them at once would take the same ports. Trials over MAVLink pick free
 # instance numbers under a machine-wide lock (ft_sitl.mavlink.instances) and the bridge
-# tests use instance numbers of their own file, so those need nothing more. (xdist's own
-# `--dist loadgroup` cannot do this under pytest 9.2: it renames the tests through an
-# attribute pytest no longer reads.)
+# tests use instance numbers of their own file, so those need nothing more.
+#
+# This overrides a private method of xdist's (LoadScopeScheduling._split_scope), which is
+# why pyproject pins pytest-xdist below 4; tests/test_parallel.py drives the scheduler
+# on a made-up collection and fails if the grouping stops happening. What xdist supports
+# does not do it (tried 2026-12-07 with pytest 9.2.0 and pytest-xdist 3.8.0, the newest
+# on PyPI): `--dist loadgroup` with `@pytest.mark.xdist_group(name=...)` (also added from
+# a collection hook) groups nothing: xdist marks a test's group by assigning
+# `item._nodeid`, which pytest 9.2 no longer reads (node ids are `Node._id`), so the
+# grouped tests of four files were spread over both workers like ungrouped ones
+# (pytest-xdist issue 1386; the fix, PR 1388, is unreleased); and it would run every
+# ungrouped test on its own, not a file whole. `--dist loadfile` keeps a file whole but
+# puts different files on different workers. `--dist loadscope` is by file or class,
+# `worksteal` and `load` by test. Relying on the ports' lock instead is not enough: trials
+# and the harness wait for a held number, but `ft-sitl sitl` (tests/cli, tests/wire)
+# refuses one, so it would fail while the other worker's harness holds it.
 FIXED_PORTS_GROUP = "sitl-ports"
 FIXED_PORTS = ("tests/mavlink/", "tests/wire/", "tests/cli/test_cli.py",
                "tests/missions/test_axes.py", "tests/scenarios/test_movers_spec.py")

@@ -3,10 +3,9 @@ ports share one xdist worker, every other file is run whole by one."""
 
 import re
 from pathlib import Path
+from types import SimpleNamespace
 
-from xdist.scheduler import LoadScopeScheduling
-
-from .conftest import FIXED_PORTS, FIXED_PORTS_GROUP, group_of
+from .conftest import FIXED_PORTS, FIXED_PORTS_GROUP, group_of, pytest_xdist_make_scheduler
 
 TESTS = Path(__file__).parent
 # what serves or flies on fixed SITL ports: the harness, a server, an `ft-sitl sitl` process
@@ -19,8 +18,60 @@ def test_files_are_grouped_whole_and_fixed_port_files_together():
     assert group_of("tests/cli/test_cli.py::test_z") == FIXED_PORTS_GROUP
     assert group_of("tests/cli/test_cli_scenarios.py::test_z") == "tests/cli/test_cli_scenarios.py"
     assert group_of("tests/physics/test_motor.py::test_a[1]") == "tests/physics/test_motor.py"
-    # the scheduler hook overrides this method of xdist's: it must still be there
-    assert callable(getattr(LoadScopeScheduling, "_split_scope", None))
+
+
+class _Worker:
+    """What xdist's scheduler sees of a worker: it is sent indices into the collection."""
+
+    def __init__(self, name: str):
+        self.gateway = SimpleNamespace(id=name)
+        self.shutting_down = False
+        self.queue: list[int] = []
+
+    def send_runtest_some(self, indices):
+        self.queue.extend(indices)
+
+    def shutdown(self):
+        self.shutting_down = True
+
+
+def test_the_installed_xdist_schedules_by_our_groups():
+    """The scheduler the conftest hook makes, driven as xdist's controller drives it (two
+    workers, tests reported done one at a time): it overrides a private method of xdist's,
+    so this fails if a pytest-xdist release stops calling it or schedules otherwise."""
+    collection = [
+        "tests/mavlink/test_orbit.py::test_a", "tests/mavlink/test_orbit.py::test_b",
+        "tests/physics/test_motor.py::test_c[1]", "tests/physics/test_motor.py::test_c[2]",
+        "tests/wire/test_wire_trials.py::test_d[x::y]",
+        "tests/scenarios/test_io.py::test_e", "tests/scenarios/test_io.py::test_f",
+        "tests/cli/test_cli.py::test_g", "tests/cli/test_cli_scenarios.py::test_h",
+        "tests/bus/test_codec.py::test_i", "tests/missions/test_axes.py::test_j",
+        "tests/bus/test_codec.py::test_k",
+    ]
+    config = SimpleNamespace(getvalue=lambda name: ["2*popen"] if name == "tx" else None,
+                             option=SimpleNamespace(loadscopereorder=True))
+    sched = pytest_xdist_make_scheduler(config, None)
+    workers = [_Worker("gw0"), _Worker("gw1")]
+    for w in workers:
+        sched.add_node(w)
+    for w in workers:
+        sched.add_node_collection(w, collection)
+    sched.schedule()
+    ran: dict[str, str] = {}
+    while any(w.queue for w in workers):
+        for w in workers:
+            if w.queue:
+                i = w.queue.pop(0)
+                ran[collection[i]] = w.gateway.id
+                sched.mark_test_complete(w, i)
+    assert sorted(ran) == sorted(collection) and sched.tests_finished
+    by_group: dict[str, set] = {}
+    for nodeid, worker in ran.items():
+        by_group.setdefault(group_of(nodeid), set()).add(worker)
+    assert all(len(ws) == 1 for ws in by_group.values()), by_group
+    fixed = {n for n in collection if n.startswith(FIXED_PORTS)}
+    assert len(fixed) == 5 and len({ran[n] for n in fixed}) == 1
+    assert set(ran.values()) == {"gw0", "gw1"}  # and it is a parallel run
 
 
 def test_every_file_on_fixed_ports_is_in_the_group():
