@@ -148,7 +148,10 @@ def requested(environ: MutableMapping[str, str] | None = None) -> str:
     return level
 
 
-#: what :func:`pin` set in ``os.environ`` (a child at another level must not inherit it)
+#: names the variables an ft_sitl process set (so a child knows they are not the user's)
+MARK_VAR = "FT_SITL_PINNED_VARS"
+#: what ft_sitl set in ``os.environ``, here or in a parent (a child at another level must
+#: not inherit it)
 _SET: dict[str, str] = {}
 
 
@@ -156,12 +159,19 @@ def pin(environ: MutableMapping[str, str] | None = None,
         flags: set[str] | None = None) -> dict[str, str]:
     """Set the settings above in ``environ`` (``os.environ``) where unset; returns what
     was set. The level is ``FT_SITL_ISA``'s; on a processor without x86-64-v3 nothing but
-    the threads is pinned (with a warning), and :func:`in_force` says ``host``."""
+    the threads is pinned (with a warning), and :func:`in_force` says ``host``. Variables
+    a parent ft_sitl process set (:data:`MARK_VAR`) count as unset, so a child asked for
+    ``host`` drops the parent's pins."""
     if environ is None:
         done = _pin(os.environ, flags)
-        _SET.update(done)
+        _SET.clear()
+        _SET.update({k: os.environ[k] for k in _marked(os.environ) if k in os.environ})
         return done
     return _pin(environ, flags)
+
+
+def _marked(environ: MutableMapping[str, str]) -> set[str]:
+    return {v for v in environ.get(MARK_VAR, "").split(",") if v}
 
 
 def chosen_by_user(environ: MutableMapping[str, str] | None = None) -> bool:
@@ -170,36 +180,39 @@ def chosen_by_user(environ: MutableMapping[str, str] | None = None) -> bool:
 
 
 def child_env(level: str) -> dict[str, str]:
-    """This process's environment for a child that computes at ``level``: what pin() set
-    here is left out, so the child pins afresh; what the user set stays."""
+    """This process's environment for a child that computes at ``level``: what ft_sitl set
+    is left out, so the child pins afresh; what the user set stays."""
     requested({LEVEL_VAR: level})
-    env = {k: v for k, v in os.environ.items() if k not in _SET}
+    env = {k: v for k, v in os.environ.items() if k not in _SET and k != MARK_VAR}
     env[LEVEL_VAR] = level
     return env
 
 
 def _pin(environ: MutableMapping[str, str], flags: set[str] | None) -> dict[str, str]:
+    inherited = _marked(environ)
+    level = requested(environ)
+    flags = cpu_flags() if flags is None else flags
+    pinned = level == PINNED and V3_FLAGS <= flags
+    if not pinned:  # a parent's pins are not this process's
+        for var in inherited & set(v3_settings()) - {CORETYPE_VAR}:
+            environ.pop(var, None)
     done = {}
     for var in THREAD_VARS:
         if var not in environ:
             environ[var] = done[var] = "1"
-    level = requested(environ)
-    flags = cpu_flags() if flags is None else flags
-    if level == PINNED and not V3_FLAGS <= flags:
-        if flags:  # (no /proc/cpuinfo: not x86 Linux, nothing to say)
-            warnings.warn(f"this processor lacks {', '.join(sorted(V3_FLAGS - flags))} of "
-                          f"x86-64-v3: numeric libraries are not pinned, and rows made here "
-                          f"need not equal rows made elsewhere", RuntimeWarning, stacklevel=2)
-        if {"avx2", "fma"} <= flags and CORETYPE_VAR not in environ:
-            environ[CORETYPE_VAR] = done[CORETYPE_VAR] = OPENBLAS_CORE
-        return done
-    if level == HOST:
-        if {"avx2", "fma"} <= flags and CORETYPE_VAR not in environ:
-            environ[CORETYPE_VAR] = done[CORETYPE_VAR] = OPENBLAS_CORE
-        return done
-    for var, value in v3_settings().items():
-        if var not in environ:
-            environ[var] = done[var] = value
+    if level == PINNED and not pinned and flags:  # (no /proc/cpuinfo: not x86 Linux)
+        warnings.warn(f"this processor lacks {', '.join(sorted(V3_FLAGS - flags))} of "
+                      f"x86-64-v3: numeric libraries are not pinned, and rows made here "
+                      f"need not equal rows made elsewhere", RuntimeWarning, stacklevel=3)
+    if pinned:
+        for var, value in v3_settings().items():
+            if var not in environ:
+                environ[var] = done[var] = value
+    elif {"avx2", "fma"} <= flags and CORETYPE_VAR not in environ:
+        environ[CORETYPE_VAR] = done[CORETYPE_VAR] = OPENBLAS_CORE
+    ours = (inherited & set(environ)) | set(done)
+    if ours:
+        environ[MARK_VAR] = ",".join(sorted(ours))
     return done
 
 

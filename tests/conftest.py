@@ -45,47 +45,6 @@ def navrl_checkpoint() -> Path:
 # opens a network socket or starts a process.
 from .lanes import pytest_runtest_call, pytest_runtest_setup  # noqa: E402, F401, I001
 
-# Marks of tests in files that others are editing: the marks belong in those files; until
-# they carry them, they are applied here by file and function name (tests/test_lanes.py
-# checks that each test is still there; one found marked in its file may leave the list).
-MARKED_HERE = {
-    "tests/test_determinism.py": {
-        "test_a_bad_level_is_refused_by_name": "e2e",  # `python -m ft_sitl` in a child
-        "test_a_fresh_import_runs_one_thread_of_the_pinned_kernels": "e2e",  # `python -c`
-        # four trials flown in children (~100 s)
-        "test_pinned_rows_are_equal_on_another_processor_and_unpinned_ones_need_not_be":
-            "e2e",
-    },
-    "tests/missions/test_cli_missions.py": {
-        "test_bad_input_from_the_installed_script": "e2e",  # the ft-sitl script
-        "test_workers_stop_when_the_campaign_process_is_killed": "e2e",  # campaign run
-        # a trial rerun in a child (`python -m ft_sitl trial rerun`)
-        "test_rerun_flies_rows_at_the_instruction_set_level_they_were_made_at": "e2e",
-        "test_run_with_limit_then_resume_with_report_and_csv": "slow",  # a campaign, a report
-        "test_report_of_a_result_directory": "slow",  # a campaign report
-    },
-    "tests/navigation/test_navrl.py": {
-        "test_install_command_makes_navrl_available": "e2e",  # the ft-sitl script
-        "test_rerun_by_the_command_matches_the_worker_row_bit_for_bit": "e2e",  # children
-        "test_real_forest_trial_succeeds_near_one_metre_per_second": "slow",  # a trial
-        "test_trial_with_movers_ends_by_the_protocol_with_each_option": "slow",  # 3 trials
-        "test_tracked_and_true_moving_obstacles_give_the_policy_similar_inputs": "slow",
-        "test_rows_of_earlier_protocols_fly_as_they_were_stored": "slow",  # a Maze trial
-        "test_in_a_static_world_the_detector_changes_nothing": "slow",  # two of them
-    },
-}
-
-
-@pytest.hookimpl(tryfirst=True)  # before `-m` deselects by marks
-def pytest_collection_modifyitems(items):
-    for item in items:
-        marks = MARKED_HERE.get(item.nodeid.split("::", 1)[0])
-        if marks:
-            mark = marks.get(getattr(item, "originalname", item.name))
-            if mark is not None:
-                item.add_marker(getattr(pytest.mark, mark))
-
-
 # Parallel runs (pytest-xdist; pyproject's addopts run `-n 2`, `-n 0` runs in this process
 # alone). Each test file is run whole by one worker, so a file's module fixtures are built
 # once. The files that serve or fly on the SITL's fixed MAVLink ports (an `ft-sitl sitl`

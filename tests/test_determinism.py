@@ -6,6 +6,8 @@ import os
 import subprocess
 import sys
 
+import pytest
+
 from ft_sitl import numeric_env
 
 PROBE = ("import json, ft_sitl, numpy, threadpoolctl; "
@@ -27,6 +29,7 @@ def test_pin_sets_only_what_is_unset():
         "NUMBA_CPU_NAME": "x86-64-v3", numeric_env.EMBREE_VAR: "isa=avx2"}
     assert env["NUMBA_CPU_FEATURES"] == numeric_env.V3_LLVM_FEATURES
     assert numeric_env.LEVEL_VAR not in env  # (so a set FT_SITL_ISA is the user's)
+    assert "NPY_DISABLE_CPU_FEATURES" not in env[numeric_env.MARK_VAR].split(",")
     env = {"OPENBLAS_CORETYPE": "Zen"}
     numeric_env.pin(env, flags=V3_HOST)
     assert env["OPENBLAS_CORETYPE"] == "Zen"
@@ -35,14 +38,31 @@ def test_pin_sets_only_what_is_unset():
 def test_host_pins_only_the_blas():
     env = {numeric_env.LEVEL_VAR: "host"}
     numeric_env.pin(env, flags=V3_HOST)
-    assert env == {numeric_env.LEVEL_VAR: "host", "OMP_NUM_THREADS": "1",
-                   "OPENBLAS_NUM_THREADS": "1", "MKL_NUM_THREADS": "1",
-                   "OPENBLAS_CORETYPE": "Haswell"}
+    blas = {"OMP_NUM_THREADS": "1", "OPENBLAS_NUM_THREADS": "1", "MKL_NUM_THREADS": "1",
+            "OPENBLAS_CORETYPE": "Haswell"}
+    assert env == {numeric_env.LEVEL_VAR: "host", **blas,
+                   numeric_env.MARK_VAR: ",".join(sorted(blas))}
 
 
+def test_a_child_asked_for_host_drops_the_pins_its_parent_set():
+    """A process started with a pinned parent's environment (an xdist worker, a campaign
+    worker) but FT_SITL_ISA=host computes at host: the parent's pins are marked as
+    ft_sitl's, not the user's. A variable the user set stays."""
+    parent = {"NPY_DISABLE_CPU_FEATURES": "AVX512_SPR"}
+    numeric_env.pin(parent, flags=V3_HOST)
+    assert parent["NUMBA_CPU_NAME"] == "x86-64-v3"
+    child = {**parent, numeric_env.LEVEL_VAR: "host"}
+    numeric_env.pin(child, flags=V3_HOST)
+    assert "NUMBA_CPU_NAME" not in child and numeric_env.EMBREE_VAR not in child
+    assert child["NPY_DISABLE_CPU_FEATURES"] == "AVX512_SPR"  # the user's
+    assert numeric_env.expected_level(child, flags=V3_HOST) == "host"
+    again = {**parent}
+    numeric_env.pin(again, flags=V3_HOST)
+    assert again == parent
+
+
+@pytest.mark.e2e  # `python -m ft_sitl` in a child
 def test_a_bad_level_is_refused_by_name(tmp_path):
-    import pytest
-
     with pytest.raises(numeric_env.NumericEnvError, match=r"FT_SITL_ISA='v4' is not a level"):
         numeric_env.pin({numeric_env.LEVEL_VAR: "v4"}, flags=V3_HOST)
     env = {**os.environ, numeric_env.LEVEL_VAR: "avx512"}
@@ -78,6 +98,7 @@ def test_the_test_process_computes_at_the_pinned_level():
         assert json.loads(software())["isa"] == "x86-64-v3"
 
 
+@pytest.mark.e2e  # `python -c` in a child
 def test_a_fresh_import_runs_one_thread_of_the_pinned_kernels():
     env = {k: v for k, v in numeric_env.child_env(numeric_env.requested()).items()
            if k not in numeric_env.THREAD_VARS + (numeric_env.CORETYPE_VAR,)}
@@ -183,6 +204,7 @@ def _fly(mode: str, level: str, tmp_path) -> dict:
     return json.loads(out.stdout.strip().splitlines()[-1])
 
 
+@pytest.mark.e2e  # four trials flown in children (~100 s)
 def test_pinned_rows_are_equal_on_another_processor_and_unpinned_ones_need_not_be(tmp_path):
     """The same trial compiled and flown in processes that see two processors: this one,
     and one that tells numba it runs on a Haswell (a target this machine can run; numpy's
@@ -245,8 +267,6 @@ def test_the_level_a_child_will_compute_at_is_read_from_its_environment():
 
 
 def test_a_dask_worker_refuses_chunks_of_a_campaign_at_another_level():
-    import pytest
-
     from ft_sitl.missions.executors import ExecutorError, dask_chunk
     from ft_sitl.provenance import code_digest
 

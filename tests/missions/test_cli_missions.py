@@ -111,6 +111,7 @@ def test_check_a_preset(capsys):
 
 
 # --- campaign run and report -----------------------------------------------------------------
+@pytest.mark.slow  # a campaign and its report
 def test_run_with_limit_then_resume_with_report_and_csv(capsys, campaign, tmp_path):
     out = tmp_path / "out"
     rc, stdout, err = cli(capsys, "campaign", "run", campaign, "--out", out, "--limit", "1",
@@ -143,6 +144,7 @@ def test_run_with_limit_then_resume_with_report_and_csv(capsys, campaign, tmp_pa
     assert rc == 0 and stdout.startswith("0 trials run, 4 already done, 4 in the campaign")
 
 
+@pytest.mark.slow  # a campaign report
 def test_report_of_a_result_directory(capsys, done, tmp_path):
     out = tmp_path / "copy"
     shutil.copytree(done, out)
@@ -392,6 +394,7 @@ def test_bad_input_is_one_line_exit_2(capsys, tmp_path, campaign, done, args, me
     assert not (tmp_path / "o").exists()
 
 
+@pytest.mark.e2e  # the ft-sitl script
 def test_bad_input_from_the_installed_script(tmp_path):
     proc = run_exe("campaign", "run", "quik", "--out", tmp_path / "o")
     assert proc.returncode == 2 and proc.stdout == ""
@@ -447,6 +450,7 @@ def _alive(pid: int) -> bool:
     return stat[stat.rindex(")") + 2:].split()[0] != "Z"
 
 
+@pytest.mark.e2e  # a campaign run
 @pytest.mark.skipif(not sys.platform.startswith("linux"), reason="PR_SET_PDEATHSIG is Linux")
 def test_workers_stop_when_the_campaign_process_is_killed(tmp_path):
     """SIGKILL leaves the campaign process no chance to stop its pool: the workers must not
@@ -511,6 +515,7 @@ def test_rerun_of_a_row_built_by_an_older_generator_rebuilds_that_scene(capsys, 
     assert "  identical to the stored result (all but wall-clock columns)" in lines
 
 
+@pytest.mark.e2e  # a trial rerun in a child
 def test_rerun_flies_rows_at_the_instruction_set_level_they_were_made_at(capsys, tmp_path,
                                                                           monkeypatch):
     """A row made before the pins (no ``isa`` in its software column) is re-run by a child

@@ -366,6 +366,7 @@ def test_without_checkpoint_navrl_is_refused_by_name_and_left_out_of_all(without
     assert any("navrl" in n and ENV_VAR in n for n in c.notes)
 
 
+@pytest.mark.e2e  # the ft-sitl script
 def test_install_command_makes_navrl_available(without_checkpoint, navrl_checkpoint, tmp_path):
     env = dict(os.environ)
     cli = [str(Path(sys.executable).parent / "ft-sitl")]
@@ -380,6 +381,7 @@ def test_install_command_makes_navrl_available(without_checkpoint, navrl_checkpo
     assert "navrl" in [a.name for a in load_campaign("paper").algorithms]
 
 
+@pytest.mark.slow  # a trial
 def test_real_forest_trial_succeeds_near_one_metre_per_second(with_checkpoint):
     row = run_trial(TrialSpec(algorithm="navrl", platform=AGILE, family="forest",
                               scenario_index=1)).row
@@ -388,6 +390,7 @@ def test_real_forest_trial_succeeds_near_one_metre_per_second(with_checkpoint):
     assert row["planner_calls"] > 0 and row["min_clearance_m"] > 0.0
 
 
+@pytest.mark.e2e  # campaign and rerun in children
 def test_rerun_by_the_command_matches_the_worker_row_bit_for_bit(navrl_checkpoint, tmp_path):
     """A NavRL trial flown by a campaign worker (one BLAS thread) and again by `ft-sitl trial
     rerun` started with no BLAS thread variables: the same row to the last bit. (With a
@@ -488,6 +491,7 @@ def _hover_beside_a_crossing_person(mode: str):
     return nav, inputs
 
 
+@pytest.mark.slow  # trials
 def test_tracked_and_true_moving_obstacles_give_the_policy_similar_inputs(with_checkpoint):
     """A person crossing 3 m ahead in plain view: once the tracker has followed it for
     0.7 s, the policy's dynamic input from the tracker matches the one from the ground
@@ -527,6 +531,7 @@ def test_truth_needs_the_ground_truth_in_the_observation(with_checkpoint):
     nav.step(Observation(**{**_obs(0.0, yaw=0.0).__dict__, "movers": ObstacleStates.empty()}))
 
 
+@pytest.mark.slow  # three trials
 @pytest.mark.parametrize("mode", ["tracked", "truth", "off"])
 def test_trial_with_movers_ends_by_the_protocol_with_each_option(with_checkpoint, mode):
     """A short Maze trial among 40 walking people: every option flies to a protocol
@@ -556,6 +561,7 @@ def _stored(trial_id: str) -> tuple[TrialSpec, dict]:
     return TrialSpec.from_dict(json.loads(stored["spec"])), stored
 
 
+@pytest.mark.slow  # a Maze trial
 def test_rows_of_earlier_protocols_fly_as_they_were_stored(with_checkpoint):
     """Before protocol 7 NavRL saw no moving obstacles: its trials fly with
     dynamic_obstacles = "off" (pinned by their protocol) and give the stored row bit for
@@ -567,6 +573,7 @@ def test_rows_of_earlier_protocols_fly_as_they_were_stored(with_checkpoint):
     assert differences(run_trial(spec).row, stored) == []
 
 
+@pytest.mark.slow  # two trials
 def test_in_a_static_world_the_detector_changes_nothing(with_checkpoint):
     """The same trial under protocol 7 ("tracked" by default): in a static world the
     detector reports nothing, so the flight and its row are those of "off"."""
