@@ -124,6 +124,29 @@ def test_lower_layers_import_alone(layer, forbidden):
     assert len(names) > 2 and not above, above
 
 
+def modules_loaded_by(module: str) -> list[str]:
+    """Every module (ft_sitl's and third-party) in sys.modules after importing ``module``
+    alone in a fresh interpreter."""
+    code = ("import importlib, json, sys\n"
+            f"importlib.import_module({module!r})\n"
+            "print(json.dumps(sorted(sys.modules)))")
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
+                         timeout=300, cwd=PKG.parent)
+    assert out.returncode == 0, out.stderr
+    return json.loads(out.stdout.strip().splitlines()[-1])
+
+
+@pytest.mark.e2e
+def test_navigator_protocol_loads_no_map():
+    """The Navigator protocol (navigation.base), which every transport imports, loads
+    neither the local map (navigation.mapping, numba kernels) nor anything importing it:
+    a task's map lives with the map."""
+    loaded = modules_loaded_by("ft_sitl.navigation.base")
+    assert "ft_sitl.navigation.base" in loaded
+    assert "ft_sitl.navigation.mapping" not in loaded, sorted(
+        m for m in loaded if m.startswith("ft_sitl."))
+
+
 def test_in_function_imports_say_why():
     """An import inside a function only where it breaks a real cost (a heavy or optional
     dependency, the command line's start-up time), with its reason in a comment on its

@@ -35,7 +35,6 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from ft_sitl.autopilot.setpoints import Setpoint
-from ft_sitl.navigation.mapping import LocalMap, MapConfig
 from ft_sitl.schema import Schema
 
 #: navigation starts once the vehicle is stable at the start waypoint: within
@@ -212,20 +211,3 @@ class Navigator:
     def step(self, obs: Observation) -> Setpoint:  # pragma: no cover - abstract
         raise NotImplementedError
 
-
-def local_map_for(task: Task, camera):
-    """The planners' local map for a task: the scenario ceiling and floor, frames of
-    ``camera`` taken at full resolution (the benchmark camera is already subsampled)."""
-
-    return LocalMap(MapConfig(skip_pixel=1, inflation_voxels=inflation_voxels(task)),
-                    task.ceiling, float(task.bounds_min[2]), camera=camera,
-                    center_m=tuple(task.start[:2]))
-
-
-def inflation_voxels(task: Task, resolution_m: float = MapConfig.resolution_m) -> int:
-    """The map's dilation radius (voxels) for a task: the footprint rounded up to whole
-    voxels, as the originals turn ``obstacles_inflation`` into their ``inflate_step``
-    (protocol 4 on); one voxel (the originals' default 0.099 m) without a footprint."""
-    if task.footprint_m is None:
-        return MapConfig.inflation_voxels
-    return max(1, math.ceil(task.footprint_m / resolution_m - 1e-9))

@@ -12,13 +12,8 @@ from dataclasses import replace
 import numpy as np
 
 from ft_sitl.autopilot.setpoints import Setpoint
-from ft_sitl.navigation.base import (
-    GiveUp,
-    Navigator,
-    Observation,
-    Task,
-    local_map_for,
-)
+from ft_sitl.navigation.base import GiveUp, Navigator, Observation, Task
+from ft_sitl.navigation.mapping import local_map_for
 from ft_sitl.scenarios.camera import CameraConfig
 from ft_sitl.schema import Param, Schema
 

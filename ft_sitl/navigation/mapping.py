@@ -123,6 +123,7 @@ from typing import NamedTuple
 import numpy as np
 from numba import njit
 
+from ft_sitl.navigation.base import Task
 from ft_sitl.scenarios.camera import CameraConfig, DepthFrame
 
 __all__ = ["FuseStats", "LocalMap", "MapConfig", "logit"]
@@ -1432,3 +1433,21 @@ class LocalMap:
         if bad:
             raise ValueError(f"points must be finite ({bad} are not)")
         return _shaped(dist, shape), grad.reshape(shape + (3,))
+
+
+def local_map_for(task: Task, camera):
+    """The planners' local map for a task: the scenario ceiling and floor, frames of
+    ``camera`` taken at full resolution (the benchmark camera is already subsampled)."""
+
+    return LocalMap(MapConfig(skip_pixel=1, inflation_voxels=inflation_voxels(task)),
+                    task.ceiling, float(task.bounds_min[2]), camera=camera,
+                    center_m=tuple(task.start[:2]))
+
+
+def inflation_voxels(task: Task, resolution_m: float = MapConfig.resolution_m) -> int:
+    """The map's dilation radius (voxels) for a task: the footprint rounded up to whole
+    voxels, as the originals turn ``obstacles_inflation`` into their ``inflate_step``
+    (protocol 4 on); one voxel (the originals' default 0.099 m) without a footprint."""
+    if task.footprint_m is None:
+        return MapConfig.inflation_voxels
+    return max(1, math.ceil(task.footprint_m / resolution_m - 1e-9))

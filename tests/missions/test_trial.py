@@ -772,8 +772,8 @@ def test_navigators_keep_their_platforms_footprint_from_protocol_4():
     NavRL's shield uses it as the agent radius. Fast-Planner on a 4.5 kg platform (0.356 m)
     in Forest 1 passed trunks 0.11 m away under protocol 3 and keeps > 0.3 m under 4."""
     from ft_sitl.missions.protocol import trial_task
-    from ft_sitl.navigation.base import inflation_voxels, local_map_for
     from ft_sitl.navigation.fast import FastPlanner
+    from ft_sitl.navigation.mapping import inflation_voxels, local_map_for
 
     big = "4.50kg-UAV 14"
     sc = load_scenario_for(TrialSpec("fast", big, "forest"))
