@@ -18,7 +18,7 @@ import pytest
 PKG = Path(__file__).resolve().parents[1] / "ft_sitl"
 #: modules directly under ft_sitl/ that every layer may use
 BASE = {"ft_sitl", "frames", "numeric_env", "jit_cache", "config", "schema", "rotations",
-        "provenance", "__version__", "G"}
+        "provenance", "mover_kinds", "__version__", "G"}
 #: what each part of the package may import besides BASE and itself
 ALLOWED = {
     "physics": set(),
@@ -145,6 +145,18 @@ def test_navigator_protocol_loads_no_map():
     assert "ft_sitl.navigation.base" in loaded
     assert "ft_sitl.navigation.mapping" not in loaded, sorted(
         m for m in loaded if m.startswith("ft_sitl."))
+
+
+@pytest.mark.e2e
+def test_bus_codec_loads_no_scenario_code():
+    """The bus's payloads (bus.codec), which every subscriber imports, load no scenarios
+    module and not trimesh: the movers' shapes and count limit come from ft_sitl.mover_kinds,
+    the camera's DepthFrame only when a frame is rebuilt (to_depth_frame)."""
+    loaded = modules_loaded_by("ft_sitl.bus.codec")
+    assert "ft_sitl.bus.codec" in loaded
+    heavy = [m for m in loaded if m == "ft_sitl.scenarios" or m.startswith("ft_sitl.scenarios.")
+             or m == "trimesh" or m.startswith("trimesh.")]
+    assert not heavy, heavy
 
 
 def test_in_function_imports_say_why():

@@ -52,10 +52,9 @@ import numpy as np
 from msgspec import UNSET, Meta, Struct, UnsetType
 
 from ft_sitl.bus.topics import check_vehicle
+from ft_sitl.mover_kinds import MAX_MOVERS
+from ft_sitl.mover_kinds import SHAPES as MOVER_SHAPES
 from ft_sitl.rotations import matrix_from_quat, quat_from_matrix
-from ft_sitl.scenarios.camera import DepthFrame
-from ft_sitl.scenarios.movers import SCHEMA as MOVER_SCHEMA
-from ft_sitl.scenarios.movers import SHAPES as MOVER_SHAPES
 
 if TYPE_CHECKING:  # the camera module pulls in trimesh; import it only when needed
     from ft_sitl.scenarios.camera import CameraConfig, DepthFrame
@@ -680,8 +679,7 @@ def decode_status(payload) -> Status:
 
 
 # --- movers ---------------------------------------------------------------------------------
-#: Most movers in one payload (scenarios.movers: a field holds at most 64).
-MAX_MOVERS = int(MOVER_SCHEMA["count"].range[1])
+# MAX_MOVERS (ft_sitl.mover_kinds): the most movers in one payload, as in one field.
 #: The size fields each shape carries (m): as ``scenarios.movers.Movers.describe``.
 MOVER_SIZES = {"person": ("radius_m", "height_m"), "box": ("length_m", "width_m", "height_m"),
                "sphere": ("radius_m",)}
@@ -969,6 +967,9 @@ class SensorFrame:
 
     def to_depth_frame(self) -> DepthFrame:
         """A ``DepthFrame`` as the camera would have produced it (depth to 0.5 mm)."""
+        # the camera module loads trimesh and numba: only a subscriber rebuilding camera
+        # frames pays for them, not every user of the codec
+        from ft_sitl.scenarios.camera import DepthFrame
 
         if self.kind != FrameKind.DEPTH:
             raise ValueError(f"to_depth_frame needs a depth frame, this is a {self.kind} frame")

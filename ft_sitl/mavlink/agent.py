@@ -67,7 +67,7 @@ TRAFFIC_HZ = 2.0
 #: the ICAO address of mover j is this + j + 1 (an arbitrary block: ADSB_FLAGS_SIMULATED
 #: marks them as not real aircraft)
 TRAFFIC_ICAO_BASE = 0xFE0000
-#: the ADS-B emitter category of each mover shape (scenarios.movers.SHAPES): a person has
+#: the ADS-B emitter category of each mover shape (mover_kinds.SHAPES): a person has
 #: none of its own (POINT_OBSTACLE), a box is a cart or a car (SERVICE_SURFACE), a sphere a
 #: balloon or another drone (UAV)
 TRAFFIC_EMITTER = {"person": mav.ADSB_EMITTER_TYPE_POINT_OBSTACLE,

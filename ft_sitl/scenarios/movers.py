@@ -49,12 +49,13 @@ from dataclasses import dataclass, replace
 import numpy as np
 from numba import njit
 
+from ft_sitl.mover_kinds import MAX_MOVERS, SHAPES
 from ft_sitl.scenarios.solvability import segment_mesh_distance
 from ft_sitl.schema import Param, Schema, SchemaError
 
-#: kinds of shape, as stored in :attr:`Movers.kind`
+#: kinds of shape, as stored in :attr:`Movers.kind`: indices into SHAPES (declared, with
+#: MAX_MOVERS, in ft_sitl.mover_kinds, which the bus shares)
 CYLINDER, BOX, SPHERE = 0, 1, 2
-SHAPES = ("person", "box", "sphere")
 PATHS = ("line", "waypoints", "random_walk", "crossing")
 #: how a path is walked: back and forth, or round a loop
 PINGPONG, LOOP = 0, 1
@@ -70,7 +71,7 @@ NOT_STARTED = 2 ** 62
 SPHERE_ALTITUDE_SPREAD_M = 0.5
 
 SCHEMA = Schema((
-    Param("count", 0, "-", (0, 64), doc="how many moving obstacles (0: see density)"),
+    Param("count", 0, "-", (0, MAX_MOVERS), doc="how many moving obstacles (0: see density)"),
     Param("density_per_1000m2", 0.0, "1/1000 m^2", (0.0, 50.0),
           doc="movers per 1000 m^2 of the scenario's area, when count is 0"),
     Param("speed_m_s", 1.5, "m/s", (0.0, 10.0), doc="each mover's speed along its path"),
