@@ -35,8 +35,7 @@ import time  # noqa: E402
 import numpy as np  # noqa: E402
 from benchutil import machine_info, pin_to_one_cpu  # noqa: E402
 
-from ft_sitl.navigation.common import camera_config  # noqa: E402
-from ft_sitl.scenarios.camera import DepthCamera  # noqa: E402
+from ft_sitl.scenarios.camera import DepthCamera, camera_config  # noqa: E402
 from ft_sitl.scenarios.families import FAMILIES, REGISTRY, build_scenario  # noqa: E402
 
 

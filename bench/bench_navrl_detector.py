@@ -42,10 +42,9 @@ import numpy as np  # noqa: E402
 from benchutil import machine_info, pin_to_one_cpu  # noqa: E402
 
 from ft_sitl.navigation.base import Limits, Observation, Task  # noqa: E402
-from ft_sitl.navigation.common import camera_config  # noqa: E402
 from ft_sitl.navigation.navrl import NavRL, find_checkpoint  # noqa: E402
 from ft_sitl.navigation.navrl_detector import DynamicObstacleTracker  # noqa: E402
-from ft_sitl.scenarios.camera import DepthCamera  # noqa: E402
+from ft_sitl.scenarios.camera import DepthCamera, camera_config  # noqa: E402
 from ft_sitl.scenarios.families import build_scenario  # noqa: E402
 from ft_sitl.scenarios.movers import place_movers  # noqa: E402
 

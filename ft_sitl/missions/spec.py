@@ -45,7 +45,7 @@ class ProtocolRules:
     #: MPC_ACC_* also clamp the navigator's offboard setpoints (FT_OFFB_ACC_LIM = 1)
     offboard_acc_clamp: bool
     #: the benchmark depth camera's frame rate when a navigator does not set its own (Hz;
-    #: None: the camera's current one, navigation.common.BENCHMARK_CAMERA_HZ)
+    #: None: the camera's current one, scenarios.camera.BENCHMARK_CAMERA_HZ)
     benchmark_camera_hz: float | None
     #: the navigator is reset before arming and observes the approach (Navigator.observe)
     observe_approach: bool

@@ -57,8 +57,8 @@ from ft_sitl.missions.protocol import (
 from ft_sitl.missions.resources import RESOURCES
 from ft_sitl.missions.results import Outcome
 from ft_sitl.missions.spec import PROTOCOLS, TrialSpec, TrialSpecError, platform_for
-from ft_sitl.navigation.common import camera_config
 from ft_sitl.navigation.registry import create
+from ft_sitl.scenarios.camera import camera_config
 from ft_sitl.wire.navigate import ClientResult, WireTask
 from ft_sitl.wire.sitl_bus import SitlBus
 

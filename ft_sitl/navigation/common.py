@@ -1,20 +1,20 @@
-"""Pieces the planners share: the depth camera they use, angle wrapping, a B-spline
-trajectory started at a time, yaw pursuit, the NaN guard on every setpoint, and
-:class:`ReplanningPlanner`, the skeleton of the three optimisation planners (parameters,
-map, the pending plan and its latency, failure back-off and giving up)."""
+"""Pieces the planners share: angle wrapping, a B-spline trajectory started at a time, yaw
+pursuit, the NaN guard on every setpoint, and :class:`ReplanningPlanner`, the skeleton of
+the three optimisation planners (parameters, depth camera, map, the pending plan and its
+latency, failure back-off and giving up). The depth cameras themselves (the benchmark's
+presets, :func:`~ft_sitl.scenarios.camera.camera_config`) live with the camera."""
 
 from __future__ import annotations
 
 import math
 import time
-from dataclasses import replace
 
 import numpy as np
 
 from ft_sitl.autopilot.setpoints import Setpoint
 from ft_sitl.navigation.base import GiveUp, Navigator, Observation, Task
 from ft_sitl.navigation.mapping import local_map_for
-from ft_sitl.scenarios.camera import CameraConfig
+from ft_sitl.scenarios.camera import CAMERA_PARAMS, camera_of
 from ft_sitl.schema import Param, Schema
 
 #: after a failed plan, the next attempt waits this long (simulated s), doubling with each
@@ -29,48 +29,6 @@ GIVE_UP_AFTER = 8
 def wrap_angle(a: float) -> float:
     """a wrapped into [-pi, pi)."""
     return (a + math.pi) % (2.0 * math.pi) - math.pi
-
-
-#: the benchmark camera's frame rate (Hz): the originals' depth stream (protocol 3 on;
-#: 15 Hz before, which trials of protocols 1 and 2 keep)
-BENCHMARK_CAMERA_HZ = 30.0
-
-CAMERA_PARAMS = Schema((
-    Param("camera", "benchmark", choices=("benchmark", "d435"),
-          doc="depth camera: 'benchmark' 160 x 120 @ 30 Hz, 'd435' the originals' "
-              "320 x 240 @ 30 Hz (same field of view)"),
-    Param("camera_width", None, "px", (16, 1280), kind="int",
-          doc="frame width (none: the camera's)"),
-    Param("camera_height", None, "px", (12, 960), kind="int",
-          doc="frame height (none: the camera's)"),
-    Param("camera_rate_hz", None, "Hz", (1.0, 60.0), kind="float",
-          doc="frame rate (none: the camera's)"),
-))
-"""The depth camera's parameters, which every camera-based navigator takes."""
-
-
-def camera_config(camera: str, width: int | None, height: int | None, rate_hz: float | None):
-    """The planners' depth camera: "benchmark" (160 x 120 @ 30 Hz, the originals' frame
-    rate) or "d435" (the originals' stream with every second pixel: 320 x 240 @ 30 Hz),
-    optionally resized or at another rate (ranges: see :data:`CAMERA_PARAMS`)."""
-
-    for key, value in (("camera", camera), ("camera_width", width),
-                       ("camera_height", height), ("camera_rate_hz", rate_hz)):
-        CAMERA_PARAMS[key].check(value, "depth camera")
-    base = CameraConfig(max_range_m=10.0)
-    if camera == "benchmark":
-        cfg = replace(base.subsampled(4), rate_hz=BENCHMARK_CAMERA_HZ)
-    else:
-        cfg = replace(base.subsampled(2), rate_hz=30.0)
-    if width is not None or height is not None:
-        w = int(width or cfg.width)
-        h = int(height or cfg.height)
-        step_x = base.width / w
-        cfg = replace(base, width=w, height=h, fx=base.fx / step_x, fy=base.fy / step_x,
-                      cx=(w - 1) / 2.0, cy=(h - 1) / 2.0, rate_hz=cfg.rate_hz)
-    if rate_hz is not None:
-        cfg = replace(cfg, rate_hz=float(rate_hz))
-    return cfg
 
 
 class SplineTrajectory:
@@ -161,12 +119,6 @@ class DelayedCommands:
                 else:
                     self.pending = (t + lat, cmd)
         return self.current
-
-
-def camera_of(settings: dict):
-    """The depth camera a navigator's resolved settings name (:data:`CAMERA_PARAMS`)."""
-    return camera_config(settings["camera"], settings["camera_width"],
-                         settings["camera_height"], settings["camera_rate_hz"])
 
 
 def planner_schema(*own: Param, **defaults) -> Schema:

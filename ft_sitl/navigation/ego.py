@@ -52,10 +52,9 @@ from ft_sitl.autopilot.setpoints import Setpoint
 from ft_sitl.navigation.astar import OccupancyView
 from ft_sitl.navigation.base import Observation, Task
 from ft_sitl.navigation.bspline import UniformBSpline
-from ft_sitl.navigation.common import (  # noqa: F401 - camera_config re-exported
+from ft_sitl.navigation.common import (
     HorizonPlanner,
     SplineTrajectory,
-    camera_config,
     checked_setpoint,
     pursue_yaw,
 )

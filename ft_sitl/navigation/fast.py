@@ -76,7 +76,7 @@ inflated occupancy, free voxels hold multiples of the 0.1 m resolution, so "belo
 is exactly "the point's voxel is planning-occupied": we ask the map's planning occupancy,
 which is always current (the ESDF is recomputed only when a plan is made).
 
-Camera: as the EGO navigator (:func:`~ft_sitl.navigation.common.camera_config`): 160 x 120 @
+Camera: as the EGO navigator (:func:`~ft_sitl.scenarios.camera.camera_config`): 160 x 120 @
 15 Hz by default, ``camera="d435"`` for the originals' 320 x 240 @ 30 Hz rays.
 """
 

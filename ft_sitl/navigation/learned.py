@@ -39,14 +39,7 @@ import numpy as np
 
 from ft_sitl.autopilot.setpoints import Setpoint
 from ft_sitl.navigation.base import Navigator, Observation, Task
-from ft_sitl.navigation.common import (
-    CAMERA_PARAMS,
-    LATENCY,
-    MEASURED_LATENCY,
-    DelayedCommands,
-    camera_of,
-    wrap_angle,
-)
+from ft_sitl.navigation.common import LATENCY, MEASURED_LATENCY, DelayedCommands, wrap_angle
 from ft_sitl.navigation.mapping import LocalMap, MapConfig
 from ft_sitl.navigation.policy_io import (
     N_STATE,
@@ -64,6 +57,7 @@ from ft_sitl.navigation.policy_io import (
     velocity_action,
 )
 from ft_sitl.physics import dynamics as d
+from ft_sitl.scenarios.camera import CAMERA_PARAMS, camera_of
 from ft_sitl.schema import Param, Schema
 
 #: the policies shipped with ft-sitl: ``learned-<name>.npz`` here, named by ``<name>``; a

@@ -76,18 +76,12 @@ from scipy.optimize import minimize
 from ft_sitl.autopilot.setpoints import Setpoint
 from ft_sitl.navigation import navrl_detector
 from ft_sitl.navigation.base import Navigator, Observation, ObstacleStates, Task
-from ft_sitl.navigation.common import (
-    CAMERA_PARAMS,
-    LATENCY,
-    MEASURED_LATENCY,
-    DelayedCommands,
-    camera_of,
-    wrap_angle,
-)
+from ft_sitl.navigation.common import LATENCY, MEASURED_LATENCY, DelayedCommands, wrap_angle
 from ft_sitl.navigation.mapping import local_map_for
 from ft_sitl.navigation.navrl_detector import DynamicObstacleTracker, in_range
 from ft_sitl.navigation.navrl_policy import DYN_DIM, DYN_OBS, CheckpointError, NavRLPolicy
 from ft_sitl.navigation.policy_io import goal_frame
+from ft_sitl.scenarios.camera import CAMERA_PARAMS, camera_of
 from ft_sitl.schema import Param, Schema
 
 ENV_VAR = "FT_SITL_NAVRL_CHECKPOINT"

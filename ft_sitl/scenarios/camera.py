@@ -58,6 +58,15 @@ same float64 distances (to 1e-13 m). Without noise, each ray stops just past
 
 The mesh must not be modified after the camera is built (its BVH and plane table are built
 once in the constructor); build a new camera for a new mesh.
+
+Benchmark cameras
+-----------------
+The cameras the navigators fly with are presets of this one (:func:`camera_config`):
+"benchmark", 160 x 120 at :data:`BENCHMARK_CAMERA_HZ` (30 Hz), and "d435", the originals'
+stream at 320 x 240 and 30 Hz, both with the field of view above and a 10 m range,
+optionally resized or at another rate. :data:`CAMERA_PARAMS` declares the parameters every
+camera-based navigator takes to choose one; :func:`camera_of` turns its settings into the
+configuration.
 """
 
 from __future__ import annotations
@@ -74,6 +83,7 @@ from numba import njit
 from ft_sitl.rotations import matrix_from_quat
 from ft_sitl.scenarios.embree_packets import packet_scene, plane_length
 from ft_sitl.scenarios.movers import image_first_hit, ray_first_hit
+from ft_sitl.schema import Param, Schema
 
 __all__ = [
     "NOISE_K_DEFAULT",
@@ -222,6 +232,55 @@ class CameraConfig:
         return replace(self, width=self.width // step, height=self.height // step,
                        fx=self.fx / step, fy=self.fy / step,
                        cx=(self.cx + 0.5) / step - 0.5, cy=(self.cy + 0.5) / step - 0.5)
+
+
+# --- the benchmark's cameras ------------------------------------------------------------------
+#: the benchmark camera's frame rate (Hz): the originals' depth stream (protocol 3 on;
+#: 15 Hz before, which trials of protocols 1 and 2 keep)
+BENCHMARK_CAMERA_HZ = 30.0
+
+CAMERA_PARAMS = Schema((
+    Param("camera", "benchmark", choices=("benchmark", "d435"),
+          doc="depth camera: 'benchmark' 160 x 120 @ 30 Hz, 'd435' the originals' "
+              "320 x 240 @ 30 Hz (same field of view)"),
+    Param("camera_width", None, "px", (16, 1280), kind="int",
+          doc="frame width (none: the camera's)"),
+    Param("camera_height", None, "px", (12, 960), kind="int",
+          doc="frame height (none: the camera's)"),
+    Param("camera_rate_hz", None, "Hz", (1.0, 60.0), kind="float",
+          doc="frame rate (none: the camera's)"),
+))
+"""The depth camera's parameters, which every camera-based navigator takes."""
+
+
+def camera_config(camera: str, width: int | None, height: int | None, rate_hz: float | None):
+    """The planners' depth camera: "benchmark" (160 x 120 @ 30 Hz, the originals' frame
+    rate) or "d435" (the originals' stream with every second pixel: 320 x 240 @ 30 Hz),
+    optionally resized or at another rate (ranges: see :data:`CAMERA_PARAMS`)."""
+
+    for key, value in (("camera", camera), ("camera_width", width),
+                       ("camera_height", height), ("camera_rate_hz", rate_hz)):
+        CAMERA_PARAMS[key].check(value, "depth camera")
+    base = CameraConfig(max_range_m=10.0)
+    if camera == "benchmark":
+        cfg = replace(base.subsampled(4), rate_hz=BENCHMARK_CAMERA_HZ)
+    else:
+        cfg = replace(base.subsampled(2), rate_hz=30.0)
+    if width is not None or height is not None:
+        w = int(width or cfg.width)
+        h = int(height or cfg.height)
+        step_x = base.width / w
+        cfg = replace(base, width=w, height=h, fx=base.fx / step_x, fy=base.fy / step_x,
+                      cx=(w - 1) / 2.0, cy=(h - 1) / 2.0, rate_hz=cfg.rate_hz)
+    if rate_hz is not None:
+        cfg = replace(cfg, rate_hz=float(rate_hz))
+    return cfg
+
+
+def camera_of(settings: dict):
+    """The depth camera a navigator's resolved settings name (:data:`CAMERA_PARAMS`)."""
+    return camera_config(settings["camera"], settings["camera_width"],
+                         settings["camera_height"], settings["camera_rate_hz"])
 
 
 # --- output -----------------------------------------------------------------------------------

@@ -29,9 +29,8 @@ import numpy as np
 from ft_sitl.bus.codec import MOVER_SIZES, EventType, MoverStates, Telemetry
 from ft_sitl.bus.publisher import BusPublisher
 from ft_sitl.bus.ratelimit import RateGate
-from ft_sitl.navigation.common import camera_config
 from ft_sitl.physics import dynamics as d
-from ft_sitl.scenarios.camera import DepthCamera
+from ft_sitl.scenarios.camera import DepthCamera, camera_config
 from ft_sitl.sim.guard import GuardEventKind
 
 log = logging.getLogger("ft_sitl.bus")

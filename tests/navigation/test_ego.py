@@ -6,8 +6,9 @@ import pytest
 
 from ft_sitl.autopilot.cascade import SP_POS
 from ft_sitl.missions.trial import TrialSpec, run_trial
-from ft_sitl.navigation.ego import EgoPlanner, camera_config
+from ft_sitl.navigation.ego import EgoPlanner
 from ft_sitl.navigation.registry import create
+from ft_sitl.scenarios.camera import camera_config
 
 from .planner_util import obs_at, open_task
 

@@ -10,7 +10,6 @@ import pytest
 import trimesh
 
 from ft_sitl.navigation.base import ObstacleStates
-from ft_sitl.navigation.common import camera_config
 from ft_sitl.navigation.navrl_detector import (
     DetectorConfig,
     DynamicObstacleTracker,
@@ -18,7 +17,7 @@ from ft_sitl.navigation.navrl_detector import (
     dbscan_labels,
     in_range,
 )
-from ft_sitl.scenarios.camera import DepthCamera
+from ft_sitl.scenarios.camera import DepthCamera, camera_config
 from ft_sitl.scenarios.families import build_scenario
 from ft_sitl.scenarios.movers import movers_from_list
 

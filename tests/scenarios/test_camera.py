@@ -11,7 +11,7 @@ import pytest
 import trimesh
 
 from ft_sitl.scenarios import camera as cam_mod
-from ft_sitl.scenarios.camera import CameraConfig, DepthCamera, DepthFrame
+from ft_sitl.scenarios.camera import CameraConfig, DepthCamera, DepthFrame, camera_config
 
 IDENTITY = np.array([1.0, 0.0, 0.0, 0.0])
 
@@ -344,7 +344,6 @@ def test_packet_queries_hit_the_same_triangles_as_single_rays(family):
     """Embree's 16-ray packets (embree_packets) against embreex's one-ray query: the same
     first-hit triangle for every pixel of frames from random poses and attitudes, hence
     bit-identical depth images and point clouds."""
-    from ft_sitl.navigation.common import camera_config
     from ft_sitl.scenarios.families import build_scenario
 
     sc = build_scenario(family, 3)
@@ -379,7 +378,6 @@ def test_one_instance_per_piece_sees_the_same_surfaces(family, version):
     all but a handful of pixels in a million (rays through an edge or grazing a silhouette,
     tested in the piece's frame) are bit-identical. (Perlin version 2's ~40,000 boxes are
     more pieces than MAX_INSTANCES: one scene, next test.)"""
-    from ft_sitl.navigation.common import camera_config
     from ft_sitl.scenarios.families import build_scenario
 
     sc = build_scenario(family, 3, version=version)
@@ -413,7 +411,6 @@ def test_one_instance_per_piece_sees_the_same_surfaces(family, version):
 def test_a_mesh_of_more_pieces_than_max_instances_is_one_scene():
     """Perlin version 2 (~40,000 boxes) is built as one Embree scene, not as one instance
     per box, and its frames are the one-scene camera's, pixel for pixel."""
-    from ft_sitl.navigation.common import camera_config
     from ft_sitl.scenarios.embree_packets import MAX_INSTANCES
     from ft_sitl.scenarios.families import build_scenario
 
