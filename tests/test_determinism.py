@@ -276,3 +276,18 @@ def test_a_dask_worker_refuses_chunks_of_a_campaign_at_another_level():
                                             rf"at {other}: start every worker with "
                                             rf"FT_SITL_ISA={other}"):
         dask_chunk(lambda c: c, [], code_digest(), None, other)
+
+
+def test_version_says_the_arithmetic_in_force(capsys):
+    from ft_sitl import __version__
+    from ft_sitl.cli import main
+
+    with pytest.raises(SystemExit) as done:
+        main(["--version"])
+    assert done.value.code == 0
+    out = capsys.readouterr().out.splitlines()
+    force = numeric_env.in_force()
+    assert out[0] == f"ft-sitl {__version__}"
+    assert out[1].startswith(f"numeric libraries at {force['level']} on {force['cpu']} "
+                             f"(numba {force['numba_cpu']}, numpy up to "
+                             f"{force['numpy_dispatch']}")

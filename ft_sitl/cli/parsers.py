@@ -11,7 +11,7 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
-from ft_sitl import __version__
+from ft_sitl import __version__, numeric_env
 from ft_sitl.bridge import ARDUPILOT_DEFAULT_PORT
 from ft_sitl.cli.common import number
 from ft_sitl.scenarios.render import DEFAULT_DPI  # numpy only: cheap at start-up
@@ -22,12 +22,26 @@ ACTUATORS_HELP = ("imperfect actuators as KEY=VALUE,... (efficiency, degraded_mo
                   "docs/platforms.md, Actuator imperfection)")
 
 
+class _Version(argparse.Action):
+    """``--version``: ft-sitl's version and the instruction-set level its numeric
+    libraries compute at here (ft_sitl.numeric_env), which rows made here record."""
+
+    def __call__(self, parser, namespace, values, option_string=None):
+        f = numeric_env.in_force()
+        print(f"ft-sitl {__version__}\n"
+              f"numeric libraries at {f['level']} on {f['cpu']} (numba {f['numba_cpu']}, "
+              f"numpy up to {f['numpy_dispatch']}, OpenBLAS {f['openblas']}, Embree "
+              f"{f['embree']}; FT_SITL_ISA)")
+        parser.exit()
+
+
 def build_parser() -> argparse.ArgumentParser:
     ap = argparse.ArgumentParser(
         prog="ft-sitl",
         description="FLYINGTRUST quadrotor SITL: platforms, rotor dynamics and a virtual PX4.",
     )
-    ap.add_argument("--version", action="version", version=f"ft-sitl {__version__}")
+    ap.add_argument("--version", action=_Version, nargs=0,
+                    help="show the version and the arithmetic in force, and exit")
     pf = argparse.ArgumentParser(add_help=False)
     pf.add_argument("--platform-file", action="append", type=Path, metavar="FILE",
                     help="add user platforms from a TOML/YAML file (repeatable)")
