@@ -113,22 +113,16 @@ def test_lower_layers_import_alone(layer, forbidden):
     """Every module of a lower layer imported in a fresh interpreter pulls in no module
     of the layers above it."""
     names = [n for n, _ in modules() if part_of(n) == layer]
-    code = ("import importlib, json, sys\n"
-            f"for n in {names!r}: importlib.import_module(n)\n"
-            "print(json.dumps(sorted(m for m in sys.modules if m.startswith('ft_sitl.'))))")
-    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
-                         timeout=300, cwd=PKG.parent)
-    assert out.returncode == 0, out.stderr
-    loaded = json.loads(out.stdout.strip().splitlines()[-1])
+    loaded = [m for m in modules_loaded_by(*names) if m.startswith("ft_sitl.")]
     above = [m for m in loaded if part_of(m) in forbidden]
     assert len(names) > 2 and not above, above
 
 
-def modules_loaded_by(module: str) -> list[str]:
-    """Every module (ft_sitl's and third-party) in sys.modules after importing ``module``
+def modules_loaded_by(*names: str) -> list[str]:
+    """Every module (ft_sitl's and third-party) in sys.modules after importing ``names``
     alone in a fresh interpreter."""
     code = ("import importlib, json, sys\n"
-            f"importlib.import_module({module!r})\n"
+            f"for n in {list(names)!r}: importlib.import_module(n)\n"
             "print(json.dumps(sorted(sys.modules)))")
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
                          timeout=300, cwd=PKG.parent)
