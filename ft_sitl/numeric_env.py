@@ -150,11 +150,6 @@ def requested(environ: MutableMapping[str, str] | None = None) -> str:
 
 #: names the variables an ft_sitl process set (so a child knows they are not the user's)
 MARK_VAR = "FT_SITL_PINNED_VARS"
-#: what ft_sitl set in ``os.environ``, here or in a parent (a child at another level must
-#: not inherit it)
-_SET: dict[str, str] = {}
-
-
 def pin(environ: MutableMapping[str, str] | None = None,
         flags: set[str] | None = None) -> dict[str, str]:
     """Set the settings above in ``environ`` (``os.environ``) where unset; returns what
@@ -162,12 +157,7 @@ def pin(environ: MutableMapping[str, str] | None = None,
     the threads is pinned (with a warning), and :func:`in_force` says ``host``. Variables
     a parent ft_sitl process set (:data:`MARK_VAR`) count as unset, so a child asked for
     ``host`` drops the parent's pins."""
-    if environ is None:
-        done = _pin(os.environ, flags)
-        _SET.clear()
-        _SET.update({k: os.environ[k] for k in _marked(os.environ) if k in os.environ})
-        return done
-    return _pin(environ, flags)
+    return _pin(os.environ if environ is None else environ, flags)
 
 
 def _marked(environ: MutableMapping[str, str]) -> set[str]:
@@ -181,9 +171,10 @@ def chosen_by_user(environ: MutableMapping[str, str] | None = None) -> bool:
 
 def child_env(level: str) -> dict[str, str]:
     """This process's environment for a child that computes at ``level``: what ft_sitl set
-    is left out, so the child pins afresh; what the user set stays."""
+    (:data:`MARK_VAR`) is left out, so the child pins afresh; what the user set stays."""
     requested({LEVEL_VAR: level})
-    env = {k: v for k, v in os.environ.items() if k not in _SET and k != MARK_VAR}
+    ours = _marked(os.environ) | {MARK_VAR}
+    env = {k: v for k, v in os.environ.items() if k not in ours}
     env[LEVEL_VAR] = level
     return env
 
@@ -234,14 +225,14 @@ def embree_config() -> str | None:
     return os.environ.get(EMBREE_VAR) or None
 
 
-def _loaded_numpy() -> dict:
+def _numpy_dispatch() -> list[str]:
+    """numpy's dispatch targets active in this process, lowest first."""
     try:
         # numpy loads only after pin() has set its variables (this module loads first)
         from numpy._core import _multiarray_umath as m
     except ImportError:  # numpy 1.x
         from numpy.core import _multiarray_umath as m  # type: ignore[no-redef]
-    on = [t for t in m.__cpu_dispatch__ if m.__cpu_features__.get(t)]
-    return {"dispatch": on[-1] if on else "baseline", "active": on}
+    return [t for t in m.__cpu_dispatch__ if m.__cpu_features__.get(t)]
 
 
 def cpu_model_name(path: str = "/proc/cpuinfo") -> str:
@@ -278,15 +269,14 @@ def in_force() -> dict:
     import numba  # noqa: F401
     from numba.core import config
 
-    expected = v3_settings()
     numba_cpu = config.CPU_NAME or "host"
-    numpy_on = _loaded_numpy()["dispatch"]
+    numpy_on = _numpy_dispatch()
     facts = {"cpu": _cpu_model(), "numba_cpu": numba_cpu,
-             "numpy_dispatch": numpy_on,
+             "numpy_dispatch": numpy_on[-1] if numpy_on else "baseline",
              "openblas": os.environ.get(CORETYPE_VAR, "auto"),
              "embree": embree_config() or "auto"}
-    pinned = (numba_cpu == PINNED and config.CPU_FEATURES == expected["NUMBA_CPU_FEATURES"]
-              and not any("512" in t or "V4" in t for t in _loaded_numpy()["active"])
+    pinned = (numba_cpu == PINNED and config.CPU_FEATURES == V3_LLVM_FEATURES
+              and not any("512" in t or "V4" in t for t in numpy_on)
               and facts["openblas"] == OPENBLAS_CORE and facts["embree"] == EMBREE_V3
               and "numpy" not in _IMPORTED_BEFORE)
     return {"level": PINNED if pinned else HOST, **facts}
