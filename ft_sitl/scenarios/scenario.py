@@ -47,13 +47,14 @@ def _inside(name: str, p: np.ndarray, lo: np.ndarray, hi: np.ndarray) -> None:
         )
 
 
-def _jsonable(v):
+def jsonable(v):
+    """``v`` with numpy arrays and scalars made plain Python, dict keys made strings."""
     if isinstance(v, dict):
-        return {str(k): _jsonable(x) for k, x in v.items()}
+        return {str(k): jsonable(x) for k, x in v.items()}
     if isinstance(v, (list, tuple)):
-        return [_jsonable(x) for x in v]
+        return [jsonable(x) for x in v]
     if isinstance(v, np.ndarray):
-        return _jsonable(v.tolist())
+        return jsonable(v.tolist())
     if isinstance(v, np.generic):
         return v.item()
     return v
@@ -203,7 +204,7 @@ class Scenario:
     def summary(self) -> dict:
         """Everything but the mesh itself, as plain JSON types."""
         ext = self.mesh.bounds if len(self.mesh.faces) else np.zeros((2, 3))
-        return _jsonable({
+        return jsonable({
             "name": self.name,
             "family": self.family,
             "index": self.index,

@@ -13,7 +13,7 @@ import numpy as np
 import trimesh
 
 from ft_sitl import __version__
-from ft_sitl.scenarios.scenario import Scenario, ScenarioError
+from ft_sitl.scenarios.scenario import Scenario, ScenarioError, jsonable
 from ft_sitl.schema import Param, Schema, SchemaError
 
 START_MARGIN_M = 3.0
@@ -206,18 +206,6 @@ class MeshBuilder:
 # --------------------------------------------------------------------------------------
 
 
-def _plain(v):
-    if isinstance(v, dict):
-        return {k: _plain(x) for k, x in v.items()}
-    if isinstance(v, (list, tuple)):
-        return [_plain(x) for x in v]
-    if isinstance(v, np.ndarray):
-        return _plain(v.tolist())
-    if isinstance(v, np.generic):
-        return v.item()
-    return v
-
-
 def make_scenario(fam: Family, index: int, seed: int, builder: MeshBuilder, params: dict, *,
                   derived: dict, layout: dict, obstacle_count: int, altitude: float,
                   start_xy=None, goal_xy=None, pitch=None,
@@ -235,10 +223,10 @@ def make_scenario(fam: Family, index: int, seed: int, builder: MeshBuilder, para
         "seed": int(seed),
         "index": int(index),
         "ft_sitl_version": __version__,
-        "parameters": _plain(fam.schema.record(params, derived)),
+        "parameters": jsonable(fam.schema.record(params, derived)),
         "obstacle_count": int(obstacle_count),
         "mesh_pieces": builder.pieces,
-        "layout": _plain(layout),
+        "layout": jsonable(layout),
     }
     first_face, names = builder.piece_names()
     if pitch is not None:
