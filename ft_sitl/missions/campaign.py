@@ -19,6 +19,7 @@ import os
 import platform as pyplatform
 import signal
 import sys
+import threading
 import time
 import traceback
 from collections import defaultdict
@@ -183,15 +184,26 @@ class RunSummary:
 
 @contextmanager
 def _signals_deferred():
-    """Ctrl-C and SIGTERM wait (blocked, then delivered) while a finished row is written
-    and counted: the KeyboardInterrupt they raise between the write and the count left a
-    row in trials.jsonl that runs.json did not count."""
-    signals = {signal.SIGINT, signal.SIGTERM}
-    old = signal.pthread_sigmask(signal.SIG_BLOCK, signals)
+    """Ctrl-C and SIGTERM wait while a finished row is written and counted, then act: the
+    KeyboardInterrupt they raise between the write and the count left a row in
+    trials.jsonl that runs.json did not count. The deferral is in Python's handlers, not
+    a thread's signal mask: the kernel hands a process signal to any thread that does not
+    block it (tqdm's monitor, an executor's threads), and Python then runs the handler in
+    the main thread wherever it is. Off the main thread (no handlers to swap) it is a
+    no-op."""
+    if threading.current_thread() is not threading.main_thread():
+        yield
+        return
+    caught: list[int] = []
+    watched = (signal.SIGINT, signal.SIGTERM)
+    old = {s: signal.signal(s, lambda signum, _frame: caught.append(signum)) for s in watched}
     try:
         yield
     finally:
-        signal.pthread_sigmask(signal.SIG_SETMASK, old)
+        for s, handler in old.items():
+            signal.signal(s, signal.SIG_DFL if handler is None else handler)
+        for s in dict.fromkeys(caught):
+            signal.raise_signal(s)  # the handler in force before acts on it now
 
 
 def run_campaign(campaign: Campaign, out_dir: str | Path, *, workers: int = 1,

@@ -17,6 +17,7 @@ import math
 import os
 import signal
 import subprocess
+import threading
 import time
 from pathlib import Path
 
@@ -867,3 +868,31 @@ def test_a_bad_navrl_checkpoint_variable_is_one_error_line_from_the_cli(tmp_path
             assert f"FT_SITL_NAVRL_CHECKPOINT={value}: " in proc.stderr, command
             assert proc.stderr.count("\n") == 1, (command, proc.stderr)
     assert not (tmp_path / "out").exists()
+
+
+def test_a_signal_taken_by_another_thread_waits_until_the_row_is_counted():
+    """The kernel gives a process signal to any thread not blocking it; Python then runs
+    the handler in the main thread at its next instruction. The row's write and count must
+    still come first, and the signal must act after them, once."""
+    from ft_sitl.missions.campaign import _signals_deferred
+
+    def interrupt(signum, frame):
+        raise KeyboardInterrupt
+
+    previous = signal.signal(signal.SIGTERM, interrupt)
+    steps = []
+    try:
+        with pytest.raises(KeyboardInterrupt):
+            with _signals_deferred():
+                steps.append("written")
+                other = threading.Thread(target=lambda: signal.pthread_kill(
+                    threading.get_ident(), signal.SIGTERM))
+                other.start()
+                other.join()
+                time.sleep(0.05)  # many instructions at which the handler could have run
+                steps.append("counted")
+            steps.append("not reached")
+        assert signal.getsignal(signal.SIGTERM) is interrupt
+    finally:
+        signal.signal(signal.SIGTERM, previous)
+    assert steps == ["written", "counted"]
