@@ -1,4 +1,4 @@
-"""Benchmark: the planners' local map (ft_sitl.navigation.mapping), one core.
+"""Benchmark: the planners' local map (ft_sitl.navigation.maps.mapping), one core.
 
 Scene: FLYINGTRUST Forest configuration 5 (``build_scenario("forest", 5)``, 3 m ceiling).
 The camera flies the start->goal line at 4 m/s; frames at the map's 20 Hz (0.2 m apart) are
@@ -42,7 +42,7 @@ import time  # noqa: E402
 import numpy as np  # noqa: E402
 from benchutil import machine_info, pin_to_one_cpu, timed  # noqa: E402
 
-from ft_sitl.navigation.mapping import LocalMap, MapConfig  # noqa: E402
+from ft_sitl.navigation.maps.mapping import LocalMap, MapConfig  # noqa: E402
 from ft_sitl.scenarios.camera import CameraConfig, DepthCamera  # noqa: E402
 from ft_sitl.scenarios.families import build_scenario  # noqa: E402
 

@@ -1,4 +1,4 @@
-"""Benchmark: NavRL's dynamic-obstacle detector and tracker (navigation.navrl_detector), and
+"""Benchmark: NavRL's dynamic-obstacle detector and tracker (navigation.learned.navrl_detector), and
 NavRL's perception per frame with it, one core.
 
 Scenes: the Maze (configuration 1) and Forest (configuration 5), each with 20 people
@@ -42,8 +42,8 @@ import numpy as np  # noqa: E402
 from benchutil import machine_info, pin_to_one_cpu  # noqa: E402
 
 from ft_sitl.navigation.base import Limits, Observation, Task  # noqa: E402
-from ft_sitl.navigation.navrl import NavRL, find_checkpoint  # noqa: E402
-from ft_sitl.navigation.navrl_detector import DynamicObstacleTracker  # noqa: E402
+from ft_sitl.navigation.learned.navrl import NavRL, find_checkpoint  # noqa: E402
+from ft_sitl.navigation.learned.navrl_detector import DynamicObstacleTracker  # noqa: E402
 from ft_sitl.scenarios.camera import DepthCamera, camera_config  # noqa: E402
 from ft_sitl.scenarios.families import build_scenario  # noqa: E402
 from ft_sitl.scenarios.movers import place_movers  # noqa: E402

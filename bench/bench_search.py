@@ -4,7 +4,7 @@ The tests check what these cases compute and how much work they do (expansions, 
 evaluations: deterministic); their wall-clock time is measured here instead, with this
 script's own copies of the test set-ups:
 
-* ``astar``: voxel A* (``ft_sitl.navigation.astar.search``) across a 100 x 100 x 40 grid,
+* ``astar``: voxel A* (``ft_sitl.navigation.planners.astar.search``) across a 100 x 100 x 40 grid,
   25 % of the voxels blocked at random (seed 0) plus a wall at x = 5 m open only near
   y = 0, corner to corner (tests/navigation/test_astar.py; target "tens of milliseconds",
   the old test's bound 0.1 s for the best of 3);
@@ -53,14 +53,14 @@ from pathlib import Path  # noqa: E402
 import numpy as np  # noqa: E402
 from benchutil import machine_info, pin_to_one_cpu, timed  # noqa: E402
 
-from ft_sitl.navigation.astar import OccupancyView, search  # noqa: E402
-from ft_sitl.navigation.bspline import UniformBSpline, fit_samples  # noqa: E402
-from ft_sitl.navigation.ego_optim import EgoOptimizer, EgoParams  # noqa: E402
-from ft_sitl.navigation.kino_astar import (  # noqa: E402
+from ft_sitl.navigation.optimisers.ego import EgoOptimizer, EgoParams  # noqa: E402
+from ft_sitl.navigation.planners.astar import OccupancyView, search  # noqa: E402
+from ft_sitl.navigation.planners.kino_astar import (  # noqa: E402
     KinoAstarParams,
     KinodynamicAstar,
     VoxelOccupancy,
 )
+from ft_sitl.navigation.trajectories.bspline import UniformBSpline, fit_samples  # noqa: E402
 
 RES = 0.1
 

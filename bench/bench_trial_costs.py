@@ -57,7 +57,7 @@ from ft_sitl.missions.trial import run_trial  # noqa: E402
 #: cost centre -> (file suffix, function name) whose cumulative time it is
 CENTRES = {
     "camera": ("missions/trial.py", "frame"),
-    "fusion": ("navigation/mapping.py", "fuse"),
+    "fusion": ("navigation/maps/mapping.py", "fuse"),
     "navigator": ("missions/trial.py", "_call"),
     "total": ("missions/trial.py", "run_trial"),
 }

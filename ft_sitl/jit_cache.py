@@ -3,8 +3,8 @@
 numba invalidates a cached function only when its own file changes, not when a kernel it
 calls from another module does: run_steps (sim/lockstep.py) inlines the controller
 (cascade.py), the plant (dynamics.py) and the guard (sim/guard.py), and EGO's and Fast's
-optimisers call navigation/lbfgs.py; an edit of a callee would leave stale machine code in
-use. So every kernel caches into one directory named after a hash of every module of the
+optimisers call navigation/optimisers/lbfgs.py; an edit of a callee would leave stale machine
+code in use. So every kernel caches into one directory named after a hash of every module of the
 package (a hand-kept list of kernel modules missed lbfgs.py once): any edit starts a fresh
 cache. The key also holds numba's target (``ft_sitl.numeric_env``: the pinned x86-64-v3, or
 the host's name and features), so code compiled under one pin is never loaded under

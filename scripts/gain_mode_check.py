@@ -18,7 +18,7 @@ controller's default parameters otherwise (MPC_XY_VEL_MAX 4 m/s, as in a trial):
 * ``yaw``: a 90 deg yaw step at hover; the 90 % rise time, the overshoot, the time to stay
   within 5 deg, the altitude's largest deviation;
 * ``yaw_ramp``: the same 90 deg turn as the planners command it (their yaw pursuit turns
-  at most pi/2 rad/s: navigation.common.pursue_yaw), a ramp over 1 s streamed at 200 Hz;
+  at most pi/2 rad/s: navigation.planners.skeleton.pursue_yaw), a ramp over 1 s streamed at 200 Hz;
   the overshoot and the time to stay within 5 deg, from the start of the ramp;
 * ``slalom``: an offboard trajectory (position, velocity and acceleration feed-forward, as
   the planners send) 2 m/s east weaving 1.5 m north and south at 2 rad/s, i.e. 6 m/s^2 of

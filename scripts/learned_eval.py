@@ -29,8 +29,8 @@ from tqdm import tqdm
 from ft_sitl.gym.envs import NavigateVectorEnv
 from ft_sitl.gym.train import ENV_DEFAULTS
 from ft_sitl.missions.spec import PROTOCOL_VERSION, vehicle_half_span_m
-from ft_sitl.navigation.learned import load_policy
-from ft_sitl.navigation.policy_io import EDGE_NAMES, N_STATE, PLATFORM_NAMES, policy_input
+from ft_sitl.navigation.learned.learned import load_policy
+from ft_sitl.navigation.learned.policy_io import EDGE_NAMES, N_STATE, PLATFORM_NAMES, policy_input
 from ft_sitl.physics.catalog import catalog
 from ft_sitl.scenarios.families import REGISTRY
 

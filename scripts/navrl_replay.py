@@ -35,7 +35,7 @@ import pandas as pd
 
 from ft_sitl.missions.spec import TrialSpec
 from ft_sitl.missions.trial import run_trial
-from ft_sitl.navigation import navrl as nr
+from ft_sitl.navigation.learned import navrl as nr
 
 
 class LoggedNavRL(nr.NavRL):

@@ -115,7 +115,7 @@ def test_a_fresh_import_runs_one_thread_of_the_pinned_kernels():
 
 def test_jit_cache_key_covers_every_module(tmp_path):
     """numba's cache is keyed on every module of the package: an edit of a module whose
-    kernels others call (navigation/lbfgs.py, missed by a hand-kept list once) or a moved
+    kernels others call (navigation/optimisers/lbfgs.py, missed by a hand-kept list once) or a moved
     module gives a new cache directory."""
     import shutil
     from pathlib import Path
@@ -128,11 +128,11 @@ def test_jit_cache_key_covers_every_module(tmp_path):
                     ignore=shutil.ignore_patterns("__pycache__"))
     before = source_hash(pkg)
     assert source_hash(pkg) == before
-    lbfgs = pkg / "navigation" / "lbfgs.py"
+    lbfgs = pkg / "navigation" / "optimisers" / "lbfgs.py"
     lbfgs.write_text(lbfgs.read_text() + "\n# an edit\n")
     edited = source_hash(pkg)
     assert edited != before
-    lbfgs.rename(pkg / "navigation" / "lbfgs2.py")
+    lbfgs.rename(pkg / "navigation" / "optimisers" / "lbfgs2.py")
     assert source_hash(pkg) != edited
 
 

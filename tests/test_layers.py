@@ -133,11 +133,11 @@ def modules_loaded_by(*names: str) -> list[str]:
 @pytest.mark.e2e
 def test_navigator_protocol_loads_no_map():
     """The Navigator protocol (navigation.base), which every transport imports, loads
-    neither the local map (navigation.mapping, numba kernels) nor anything importing it:
+    neither the local map (navigation.maps.mapping, numba kernels) nor anything importing it:
     a task's map lives with the map."""
     loaded = modules_loaded_by("ft_sitl.navigation.base")
     assert "ft_sitl.navigation.base" in loaded
-    assert "ft_sitl.navigation.mapping" not in loaded, sorted(
+    assert "ft_sitl.navigation.maps.mapping" not in loaded, sorted(
         m for m in loaded if m.startswith("ft_sitl."))
 
 
@@ -177,3 +177,69 @@ def test_in_function_imports_say_why():
                                    f"{here.strip()}")
     assert not bad, f"{len(bad)} in-function imports without a reason:\n" + "\n".join(
         sorted(set(bad)))
+
+
+#: the parts that reach a vehicle's state only through the fleet's (or the simulation's)
+#: named read-outs, never through the plant's array layout (docs/architecture.md, mavlink/)
+NAMED_STATE_ONLY = ("mavlink", "wire", "bridge")
+#: modules of those parts that still index the plant's arrays, each to move to named
+#: read-outs (issue 42) and then come off this list: the test fails for a module listed
+#: here that no longer needs to be
+INDEXES_PLANT_ARRAYS_STILL = {"ft_sitl/wire/sitl_bus.py", "ft_sitl/bridge/vehicle.py"}
+DYNAMICS = "ft_sitl.physics.dynamics"
+
+
+def plant_index_uses(path: Path) -> list[str]:
+    """Where a module names the plant's state or status indices (``X_*``, ``S_*`` of
+    physics.dynamics): imported by name (or ``*``), or read through the module
+    (``d.X_POS`` after ``from ft_sitl.physics import dynamics as d``)."""
+    tree = ast.parse(path.read_text())
+    aliases = {DYNAMICS}  # how the file names the dynamics module
+    found = []
+    for node in ast.walk(tree):
+        if isinstance(node, ast.ImportFrom) and node.level == 0:
+            for a in node.names:
+                if node.module == DYNAMICS and (a.name == "*" or a.name[:2] in ("X_", "S_")):
+                    found.append(f"{node.lineno}: imports {a.name} from {DYNAMICS}")
+                if f"{node.module}.{a.name}" == DYNAMICS:
+                    aliases.add(a.asname or a.name)
+        elif isinstance(node, ast.Import):
+            for a in node.names:
+                if a.name == DYNAMICS and a.asname:
+                    aliases.add(a.asname)
+    for node in ast.walk(tree):
+        if isinstance(node, ast.Attribute) and node.attr[:2] in ("X_", "S_") \
+                and ast.unparse(node.value) in aliases:
+            found.append(f"{node.lineno}: {ast.unparse(node)}")
+    return list(dict.fromkeys(found))  # (a slice names its start twice)
+
+
+def test_wire_layers_read_state_through_named_accessors():
+    """mavlink/, wire/ and bridge/ never index the plant's state arrays: they ask the
+    fleet (attitude(i), body_rates(i), rotor_speeds(i), specific_force(i), state(i)) or
+    the simulation (position(i), ...), so the array layout is physics' and sim's alone."""
+    bad, fixed = [], []
+    for name, path in modules():
+        if part_of(name) not in NAMED_STATE_ONLY:
+            continue
+        rel = str(path.relative_to(PKG.parent))
+        uses = plant_index_uses(path)
+        if rel in INDEXES_PLANT_ARRAYS_STILL:
+            if not uses:
+                fixed.append(rel)
+            continue
+        bad += [f"{rel}:{u}" for u in uses]
+    assert not bad, "\n".join(bad)
+    assert not fixed, f"no longer index the plant's arrays: take them off the list: {fixed}"
+
+
+def test_plant_index_uses_sees_every_spelling(tmp_path):
+    src = tmp_path / "m.py"
+    src.write_text("from ft_sitl.physics import dynamics as d\n"
+                   "import ft_sitl.physics.dynamics as dyn\n"
+                   "import ft_sitl.physics.dynamics\n"
+                   "from ft_sitl.physics.dynamics import X_POS, N_STATE\n"
+                   "a = x[d.X_QUAT]; b = s[dyn.S_CONTACT]; c = ft_sitl.physics.dynamics.X_VEL\n"
+                   "e = d.N_STATE; f = other.X_POS\n")
+    uses = plant_index_uses(src)
+    assert len(uses) == 4, uses

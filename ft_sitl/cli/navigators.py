@@ -7,8 +7,8 @@ import shutil
 import sys
 
 from ft_sitl.cli.common import CliError, print_schema_rows
-from ft_sitl.navigation.navrl import CHECKPOINT_NAME, data_dir
-from ft_sitl.navigation.navrl_policy import CheckpointError, NavRLPolicy
+from ft_sitl.navigation.learned.navrl import CHECKPOINT_NAME, data_dir
+from ft_sitl.navigation.learned.navrl_policy import CheckpointError, NavRLPolicy
 from ft_sitl.navigation.registry import NavigatorError, available, describe, parameters
 
 

@@ -53,7 +53,7 @@ from ft_sitl.missions.protocol import (
 )
 from ft_sitl.missions.results import Outcome
 from ft_sitl.missions.spec import vehicle_half_span_m
-from ft_sitl.navigation.policy_io import (
+from ft_sitl.navigation.learned.policy_io import (
     N_STATE,
     PLATFORM_NAMES,
     STATE_HIGH,

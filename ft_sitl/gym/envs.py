@@ -45,7 +45,7 @@ from ft_sitl.gym.worlds import (
     disc,
     ring,
 )
-from ft_sitl.navigation.policy_io import (
+from ft_sitl.navigation.learned.policy_io import (
     EDGE_NAMES,
     EDGE_RANGE_M,
     PLATFORM_HIGH,

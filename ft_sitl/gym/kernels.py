@@ -1,6 +1,6 @@
 """The per-step arithmetic of a batch over its vehicles, compiled: what the judges measure
 and the shaped reward (the observation's state vector is
-:func:`ft_sitl.navigation.policy_io.observe_state`, shared with the learned navigator).
+:func:`ft_sitl.navigation.learned.policy_io.observe_state`, shared with the learned navigator).
 One pass each over the vehicles, so a batch of one does not pay numpy's per-call
 overhead a dozen times per step."""
 

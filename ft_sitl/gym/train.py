@@ -1,13 +1,13 @@
 """Training a navigation policy on the batched environment with Stable-Baselines3's PPO
 (CPU), and exporting it as a numpy policy file the ``learned`` navigator flies
-(:mod:`ft_sitl.navigation.learned`; reference: docs/gym.md, "Training").
+(:mod:`ft_sitl.navigation.learned.learned`; reference: docs/gym.md, "Training").
 
 The training stack (``pip install 'ft-sitl[train]'``: Stable-Baselines3, PyTorch) is
 imported only here, and only when a training runs; nothing else in ft-sitl needs it.
 
 - :class:`PolicyVecEnv` adapts :class:`~ft_sitl.gym.envs.NavigateVectorEnv` (N vehicles in
   one compiled physics call) to Stable-Baselines3's ``VecEnv``: observations are the flat
-  :func:`~ft_sitl.navigation.policy_io.policy_input`, episodes auto-reset in the same step
+  :func:`~ft_sitl.navigation.learned.policy_io.policy_input`, episodes auto-reset in the same step
   (``terminal_observation`` and ``TimeLimit.truncated`` in the infos, as SB3 expects), and
   every ``world_every`` steps the whole batch moves to a newly drawn world (the running
   episodes end there as truncated).
@@ -38,7 +38,7 @@ from tqdm import tqdm
 from ft_sitl.gym.batch import catalog_range
 from ft_sitl.gym.config import ANY, ARENA, EnvError, make_config
 from ft_sitl.gym.envs import NavigateVectorEnv
-from ft_sitl.navigation.policy_io import MlpPolicy, policy_input
+from ft_sitl.navigation.learned.policy_io import MlpPolicy, policy_input
 from ft_sitl.provenance import software
 from ft_sitl.scenarios.families import REGISTRY
 from ft_sitl.schema import Param, Schema, SchemaError

@@ -19,12 +19,12 @@ from importlib.metadata import entry_points
 
 from ft_sitl.config import did_you_mean
 from ft_sitl.navigation.base import Navigator
-from ft_sitl.navigation.ego import EgoPlanner
-from ft_sitl.navigation.fast import FastPlanner
-from ft_sitl.navigation.learned import Learned
-from ft_sitl.navigation.navrl import NavRL
-from ft_sitl.navigation.pgo import PgoPlanner
-from ft_sitl.navigation.straight import StraightLine
+from ft_sitl.navigation.learned.learned import Learned
+from ft_sitl.navigation.learned.navrl import NavRL
+from ft_sitl.navigation.planners.ego import EgoPlanner
+from ft_sitl.navigation.planners.fast import FastPlanner
+from ft_sitl.navigation.planners.pgo import PgoPlanner
+from ft_sitl.navigation.planners.straight import StraightLine
 from ft_sitl.schema import Schema, SchemaError
 
 ENTRY_POINT_GROUP = "ft_sitl.navigators"

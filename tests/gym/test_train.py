@@ -15,8 +15,8 @@ import pytest
 
 from ft_sitl.cli import main as cli_main
 from ft_sitl.gym.train import PRESET, TrainError, evaluate, load_config, policy_vec_env, train
-from ft_sitl.navigation.learned import load_policy
-from ft_sitl.navigation.policy_io import MlpPolicy
+from ft_sitl.navigation.learned.learned import load_policy
+from ft_sitl.navigation.learned.policy_io import MlpPolicy
 from ft_sitl.scenarios.families import REGISTRY
 from tests.gym.gymutil import SMALL
 

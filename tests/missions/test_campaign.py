@@ -30,8 +30,8 @@ from ft_sitl.missions.results import COLUMNS, RowError, to_frame
 from ft_sitl.missions.spec import platform_for
 from ft_sitl.missions.store import ResultStore, StoreError, load_rows
 from ft_sitl.navigation.base import Limits, Navigator
+from ft_sitl.navigation.planners.straight import StraightLine
 from ft_sitl.navigation.registry import NavigatorError, available, create, parameters
-from ft_sitl.navigation.straight import StraightLine
 from ft_sitl.physics.catalog import catalog
 from ft_sitl.scenarios.families import FAMILIES
 from tests.missions.conftest import (

@@ -298,7 +298,7 @@ def test_navigators_list(capsys):
     rc, out, _ = cli(capsys, "navigators", "list", "--json")
     rows = {r["name"]: r for r in json.loads(out)}
     assert rows["straight"] == {
-        "name": "straight", "class": "ft_sitl.navigation.straight.StraightLine",
+        "name": "straight", "class": "ft_sitl.navigation.planners.straight.StraightLine",
         "rate_hz": 20.0, "depth_camera": False, "unavailable": None,
         "parameters": {"speed_m_s": None},
         "summary": "The straight-flight baseline (paper Sec. IV-A): no sensing, no avoidance."}

@@ -711,7 +711,7 @@ def test_a_navigators_map_at_navigation_start_holds_what_it_saw_on_the_approach(
     map at the first navigation step already holds the trees seen on the way (in protocol
     2 it held nothing yet). The camera runs at 30 Hz (15 Hz in protocols 1 and 2)."""
     from ft_sitl.missions.protocol import navigator_params
-    from ft_sitl.navigation.ego import EgoPlanner
+    from ft_sitl.navigation.planners.ego import EgoPlanner
     from ft_sitl.navigation.registry import create
 
     class Spy(EgoPlanner):
@@ -772,8 +772,8 @@ def test_navigators_keep_their_platforms_footprint_from_protocol_4():
     NavRL's shield uses it as the agent radius. Fast-Planner on a 4.5 kg platform (0.356 m)
     in Forest 1 passed trunks 0.11 m away under protocol 3 and keeps > 0.3 m under 4."""
     from ft_sitl.missions.protocol import trial_task
-    from ft_sitl.navigation.fast import FastPlanner
-    from ft_sitl.navigation.mapping import inflation_voxels, local_map_for
+    from ft_sitl.navigation.maps.mapping import inflation_voxels, local_map_for
+    from ft_sitl.navigation.planners.fast import FastPlanner
 
     big = "4.50kg-UAV 14"
     sc = load_scenario_for(TrialSpec("fast", big, "forest"))
@@ -798,7 +798,7 @@ def test_navigators_keep_their_platforms_footprint_from_protocol_4():
 def test_navrl_shield_takes_the_footprint_as_its_agent_radius():
     """A velocity passing 0.6 m from a 0.3 m obstacle is safe for a point agent (protocols
     1-3) and inside the velocity obstacle for an agent of 0.4 m (a footprint, protocol 4)."""
-    from ft_sitl.navigation.navrl import orca_plane
+    from ft_sitl.navigation.learned.navrl import orca_plane
 
     def in_vo(agent_radius):
         return orca_plane(np.zeros(3), np.array([1.0, 0.0, 0.0]), agent_radius,
@@ -855,7 +855,7 @@ def test_protocol_6_maps_take_the_latest_30_hz_frame_on_a_20_hz_timer():
     grid, at most one camera period before); the camera's skipped frames are not rendered.
     Protocol 5 hands over every 30 Hz frame as it is captured."""
     from ft_sitl.missions.protocol import navigator_params
-    from ft_sitl.navigation.ego import EgoPlanner
+    from ft_sitl.navigation.planners.ego import EgoPlanner
 
     class Spy(EgoPlanner):
         def reset(self, task):

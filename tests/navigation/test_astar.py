@@ -5,7 +5,7 @@ import pytest
 from scipy.sparse import coo_matrix
 from scipy.sparse.csgraph import dijkstra
 
-from ft_sitl.navigation.astar import AStarStatus, OccupancyView, astar_path, search
+from ft_sitl.navigation.planners.astar import AStarStatus, OccupancyView, astar_path, search
 
 RES = 0.1
 
@@ -234,7 +234,7 @@ def test_bounds_make_points_outside_the_box_occupied_on_every_axis_and_side():
 
 
 def test_memo_answers_repeated_searches_as_a_new_search_would():
-    from ft_sitl.navigation.astar import AStarMemo
+    from ft_sitl.navigation.planners.astar import AStarMemo
 
     rng = np.random.default_rng(5)
     blocked = rng.random((40, 30, 12)) < 0.25

@@ -4,7 +4,7 @@ import numpy as np
 import pytest
 from scipy.interpolate import BSpline
 
-from ft_sitl.navigation.bspline import UniformBSpline, basis_matrix, fit_samples
+from ft_sitl.navigation.trajectories.bspline import UniformBSpline, basis_matrix, fit_samples
 
 
 def _random_spline(degree=3, n=12, dt=0.3, seed=0):

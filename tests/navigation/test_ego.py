@@ -6,7 +6,7 @@ import pytest
 
 from ft_sitl.autopilot.cascade import SP_POS
 from ft_sitl.missions.trial import TrialSpec, run_trial
-from ft_sitl.navigation.ego import EgoPlanner
+from ft_sitl.navigation.planners.ego import EgoPlanner
 from ft_sitl.navigation.registry import create
 from ft_sitl.scenarios.camera import camera_config
 

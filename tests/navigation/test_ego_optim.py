@@ -4,10 +4,8 @@ import numpy as np
 import pytest
 from scipy.optimize import minimize
 
-from ft_sitl.navigation import ego_optim as eo
-from ft_sitl.navigation.astar import OccupancyView, search
-from ft_sitl.navigation.bspline import UniformBSpline, fit_samples
-from ft_sitl.navigation.ego_optim import (
+from ft_sitl.navigation.optimisers import ego as eo
+from ft_sitl.navigation.optimisers.ego import (
     Anchors,
     EgoOptimizer,
     EgoParams,
@@ -21,6 +19,8 @@ from ft_sitl.navigation.ego_optim import (
     fitness_cost,
     smoothness_cost,
 )
+from ft_sitl.navigation.planners.astar import OccupancyView, search
+from ft_sitl.navigation.trajectories.bspline import UniformBSpline, fit_samples
 
 RES = 0.1
 INFLATION = 0.1  # one voxel, as the local map inflates

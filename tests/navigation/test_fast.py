@@ -10,9 +10,8 @@ import trimesh
 
 from ft_sitl.autopilot.cascade import SP_POS
 from ft_sitl.missions.trial import TrialSpec, run_trial
-from ft_sitl.navigation.bspline import UniformBSpline
-from ft_sitl.navigation.fast import FastPlanner, first_collision
-from ft_sitl.navigation.fast_optim import (
+from ft_sitl.navigation.maps.mapping import LocalMap
+from ft_sitl.navigation.optimisers.fast import (
     EsdfField,
     FastOptimizer,
     FastParams,
@@ -25,8 +24,9 @@ from ft_sitl.navigation.fast_optim import (
     smoothness_cost,
     total_cost,
 )
-from ft_sitl.navigation.mapping import LocalMap
+from ft_sitl.navigation.planners.fast import FastPlanner, first_collision
 from ft_sitl.navigation.registry import available
+from ft_sitl.navigation.trajectories.bspline import UniformBSpline
 from ft_sitl.scenarios.camera import CameraConfig, DepthCamera
 
 from .planner_util import obs_at, open_task
@@ -267,7 +267,7 @@ def test_never_commands_nan():
 
 def test_gives_up_after_repeated_identical_failures():
     from ft_sitl.navigation.base import GiveUp
-    from ft_sitl.navigation.kino_astar import KinoAstarParams
+    from ft_sitl.navigation.planners.kino_astar import KinoAstarParams
 
     nav = FastPlanner()
     nav.reset(open_task())

@@ -6,7 +6,7 @@ import pytest
 from scipy.integrate import quad
 from scipy.optimize import minimize, minimize_scalar
 
-from ft_sitl.navigation.kino_astar import (
+from ft_sitl.navigation.planners.kino_astar import (
     KinoAstarParams,
     KinodynamicAstar,
     KinoStatus,

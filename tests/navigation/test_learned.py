@@ -18,8 +18,8 @@ from ft_sitl.gym.envs import NavigateEnv
 from ft_sitl.missions.spec import PROTOCOL_VERSION, PROTOCOLS, vehicle_half_span_m
 from ft_sitl.missions.trial import TrialSpec, run_trial
 from ft_sitl.navigation.base import Limits, Observation, Task
-from ft_sitl.navigation.learned import Learned, load_policy, shipped
-from ft_sitl.navigation.policy_io import (
+from ft_sitl.navigation.learned.learned import Learned, load_policy, shipped
+from ft_sitl.navigation.learned.policy_io import (
     N_STATE,
     MlpPolicy,
     PolicyFileError,

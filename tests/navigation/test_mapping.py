@@ -14,7 +14,7 @@ import pytest
 import trimesh
 from scipy import ndimage
 
-from ft_sitl.navigation.mapping import FuseStats, LocalMap, MapConfig
+from ft_sitl.navigation.maps.mapping import FuseStats, LocalMap, MapConfig
 from ft_sitl.scenarios.camera import CameraConfig, DepthCamera
 from ft_sitl.scenarios.families import build_scenario
 from ft_sitl.scenarios.movers import movers_from_list
@@ -518,7 +518,7 @@ def forest_map():
 
 
 def test_first_occupied_is_the_sampled_march_over_planning_occupancy(forest_map):
-    from ft_sitl.navigation.navrl import cast_lidar, lidar_directions
+    from ft_sitl.navigation.learned.navrl import cast_lidar, lidar_directions
 
     m = forest_map
     rng = np.random.default_rng(2)

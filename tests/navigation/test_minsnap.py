@@ -3,7 +3,7 @@
 import numpy as np
 import pytest
 
-from ft_sitl.navigation.minsnap import (
+from ft_sitl.navigation.trajectories.minsnap import (
     PiecewisePolynomial,
     ego_time_allocation,
     ego_waypoints,

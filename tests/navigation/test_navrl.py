@@ -23,7 +23,7 @@ from ft_sitl.missions.campaign_file import load_campaign
 from ft_sitl.missions.protocol import navigator_params
 from ft_sitl.missions.trial import TrialSpec, run_trial
 from ft_sitl.navigation.base import Limits, Observation, ObstacleStates, Task
-from ft_sitl.navigation.navrl import (
+from ft_sitl.navigation.learned.navrl import (
     ENV_VAR,
     NavRL,
     cast_lidar,
@@ -38,7 +38,7 @@ from ft_sitl.navigation.navrl import (
     safe_velocity,
     shield,
 )
-from ft_sitl.navigation.navrl_policy import (
+from ft_sitl.navigation.learned.navrl_policy import (
     EXPECTED_SHAPES,
     CheckpointError,
     NavRLPolicy,

@@ -1,4 +1,4 @@
-"""NavRL's dynamic-obstacle detector and tracker (ft_sitl.navigation.navrl_detector) against
+"""NavRL's dynamic-obstacle detector and tracker (ft_sitl.navigation.learned.navrl_detector) against
 movers rendered by the real depth camera, and the ground truth it is compared with."""
 
 from __future__ import annotations
@@ -10,7 +10,7 @@ import pytest
 import trimesh
 
 from ft_sitl.navigation.base import ObstacleStates
-from ft_sitl.navigation.navrl_detector import (
+from ft_sitl.navigation.learned.navrl_detector import (
     DetectorConfig,
     DynamicObstacleTracker,
     dbscan,

@@ -10,10 +10,9 @@ import trimesh
 
 from ft_sitl.autopilot.cascade import SP_POS
 from ft_sitl.missions.trial import TrialSpec, run_trial
-from ft_sitl.navigation.astar import OccupancyView
-from ft_sitl.navigation.bspline import UniformBSpline
-from ft_sitl.navigation.mapping import LocalMap
-from ft_sitl.navigation.pgo import (
+from ft_sitl.navigation.maps.mapping import LocalMap
+from ft_sitl.navigation.planners.astar import OccupancyView
+from ft_sitl.navigation.planners.pgo import (
     PgoParams,
     PgoPlanner,
     esdf_centre,
@@ -25,7 +24,7 @@ from ft_sitl.navigation.pgo import (
     normal_cost,
     plan_segment,
 )
-from ft_sitl.navigation.topo import (
+from ft_sitl.navigation.planners.topo import (
     EsdfGrid,
     discretize_path,
     find_topo_paths,
@@ -34,6 +33,7 @@ from ft_sitl.navigation.topo import (
     same_topo_path,
     shortcut_path,
 )
+from ft_sitl.navigation.trajectories.bspline import UniformBSpline
 from ft_sitl.scenarios.camera import CameraConfig, DepthCamera
 
 from .planner_util import obs_at, open_task

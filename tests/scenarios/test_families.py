@@ -14,7 +14,7 @@ import pytest
 import trimesh
 
 from ft_sitl import __version__
-from ft_sitl.navigation.mapping import MapConfig
+from ft_sitl.navigation.maps.mapping import MapConfig
 from ft_sitl.physics.catalog import catalog, largest_platform
 from ft_sitl.rotations import matrix_from_quat
 from ft_sitl.scenarios.camera import DepthCamera, camera_config

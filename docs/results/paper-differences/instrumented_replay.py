@@ -20,7 +20,7 @@ import ft_sitl  # noqa: F401  (first: pins the BLAS settings before numpy loads)
 # isort: split
 import numpy as np
 
-import ft_sitl.navigation.pgo as pgo_mod
+import ft_sitl.navigation.planners.pgo as pgo_mod
 from ft_sitl.cli.missions import differences
 from ft_sitl.missions.protocol import navigator_params
 from ft_sitl.missions.results import rows_from_parquet

@@ -4,10 +4,10 @@ rebound B-spline optimisation, replanning, emergency stop, yaw toward the path a
 What it does each call (``rate_hz`` 100, the original's command rate), in simulated time:
 
 1. **Perception.** A depth frame (when the camera is due) is fused into the
-   :class:`~ft_sitl.navigation.mapping.LocalMap`; the planner only knows what the camera
+   :class:`~ft_sitl.navigation.maps.mapping.LocalMap`; the planner only knows what the camera
    saw. Unknown space counts as free, the scenario ceiling is a virtual ceiling.
 2. **Global reference.** Once, at the start: a min-snap polynomial start -> goal through a
-   point every 4 m (:func:`~ft_sitl.navigation.minsnap.global_reference`).
+   point every 4 m (:func:`~ft_sitl.navigation.trajectories.minsnap.global_reference`).
 3. **Replanning** (EGO's FSM):
 
    * the first plan is made at once;
@@ -19,7 +19,7 @@ What it does each call (``rate_hz`` 100, the original's command rate), in simula
    * a plan: the local target ``planning_horizon_m`` (7.5 m) ahead on the reference (at
      rest when the goal is that close), a one-segment polynomial to it from the current
      trajectory's state, fitted to a uniform cubic B-spline, optimised by
-     :class:`~ft_sitl.navigation.ego_optim.EgoOptimizer` (rebound + refinement).
+     :class:`~ft_sitl.navigation.optimisers.ego.EgoOptimizer` (rebound + refinement).
 
    A plan that fails is retried after 0.05 s, doubling with each failure in a row up to
    1 s; after ``GIVE_UP_AFTER`` (8) failures in a row from the same state with the same
@@ -49,17 +49,17 @@ import time
 import numpy as np
 
 from ft_sitl.autopilot.setpoints import Setpoint
-from ft_sitl.navigation.astar import OccupancyView
 from ft_sitl.navigation.base import Observation, Task
-from ft_sitl.navigation.bspline import UniformBSpline
-from ft_sitl.navigation.common import (
+from ft_sitl.navigation.optimisers.ego import EgoOptimizer, EgoParams, first_collision_time
+from ft_sitl.navigation.planners.astar import OccupancyView
+from ft_sitl.navigation.planners.skeleton import (
     HorizonPlanner,
     SplineTrajectory,
     checked_setpoint,
     pursue_yaw,
 )
-from ft_sitl.navigation.ego_optim import EgoOptimizer, EgoParams, first_collision_time
-from ft_sitl.navigation.minsnap import global_reference, min_snap, one_segment_time
+from ft_sitl.navigation.trajectories.bspline import UniformBSpline
+from ft_sitl.navigation.trajectories.minsnap import global_reference, min_snap, one_segment_time
 
 #: estimated compute time of one EGO replan in the original C++ (optimisation ~1 ms, plus
 #: A* and map work; the paper's authors report a few ms on a desktop CPU)

@@ -2,9 +2,10 @@
 
 The NavRL authors publish their trained PPO policy as a PyTorch checkpoint (a zip file with a
 pickled ``state_dict`` and raw tensor storages). ft-sitl does not ship it (the user supplies
-it, see :mod:`ft_sitl.navigation.navrl`) and does not depend on PyTorch: :func:`load_checkpoint`
-reads the zip with a restricted unpickler that builds numpy arrays and refuses every other
-object (a checkpoint cannot run code here), and :class:`NavRLPolicy` evaluates the network:
+it, see :mod:`~ft_sitl.navigation.learned.navrl`) and does not depend on PyTorch:
+:func:`load_checkpoint` reads the zip with a restricted unpickler that builds numpy arrays
+and refuses every other object (a checkpoint cannot run code here), and :class:`NavRLPolicy`
+evaluates the network:
 
 * lidar CNN on the 36 x 4 "range deficit" image: Conv(1->4, 5x3, pad 2x1), ELU,
   Conv(4->16, 5x3, stride 2x1, pad 2x1), ELU, Conv(16->16, 5x3, stride 2x2, pad 2x1), ELU,

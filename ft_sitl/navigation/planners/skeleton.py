@@ -13,7 +13,7 @@ import numpy as np
 
 from ft_sitl.autopilot.setpoints import Setpoint
 from ft_sitl.navigation.base import GiveUp, Navigator, Observation, Task
-from ft_sitl.navigation.mapping import local_map_for
+from ft_sitl.navigation.maps.mapping import local_map_for
 from ft_sitl.scenarios.camera import CAMERA_PARAMS, camera_of
 from ft_sitl.schema import Param, Schema
 

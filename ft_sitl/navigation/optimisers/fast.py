@@ -76,9 +76,9 @@ import numpy as np
 from numba import njit
 from scipy.interpolate import BSpline
 
-from ft_sitl.navigation.bspline import UniformBSpline
-from ft_sitl.navigation.lbfgs import dot_rows, search_direction, store_pair
-from ft_sitl.navigation.mapping import esdf_eval
+from ft_sitl.navigation.maps.mapping import esdf_eval
+from ft_sitl.navigation.optimisers.lbfgs import dot_rows, search_direction, store_pair
+from ft_sitl.navigation.trajectories.bspline import UniformBSpline
 
 __all__ = [
     "EsdfField", "FastOptimizer", "FastParams", "FastResult", "KnotBSpline", "cost_terms",

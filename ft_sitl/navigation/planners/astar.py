@@ -98,7 +98,7 @@ class OccupancyView:
 
     @classmethod
     def from_map(cls, local_map, bounds=None) -> OccupancyView:
-        """View of the ``LocalMap`` of ``ft_sitl.navigation.mapping`` (duck-typed: its
+        """View of the ``LocalMap`` of ``ft_sitl.navigation.maps.mapping`` (duck-typed: its
         ``occupied_inflated(points)`` and ``resolution_m``; its voxels are world-aligned,
         centres at ``(i + 0.5) * resolution``, which is this view's default lattice; its
         ``occupied_inflated_lattice`` and ``revision`` when it has them)."""

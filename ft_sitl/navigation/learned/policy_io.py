@@ -1,6 +1,6 @@
 """What a learned policy sees and what its action means: one definition shared by the
 Gymnasium environments that train it (:mod:`ft_sitl.gym`, above the mission runner) and
-the navigator that flies it in trials (:mod:`ft_sitl.navigation.learned`, below it).
+the navigator that flies it in trials (:mod:`ft_sitl.navigation.learned.learned`, below it).
 
 - the **goal frame** (NavRL's): x the horizontal start -> goal direction, z up, y left;
 - the **state vector** (:data:`STATE_NAMES`) of a flight-controller state, compiled

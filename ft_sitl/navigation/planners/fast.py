@@ -4,13 +4,13 @@ ESDF-based B-spline optimisation, time re-allocation, yaw B-spline, replanning.
 Fast-Planner (Zhou et al., RA-L 2019) in its ``kino_replan`` configuration; behaviours and
 defaults from the facts (/work/shared/docs/planner-facts.md), the code is our own. The
 navigator's skeleton (perception, FSM, latency, retries, output) is the EGO navigator's
-(:mod:`ft_sitl.navigation.ego`), so the two differ only where the algorithms do.
+(:mod:`ft_sitl.navigation.planners.ego`), so the two differ only where the algorithms do.
 
 What it does each call (``rate_hz`` 100, the command rate of the original's
 ``traj_server``), in simulated time:
 
 1. **Perception.** A depth frame (when the camera is due) is fused into the
-   :class:`~ft_sitl.navigation.mapping.LocalMap` (unknown space is free; the scenario
+   :class:`~ft_sitl.navigation.maps.mapping.LocalMap` (unknown space is free; the scenario
    ceiling and the floor are virtual obstacles).
 2. **Replanning** (``kino_replan_fsm``):
 
@@ -27,12 +27,12 @@ What it does each call (``rate_hz`` 100, the command rate of the original's
      vehicle stops (hovers where it is, then plans from rest there);
    * a plan (``kinodynamicReplan``): the ESDF over ``+-(planning_horizon_m + 1)`` m around
      the start (clipped to the map's window); the kinodynamic A*
-     (:mod:`~ft_sitl.navigation.kino_astar`) from the current trajectory's state toward
+     (:mod:`~ft_sitl.navigation.planners.kino_astar`) from the current trajectory's state toward
      the goal (speed cap: the benchmark's, per axis; ``max_acc_m_s2`` 2; horizon 7 m;
      retried from hover with the full input set when the first search fails); its samples
      every ``ts = 0.5 m / v_max`` (spans of ``max(8, floor(T / ts))``) fitted to a uniform
      cubic B-spline with the start/end velocity and acceleration; the ESDF optimisation
-     (:class:`~ft_sitl.navigation.fast_optim.FastOptimizer`; free end when the search did
+     (:class:`~ft_sitl.navigation.optimisers.fast.FastOptimizer`; free end when the search did
      not reach the goal); the time re-allocation (up to 3 passes, the speed cap on the
      velocity control points' norm, the start state kept); a collision check of the
      result over the safety check's stretch (its first 6 m); the yaw B-spline.
@@ -89,21 +89,21 @@ import numpy as np
 
 from ft_sitl.autopilot.setpoints import Setpoint
 from ft_sitl.navigation.base import Observation, Task
-from ft_sitl.navigation.bspline import UniformBSpline
-from ft_sitl.navigation.common import HorizonPlanner, checked_setpoint, wrap_angle
-from ft_sitl.navigation.fast_optim import (
+from ft_sitl.navigation.optimisers.fast import (
     EsdfField,
     FastOptimizer,
     FastParams,
     KnotBSpline,
     plan_yaw,
 )
-from ft_sitl.navigation.kino_astar import (
+from ft_sitl.navigation.planners.kino_astar import (
     KinoAstarParams,
     KinodynamicAstar,
     KinoStatus,
     VoxelOccupancy,
 )
+from ft_sitl.navigation.planners.skeleton import HorizonPlanner, checked_setpoint, wrap_angle
+from ft_sitl.navigation.trajectories.bspline import UniformBSpline
 
 #: estimated time from state to command of one Fast-Planner replan in the original C++ on
 #: a desktop CPU: kinodynamic search a few ms, B-spline optimisation <= 300 evaluations

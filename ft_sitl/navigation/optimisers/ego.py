@@ -2,7 +2,8 @@
 
 Behaviours and defaults are EGO-Planner's (Zhou et al., RA-L 2021; ZJU-FAST-Lab/ego-planner,
 see /work/shared/docs/planner-facts.md); the code is our own. The trajectory is a uniform
-cubic B-spline (:class:`~ft_sitl.navigation.bspline.UniformBSpline`) with control points
+cubic B-spline (:class:`~ft_sitl.navigation.trajectories.bspline.UniformBSpline`) with control
+points
 ``Q[0..N-1]``; the first and last three are fixed (they pin the start and end state) and the
 interior ones are optimised.
 
@@ -14,7 +15,7 @@ and is pushed along ``v`` until it is ``clearance`` (0.5 m) beyond ``p``:
    (``i_end = (N-3) - (N-6) // 3``, EGO's "first 2/3") is sampled every half voxel against
    the inflated map; each occupied run (runs closer than 3 samples merged) becomes
    ``(in_id, out_id)``: the control point before it and the one after it.
-2. A 26-connected A* (:mod:`~ft_sitl.navigation.astar`) from ``Q[in_id]`` to ``Q[out_id]``.
+2. A 26-connected A* (:mod:`~ft_sitl.navigation.planners.astar`) from ``Q[in_id]`` to ``Q[out_id]``.
 3. Anchors (:func:`anchors_for_segment`): for each ``Q[j]`` strictly inside the stretch, the
    plane through ``Q[j]`` with normal ``Q[j+1] - Q[j-1]`` cuts the A* path at ``c``;
    ``v = (c - Q[j]) / |c - Q[j]|``; ``p`` is found by marching from ``c`` back toward
@@ -91,9 +92,9 @@ from dataclasses import dataclass, field
 import numpy as np
 from numba import njit
 
-from ft_sitl.navigation.astar import AStarMemo, OccupancyView, search
-from ft_sitl.navigation.bspline import Feasibility, UniformBSpline
-from ft_sitl.navigation.lbfgs import dot_rows, search_direction, store_pair
+from ft_sitl.navigation.optimisers.lbfgs import dot_rows, search_direction, store_pair
+from ft_sitl.navigation.planners.astar import AStarMemo, OccupancyView, search
+from ft_sitl.navigation.trajectories.bspline import Feasibility, UniformBSpline
 
 __all__ = [
     "Anchors", "EgoOptimizer", "EgoParams", "EgoResult", "EgoStatus", "anchors_for_segment",
@@ -687,7 +688,8 @@ class EgoResult:
 
 
 class EgoOptimizer:
-    """EGO's B-spline optimiser over an :class:`~ft_sitl.navigation.astar.OccupancyView`."""
+    """EGO's B-spline optimiser over an
+    :class:`~ft_sitl.navigation.planners.astar.OccupancyView`."""
 
     def __init__(self, grid: OccupancyView, params: EgoParams | None = None):
         if not isinstance(grid, OccupancyView):

@@ -12,18 +12,18 @@ licence, from the authors' repository), found in this order:
 
 Without one, naming ``navrl`` in a campaign is an error that says this, and ``algorithms =
 "all"`` leaves it out with a note. The checkpoint is read without PyTorch
-(:mod:`ft_sitl.navigation.navrl_policy`).
+(:mod:`ft_sitl.navigation.learned.navrl_policy`).
 
 What it does, as the authors' ROS deployment does (control at 20 Hz, simulated time):
 
 1. **Perception.** Depth frames are fused into the same
-   :class:`~ft_sitl.navigation.mapping.LocalMap` the planners use (0.1 m voxels, one-voxel
+   :class:`~ft_sitl.navigation.maps.mapping.LocalMap` the planners use (0.1 m voxels, one-voxel
    inflation, unknown = free). Each control step casts the 36 x 4 "lidar" into the inflated
    map from the vehicle: 10 deg horizontal steps counter-clockwise from the start -> goal
    direction, elevations -10, 0, 10, 20 deg, 4 m range; the policy sees 4 m minus the hit
    distance. Moving obstacles (``dynamic_obstacles``): "tracked" (default) runs the
    deployment's detector and tracker on every frame the navigator gets
-   (:mod:`ft_sitl.navigation.navrl_detector`), "truth" takes the simulator's ground truth
+   (:mod:`ft_sitl.navigation.learned.navrl_detector`), "truth" takes the simulator's ground truth
    (``Observation.movers``, as the original's simulation launch takes Gazebo's through its
    ``fake_detector``), "off" none. As the deployment's map does, the boxes of those within
    5 m of the camera (grown by 0.3 m, not below z = 0) are set free after each update, and
@@ -74,13 +74,18 @@ import numpy as np
 from scipy.optimize import minimize
 
 from ft_sitl.autopilot.setpoints import Setpoint
-from ft_sitl.navigation import navrl_detector
 from ft_sitl.navigation.base import Navigator, Observation, ObstacleStates, Task
-from ft_sitl.navigation.common import LATENCY, MEASURED_LATENCY, DelayedCommands, wrap_angle
-from ft_sitl.navigation.mapping import local_map_for
-from ft_sitl.navigation.navrl_detector import DynamicObstacleTracker, in_range
-from ft_sitl.navigation.navrl_policy import DYN_DIM, DYN_OBS, CheckpointError, NavRLPolicy
-from ft_sitl.navigation.policy_io import goal_frame
+from ft_sitl.navigation.learned import navrl_detector
+from ft_sitl.navigation.learned.navrl_detector import DynamicObstacleTracker, in_range
+from ft_sitl.navigation.learned.navrl_policy import DYN_DIM, DYN_OBS, CheckpointError, NavRLPolicy
+from ft_sitl.navigation.learned.policy_io import goal_frame
+from ft_sitl.navigation.maps.mapping import local_map_for
+from ft_sitl.navigation.planners.skeleton import (
+    LATENCY,
+    MEASURED_LATENCY,
+    DelayedCommands,
+    wrap_angle,
+)
 from ft_sitl.scenarios.camera import CAMERA_PARAMS, camera_of
 from ft_sitl.schema import Param, Schema
 
@@ -198,7 +203,7 @@ def obstacle_in_range(lidar_deficit: np.ndarray) -> bool:
 def dbscan(points: np.ndarray, eps: float = DBSCAN_EPS_M,
            min_points: int = DBSCAN_MIN_POINTS) -> list[np.ndarray]:
     """The shield's clustering of the ray end points (N, 3): sorted index arrays of the
-    clusters, noise left out (:func:`ft_sitl.navigation.navrl_detector.dbscan`, the
+    clusters, noise left out (:func:`ft_sitl.navigation.learned.navrl_detector.dbscan`, the
     detector's DBSCAN with the shield's eps and minimum)."""
     return navrl_detector.dbscan(points, eps, min_points)
 

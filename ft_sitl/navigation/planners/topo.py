@@ -5,7 +5,7 @@ range of its planner manager (Zhou et al., ICRA 2020; HKUST-Aerial-Robotics/Fast
 ``topo_prm.cpp``; see /work/shared/docs/planner-facts.md); the code is our own.
 
 Distances come from an :class:`EsdfGrid`, a snapshot of the local map's signed ESDF
-(:meth:`~ft_sitl.navigation.mapping.LocalMap.update_esdf`): free voxels hold the distance to
+(:meth:`~ft_sitl.navigation.maps.mapping.LocalMap.update_esdf`): free voxels hold the distance to
 the nearest planning-occupied voxel centre (>= one voxel), occupied voxels ``<= 0``. Like
 the original, the search reads it two ways: per voxel (Fast-Planner's "coarse" distance,
 used for the sample clearance, the collision range and line of sight) and trilinearly with
@@ -70,7 +70,7 @@ import numpy as np
 from numba import njit
 from scipy.ndimage import distance_transform_edt
 
-from ft_sitl.navigation.mapping import trilinear_point
+from ft_sitl.navigation.maps.mapping import trilinear_point
 
 __all__ = [
     "EsdfGrid", "TopoParams", "TopoSearch", "collision_range", "discretize_path",

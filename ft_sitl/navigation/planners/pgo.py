@@ -3,14 +3,15 @@
 Behaviours and defaults are those of Fast-Planner's topological replanner (Zhou et al.,
 ICRA 2020; HKUST-Aerial-Robotics/Fast-Planner: ``topo_replan_fsm``, ``planner_manager``'s
 ``topoReplan``, ``bspline_optimizer``; see /work/shared/docs/planner-facts.md); the code is
-our own. Structure as :mod:`ft_sitl.navigation.ego` (same perception, latency model, safety
+our own. Structure as :mod:`ft_sitl.navigation.planners.ego` (same perception, latency model, safety
 logic and give-up rule). Each call (``rate_hz`` 100), in simulated time:
 
 1. **Perception.** A due depth frame is fused into the
-   :class:`~ft_sitl.navigation.mapping.LocalMap` (the camera of ``camera_config``); unknown
+   :class:`~ft_sitl.navigation.maps.mapping.LocalMap` (the camera of ``camera_config``); unknown
    space counts as free, the scenario ceiling is a virtual ceiling.
 2. **Global reference.** A min-snap polynomial start -> goal through a point every 4 m
-   (:func:`~ft_sitl.navigation.minsnap.global_reference`), Fast-Planner's ``planGlobalTraj``.
+   (:func:`~ft_sitl.navigation.trajectories.minsnap.global_reference`), Fast-Planner's
+   ``planGlobalTraj``.
    As in Fast-Planner's ``GlobalTrajData`` the planner follows the *composite* reference:
    the current local trajectory while it lasts, then the global polynomial, delayed by the
    time the local trajectories added (:class:`_Reference`).
@@ -29,7 +30,7 @@ logic and give-up rule). Each call (``rate_hz`` 100), in simulated time:
      ``getTrajByRadius``: a point every ``ctrl_pt_dist_m`` 0.3 m of length), fitted to a
      uniform cubic B-spline; the ESDF is updated over the map window; if the segment's
      clearance stays >= 0.3 m it is only optimised (the normal cost below); otherwise the
-     topological search (:mod:`~ft_sitl.navigation.topo`) finds up to 6 distinct paths
+     topological search (:mod:`~ft_sitl.navigation.planners.topo`) finds up to 6 distinct paths
      around the colliding stretch and each guides an optimisation (phase 1: smoothness +
      1.5 x distance to guide points, solved exactly; phase 2: Fast-Planner's cost 10 x
      jerk + 5 x sum (d - 0.4)^2 where the ESDF d < 0.4 + 1e-5 x feasibility, L-BFGS, <= 300
@@ -62,10 +63,9 @@ from numba import njit
 from scipy.interpolate import BSpline
 
 from ft_sitl.autopilot.setpoints import Setpoint
-from ft_sitl.navigation.astar import OccupancyView
 from ft_sitl.navigation.base import Observation, Task
-from ft_sitl.navigation.bspline import UniformBSpline
-from ft_sitl.navigation.common import (
+from ft_sitl.navigation.planners.astar import OccupancyView
+from ft_sitl.navigation.planners.skeleton import (
     NO_REPLAN_THRESHOLD,
     ReplanningPlanner,
     SplineTrajectory,
@@ -73,8 +73,7 @@ from ft_sitl.navigation.common import (
     planner_schema,
     pursue_yaw,
 )
-from ft_sitl.navigation.minsnap import global_reference
-from ft_sitl.navigation.topo import (
+from ft_sitl.navigation.planners.topo import (
     EsdfGrid,
     TopoParams,
     TopoSearch,
@@ -84,6 +83,8 @@ from ft_sitl.navigation.topo import (
     path_length,
     trilinear,
 )
+from ft_sitl.navigation.trajectories.bspline import UniformBSpline
+from ft_sitl.navigation.trajectories.minsnap import global_reference
 from ft_sitl.schema import Param
 
 __all__ = ["DEFAULT_LATENCY_S", "PgoParams", "PgoPlan", "PgoPlanner", "first_collision_time",

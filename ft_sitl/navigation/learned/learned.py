@@ -2,15 +2,15 @@
 and the seven scenario families (``ft-sitl train``, :mod:`ft_sitl.gym.train`), flown from
 a numpy policy file without the training stack.
 
-The shipped policy (``ft_sitl/navigation/data/learned-v1.npz``; its training and results:
+The shipped policy (``ft_sitl/navigation/learned/data/learned-v1.npz``; its training and results:
 docs/planners.md, "learned", and docs/results/learned/) or any other file ``ft-sitl
 train`` wrote (parameter ``policy``). The file records how its input is built and its
-action scaled (:mod:`ft_sitl.navigation.policy_io`), and the navigator reproduces exactly
+action scaled (:mod:`ft_sitl.navigation.learned.policy_io`), and the navigator reproduces exactly
 what the policy saw in training except for one thing, the obstacles:
 
 1. **Perception.** In training the policy's ray scan is cast into the true world. Here, as
    for NavRL (whose authors trained on the simulator's truth too and deploy on a map), the
-   rays are cast into the planners' :class:`~ft_sitl.navigation.mapping.LocalMap` built
+   rays are cast into the planners' :class:`~ft_sitl.navigation.maps.mapping.LocalMap` built
    from the depth camera's frames (0.1 m voxels, from take-off on), without inflation: the
    scan reads the distance to the nearest seen surface (to the 0.05 m march step) as the
    training scan does, and what the camera has not seen reads as free.
@@ -39,9 +39,7 @@ import numpy as np
 
 from ft_sitl.autopilot.setpoints import Setpoint
 from ft_sitl.navigation.base import Navigator, Observation, Task
-from ft_sitl.navigation.common import LATENCY, MEASURED_LATENCY, DelayedCommands, wrap_angle
-from ft_sitl.navigation.mapping import LocalMap, MapConfig
-from ft_sitl.navigation.policy_io import (
+from ft_sitl.navigation.learned.policy_io import (
     N_STATE,
     STATE_HIGH,
     STATE_LOW,
@@ -55,6 +53,13 @@ from ft_sitl.navigation.policy_io import (
     policy_input,
     ray_directions,
     velocity_action,
+)
+from ft_sitl.navigation.maps.mapping import LocalMap, MapConfig
+from ft_sitl.navigation.planners.skeleton import (
+    LATENCY,
+    MEASURED_LATENCY,
+    DelayedCommands,
+    wrap_angle,
 )
 from ft_sitl.physics import dynamics as d
 from ft_sitl.scenarios.camera import CAMERA_PARAMS, camera_of
@@ -134,7 +139,7 @@ class Learned(Navigator):
         try:
             policy_path(DEFAULT_POLICY)
         except FileNotFoundError as exc:
-            return f"{exc} (the installation lacks ft_sitl/navigation/data)"
+            return f"{exc} (the installation lacks ft_sitl/navigation/learned/data)"
         return None
 
     def __init__(self, **params):

@@ -1,0 +1,2 @@
+"""Trajectories: the protocol every planned curve follows (:mod:`.base`), the B-spline
+(:mod:`.bspline`) and the piecewise (min-snap) polynomial (:mod:`.minsnap`)."""
