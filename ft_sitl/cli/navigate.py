@@ -12,9 +12,16 @@ import numpy as np
 from ft_sitl import frames
 from ft_sitl.bus.options import parse_broker_url
 from ft_sitl.cli.common import CliError, option_value, platform_registry
+from ft_sitl.navigation.base import Task, TaskError
 from ft_sitl.navigation.registry import NavigatorError, create
 from ft_sitl.scenarios.io import scenario_from_spec
-from ft_sitl.wire.navigate import ClientResult, NavigateError, WireTask, fly, require_mavsdk
+from ft_sitl.wire.navigate import (
+    ClientResult,
+    NavigateError,
+    fly,
+    require_mavsdk,
+    task_from_json,
+)
 
 
 def _vec3(name: str, text: str) -> list[float]:
@@ -41,37 +48,43 @@ def _params(items) -> dict:
     return out
 
 
-def wire_task_from_args(args):
-    """The WireTask of ``ft-sitl navigate``'s arguments."""
+def task_from_args(args) -> Task:
+    """The Task of ``ft-sitl navigate``'s arguments: ``--task-json`` whole, else built from
+    a scenario or a goal and a start, the limits and the platform given."""
     if args.task_json:
         try:
-            return WireTask.from_json(args.task_json)
-        except ValueError as exc:
+            return task_from_json(args.task_json)
+        except TaskError as exc:
             raise CliError(f"--task-json: {exc}") from None
-    kw = {"max_speed_m_s": args.max_speed, "timeout_s": args.timeout}
+    doc: dict = {"max_speed_m_s": args.max_speed, "timeout_s": args.timeout}
     if args.platform:
         p = platform_registry(args).get(args.platform)
         ind = p.indicators()
-        kw.update(collision_radius_m=p.collision_radius_m, twr_max=ind.twr_max,
-                  alpha_xy_max=ind.alpha_xy_max_rad_s2, alpha_z_max=ind.alpha_z_max_rad_s2)
+        doc.update(collision_radius_m=p.collision_radius_m, twr_max=ind.twr_max,
+                   alpha_xy_max=ind.alpha_xy_max_rad_s2, alpha_z_max=ind.alpha_z_max_rad_s2)
     if args.scenario:
         sc = option_value("--scenario", scenario_from_spec, args.scenario)
-        return WireTask(goal=list(sc.goal), start=list(sc.start), start_yaw=sc.start_yaw,
-                        origin=list(sc.takeoff), bounds_min=list(sc.bounds_min),
-                        bounds_max=list(sc.bounds_max), **kw)
-    if args.goal is None:
-        raise CliError("give --goal N,E,D (local NED metres) or --scenario FAMILY:INDEX")
-    goal = frames.ned_to_enu(np.array(_vec3("--goal", args.goal)))
-    start = frames.ned_to_enu(np.array(_vec3("--start", args.start)))
-    if start[2] <= 0.3 or goal[2] <= 0.3:
-        raise CliError("--start/--goal: must be above the ground (down < -0.3 m)")
-    d = goal - start
-    yaw = math.atan2(d[1], d[0]) if args.heading is None else frames.yaw_ned_to_enu(
-        math.radians(args.heading))
-    lo = np.minimum(start, goal) - 20.0
-    hi = np.maximum(start, goal) + 20.0
-    return WireTask(goal=list(goal), start=list(start), start_yaw=yaw,
-                    bounds_min=[lo[0], lo[1], 0.0], bounds_max=[hi[0], hi[1], hi[2]], **kw)
+        doc.update(goal=list(sc.goal), start=list(sc.start), start_yaw=float(sc.start_yaw),
+                   origin=list(sc.takeoff), bounds_min=list(sc.bounds_min),
+                   bounds_max=list(sc.bounds_max))
+    else:
+        if args.goal is None:
+            raise CliError("give --goal N,E,D (local NED metres) or --scenario FAMILY:INDEX")
+        goal = frames.ned_to_enu(np.array(_vec3("--goal", args.goal)))
+        start = frames.ned_to_enu(np.array(_vec3("--start", args.start)))
+        if start[2] <= 0.3 or goal[2] <= 0.3:
+            raise CliError("--start/--goal: must be above the ground (down < -0.3 m)")
+        d = goal - start
+        yaw = math.atan2(d[1], d[0]) if args.heading is None else frames.yaw_ned_to_enu(
+            math.radians(args.heading))
+        lo = np.minimum(start, goal) - 20.0
+        hi = np.maximum(start, goal) + 20.0
+        doc.update(goal=goal.tolist(), start=start.tolist(), start_yaw=float(yaw),
+                   bounds_min=[float(lo[0]), float(lo[1]), 0.0], bounds_max=hi.tolist())
+    try:
+        return Task.from_dict(doc)
+    except TaskError as exc:
+        raise CliError(str(exc)) from None
 
 
 def cmd_navigate(args) -> int:
@@ -81,7 +94,7 @@ def cmd_navigate(args) -> int:
         raise CliError(str(exc)) from None
     if args.mqtt:
         option_value("--mqtt", parse_broker_url, args.mqtt)
-    wt = wire_task_from_args(args)
+    task = task_from_args(args)
     params = _params(args.param)
     try:
         nav = create(args.algorithm, params)
@@ -92,11 +105,11 @@ def cmd_navigate(args) -> int:
     def progress(t, obs):
         if not args.quiet and t - last[0] >= 1.0:
             last[0] = t
-            d = float(np.linalg.norm(obs.position - np.array(wt.goal)))
+            d = float(np.linalg.norm(obs.position - task.goal))
             print(f"t {t:6.1f} s  {d:6.1f} m to the goal", file=sys.stderr, flush=True)
 
     try:
-        out = asyncio.run(fly(nav, wt, args.connect, mqtt=args.mqtt, vehicle=args.vehicle,
+        out = asyncio.run(fly(nav, task, args.connect, mqtt=args.mqtt, vehicle=args.vehicle,
                               speed_factor=args.speed_factor,
                               connect_timeout_s=args.connect_timeout, progress=progress,
                               real_latency="latency_s" not in params))

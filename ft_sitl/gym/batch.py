@@ -31,7 +31,7 @@ from dataclasses import replace
 import numpy as np
 
 from ft_sitl.autopilot.estimator import E_ON, Estimator
-from ft_sitl.autopilot.params import DEFAULT_GAINS
+from ft_sitl.autopilot.params import DEFAULT_GAINS, ParamSet
 from ft_sitl.autopilot.setpoints import (
     Setpoint,
     SetpointError,
@@ -43,16 +43,10 @@ from ft_sitl.autopilot.setpoints import (
 from ft_sitl.gym.config import ARENA, EnvConfig, EnvError
 from ft_sitl.gym.kernels import measure, shaped_rewards
 from ft_sitl.gym.worlds import BASE_CAMERA, World
-from ft_sitl.missions.protocol import (
-    GoalRule,
-    TrialFailure,
-    event_failure,
-    flight_failure,
-    flight_params,
-    vehicle_collision,
-)
+from ft_sitl.missions.plan import flight_params, vehicle_collision
+from ft_sitl.missions.protocol import GoalRule, TrialFailure, event_failure, flight_failure
 from ft_sitl.missions.results import Outcome
-from ft_sitl.missions.spec import vehicle_half_span_m
+from ft_sitl.missions.spec import PROTOCOLS, vehicle_half_span_m
 from ft_sitl.navigation.learned.policy_io import (
     N_STATE,
     PLATFORM_NAMES,
@@ -131,7 +125,8 @@ class FlightBatch:
         self.sim: Simulation | None = None
         self.guard: CollisionGuard | None = None
         self.movers = None
-        self.params = flight_params(None, cfg.limits, cfg.protocol, DEFAULT_GAINS)
+        self.params = ParamSet(flight_params(None, cfg.limits, PROTOCOLS[cfg.protocol],
+                                             DEFAULT_GAINS))
         # per vehicle
         self.goal = np.zeros((n, 3))
         self.start = np.zeros((n, 3))
@@ -164,7 +159,7 @@ class FlightBatch:
         """A new simulation (clock at 0) of the batch's vehicles in ``world``; every
         vehicle waits for :meth:`reset_vehicle`."""
         p0 = next(iter(catalog().values()))
-        radius, body = vehicle_collision(self.cfg.protocol, p0)
+        radius, body = vehicle_collision(PROTOCOLS[self.cfg.protocol], p0)
         sim = Simulation([p0] * self.n, params=self.params, physics_hz=self.cfg["physics_hz"])
         guard = CollisionGuard(world.collision, [radius] * self.n, grid=world.grid,
                                names=world.scenario.obstacle_name,
@@ -266,7 +261,7 @@ class FlightBatch:
         frame = goal_frame(goal - start)
         yaw = math.atan2(frame[0, 1], frame[0, 0])
         sim.set_platform(i, platform)
-        radius, body = vehicle_collision(self.cfg.protocol, platform)
+        radius, body = vehicle_collision(PROTOCOLS[self.cfg.protocol], platform)
         self.guard.set_vehicle(i, radius, body)
         sim.start_hovering(i, start, yaw)
         sim.set_estimator(i, est, seed=est_seed)

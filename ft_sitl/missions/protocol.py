@@ -50,21 +50,10 @@ from ft_sitl import __version__
 from ft_sitl.autopilot import failures
 from ft_sitl.autopilot.cascade import C_SAT_STEPS
 from ft_sitl.autopilot.geofence import TAKEOVER_ACTIONS
-from ft_sitl.autopilot.params import GAIN_MODES, ParamSet
 from ft_sitl.missions.resources import RESOURCES, TrialResources
 from ft_sitl.missions.results import Outcome
-from ft_sitl.missions.spec import (
-    PROTOCOLS,
-    TrialSpecError,
-    actuator_seed,
-    estimator_seed,
-    fence_of,
-    fence_params,
-    vehicle_half_span_m,
-    wind_seed,
-)
-from ft_sitl.navigation.base import STABLE_FOR_S, STABLE_POS_M, STABLE_SPEED_M_S, Task
-from ft_sitl.navigation.registry import available
+from ft_sitl.missions.spec import TrialSpecError, fence_of
+from ft_sitl.navigation.base import STABLE_FOR_S, STABLE_POS_M, STABLE_SPEED_M_S
 from ft_sitl.physics.wind import Wind
 from ft_sitl.provenance import software
 from ft_sitl.scenarios.movers import NOT_STARTED
@@ -376,8 +365,8 @@ class NavigationJudge:
     the timeout. :meth:`after_step` raises :class:`TrialFailure` with the outcome, or
     returns True on success."""
 
-    def __init__(self, fleet, guard, spec, sc, metrics: Metrics, traj: list | None = None):
-        self.fleet, self.guard, self.spec, self.sc = fleet, guard, spec, sc
+    def __init__(self, fleet, guard, plan, metrics: Metrics, traj: list | None = None):
+        self.fleet, self.guard, self.spec, self.sc = fleet, guard, plan.spec, plan.scenario
         self.m = metrics
         self.n_events = len(fleet.events)
         self.n_breaches = len(fleet.commanders[0].fence_events)
@@ -387,8 +376,8 @@ class NavigationJudge:
         self._state = fleet.true_state(0)
         self._state_us = fleet.time_us
         self.prev = self._state.position.copy()
-        self.goal = GoalRule(spec.limits)
-        stall_s = PROTOCOLS[spec.protocol].stall_timeout_s
+        self.goal = GoalRule(plan.spec.limits)
+        stall_s = plan.rules.stall_timeout_s
         self.stall_us = None if stall_s is None else round(stall_s * 1e6)
         self.best_dist = math.inf  # the closest to the goal so far, less STALL_PROGRESS_M
         self.best_us = 0
@@ -437,13 +426,14 @@ class TrialReferee:
     (it returns True once the trial has an outcome), :meth:`end` for an outcome only it
     can see (the navigator failed), and :meth:`finish` for the row."""
 
-    def __init__(self, fleet, guard, spec, scenario, *, record: bool = False):
-        self.fleet, self.guard, self.spec, self.sc = fleet, guard, spec, scenario
+    def __init__(self, fleet, guard, plan, *, record: bool = False):
+        self.fleet, self.guard, self.plan = fleet, guard, plan
+        self.spec, self.sc = plan.spec, plan.scenario
         self.metrics = Metrics()
         self.traj: list = []
         self.record = record
         self.phase = Phase.APPROACH
-        self.approach = ApproachJudge(fleet, scenario)
+        self.approach = ApproachJudge(fleet, plan.scenario)
         self.judge: NavigationJudge | None = None
         # navigation-phase baselines: time, saturated steps, physics steps, energy
         self.t_nav0_us: int | None = None
@@ -471,7 +461,7 @@ class TrialReferee:
         self._sat0 = float(fleet.sim.ctrl[0, C_SAT_STEPS])
         self._steps0 = fleet.sim.steps
         self._e0 = fleet.sim.energy_j(0)
-        self.judge = NavigationJudge(fleet, self.guard, self.spec, self.sc, self.metrics,
+        self.judge = NavigationJudge(fleet, self.guard, self.plan, self.metrics,
                                      self.traj if self.record else None)
         self.phase = Phase.NAVIGATION
         if self.guard.movers is not None:  # the movers set off as navigation starts
@@ -495,7 +485,7 @@ class TrialReferee:
         """(K, 4): t_s from navigation start, x, y, z (when recording)."""
         return np.array(self.traj) if self.record else None
 
-    def finish(self, platform, *, replans: int, wall0: float) -> dict:
+    def finish(self, *, replans: int, wall0: float) -> dict:
         """The trial's row: identity, outcome, metrics, navigation-phase totals."""
         fleet, m = self.fleet, self.metrics
         reason = self.outcome if self.outcome is not None else Outcome.NAVIGATOR_ERROR
@@ -506,7 +496,7 @@ class TrialReferee:
         nav_steps = fleet.sim.steps - self._steps0 if navigated else 0
         breaches = (fleet.commanders[0].fence_events[self.judge.n_breaches:]
                     if navigated else [])
-        row = identity_row(self.spec, platform, self.sc)
+        row = identity_row(self.spec, self.plan.platform, self.sc)
         row.update(m.row())
         row.update({
             "fence_breaches": len(breaches),
@@ -543,95 +533,32 @@ class TrialOutcome:
     scenario: object = None
 
 
-def trial_task(spec, scenario, platform) -> Task:
-    """What the navigator is told (start, goal, limits, flight volume, the platform's size
-    and indicators, its seeded random stream): the same in-process and over the wire."""
-    ind = platform.indicators()
-    return Task(start=scenario.start.copy(), start_yaw=scenario.start_yaw,
-                goal=scenario.goal.copy(), limits=spec.limits,
-                bounds_min=scenario.bounds_min.copy(), bounds_max=scenario.bounds_max.copy(),
-                collision_radius_m=platform.collision_radius_m, twr_max=ind.twr_max,
-                alpha_xy_max=ind.alpha_xy_max_rad_s2, alpha_z_max=ind.alpha_z_max_rad_s2,
-                rng=np.random.default_rng(np.random.SeedSequence([spec.seed, spec.trial])),
-                footprint_m=footprint_m(spec, platform))
-
-
-def footprint_m(spec, platform) -> float | None:
-    """How far the trial's navigator keeps obstacles away (m; None: not told): the body's
-    half span from protocol 5, the collision radius in 4, nothing before."""
-    if PROTOCOLS[spec.protocol].footprint_inflation:
-        return vehicle_half_span_m(spec.protocol, platform)
-    return None
-
-
-def navigator_params(spec) -> dict:
-    """The navigator's parameters in this trial: the spec's, plus what the trial's protocol
-    version fixed that the navigator's defaults have changed since (versions 1 and 2 flew
-    the benchmark camera at 15 Hz; before 7 NavRL saw no moving obstacles; before 8 its
-    shield clustered within 0.2 m)."""
-    params = dict(spec.algorithm_params)
-    rules = PROTOCOLS[spec.protocol]
-    cls = available().get(spec.algorithm)
-    names = () if isinstance(cls, (str, type(None))) else cls.schema.names()
-    rate = rules.benchmark_camera_hz
-    if rate is not None and "camera_rate_hz" in names and "camera_rate_hz" not in params \
-            and params.get("camera", "benchmark") == "benchmark":
-        params["camera_rate_hz"] = rate
-    if not rules.moving_obstacles and "dynamic_obstacles" in names and \
-            "dynamic_obstacles" not in params:
-        params["dynamic_obstacles"] = "off"
-    if rules.navrl_shield_cluster_m is not None and "shield_cluster_radius_m" in names and \
-            "shield_cluster_radius_m" not in params:
-        params["shield_cluster_radius_m"] = rules.navrl_shield_cluster_m
-    return params
-
-
-def vehicle_collision(protocol: int, platform):
-    """What touches obstacles in a trial of this protocol version: (the collision guard's
-    radius, the body or None). From protocol 5 (``vehicle_body``) the platform's body, its
-    bounding radius the broad phase; before, its collision sphere."""
-    if PROTOCOLS[protocol].vehicle_body:
-        body = platform.body()
-        return body.bounding_radius_m, body
-    return platform.collision_radius_m, None
-
-
-def flight_params(params: dict | None, limits, protocol: int, gains: str) -> ParamSet:
-    """The flight controller's parameters in a trial: ``params`` (the spec's) with the speed
-    cap as MPC_XY_VEL_MAX, the protocol's offboard rule as FT_OFFB_ACC_LIM and the
-    controller-gain mode ``gains`` as FT_GAIN_MODE."""
-    return ParamSet({**(params or {}),
-                     "MPC_XY_VEL_MAX": limits.max_speed_m_s,
-                     "FT_OFFB_ACC_LIM": int(PROTOCOLS[protocol].offboard_acc_clamp),
-                     "FT_GAIN_MODE": GAIN_MODES[gains]})
-
-
-def trial_vehicle(spec, scenario, platform, resources: TrialResources = RESOURCES):
+def trial_vehicle(plan, resources: TrialResources = RESOURCES):
     """The trial's collision guard and its one-vehicle Fleet, on the takeoff point facing
-    the goal, the speed cap as MPC_XY_VEL_MAX, the spec's controller-gain mode as
-    FT_GAIN_MODE, its geofence as GF_* and the commander's fence (in-process and over the
-    wire alike)."""
+    the goal, with the plan's flight parameters (the speed cap as MPC_XY_VEL_MAX, the
+    controller-gain mode as FT_GAIN_MODE, the geofence as GF_*) and the commander's fence,
+    wind, actuators, estimator and failures, each seeded from its stream (in-process and
+    over the wire alike)."""
+    spec, scenario, platform, rules = plan.spec, plan.scenario, plan.platform, plan.rules
     world, grid = resources.world_and_grid(scenario)
-    radius, body = vehicle_collision(spec.protocol, platform)
-    guard = CollisionGuard(world, [radius], grid=grid, names=scenario.obstacle_name,
-                           bodies=[body] if body is not None else None)
-    params = flight_params({**(spec.params or {}),
-                            **(fence_params(spec.fence) if spec.fence is not None else {})},
-                           spec.limits, spec.protocol, spec.gains)
-    fleet = Fleet([platform], params=[params], spawn=[scenario.takeoff],
+    guard = CollisionGuard(world, [plan.guard_radius_m], grid=grid,
+                           names=scenario.obstacle_name,
+                           bodies=[plan.body] if plan.body is not None else None)
+    fleet = Fleet([platform], params=[plan.param_set()], spawn=[scenario.takeoff],
                   spawn_yaw=[scenario.start_yaw], physics_hz=spec.physics_hz, guard=guard)
-    fleet.commanders[0].arm_fence_check = PROTOCOLS[spec.protocol].arm_fence_check
+    fleet.commanders[0].arm_fence_check = rules.arm_fence_check
     if spec.fence is not None:  # the flight controller's, from the start (PX4: uploaded)
         fleet.commanders[0].set_fence(fence_of(spec.fence))
+    streams = plan.streams
     if spec.wind is not None:  # from the trial's first step (the gust timed from it)
-        fleet.sim.set_wind(0, spec.wind, seed=wind_seed(spec))
+        fleet.sim.set_wind(0, spec.wind, seed=streams.seed("wind"))
     if spec.actuators is not None:  # likewise (a failure timed from it)
         try:
-            fleet.sim.set_actuators(0, spec.actuators, seed=actuator_seed(spec))
+            fleet.sim.set_actuators(0, spec.actuators, seed=streams.seed("actuators"))
         except SchemaError as exc:
             raise TrialSpecError(f"actuators: {exc}") from None
     if spec.estimator is not None:  # the flight controller's estimate, from the start
-        fleet.sim.set_estimator(0, spec.estimator, seed=estimator_seed(spec))
+        fleet.sim.set_estimator(0, spec.estimator, seed=streams.seed("estimator"))
     for f in spec.failures or ():  # timed from the trial's first step, PX4's way
         try:
             failures.check(failures.UNIT_CODES[f["unit"]], failures.TYPE_CODES[f["type"]],

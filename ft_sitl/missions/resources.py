@@ -18,7 +18,8 @@ import os
 import numpy as np
 
 from ft_sitl.missions.durable import durable_replace
-from ft_sitl.missions.spec import TrialSpec, TrialSpecError, mover_seed
+from ft_sitl.missions.spec import TrialSpec, TrialSpecError
+from ft_sitl.missions.streams import mover_seed
 from ft_sitl.scenarios.camera import DepthCamera
 from ft_sitl.scenarios.collision import CollisionWorld
 from ft_sitl.scenarios.distance_grid import DistanceGrid
@@ -82,7 +83,8 @@ class TrialResources:
             raise TrialSpecError(f"movers: the scenario file {spec.scenario_file} has movers "
                                  "of its own; give them in the file or in the trial's "
                                  "movers, not both")
-        seed = mover_seed(spec)
+        seed = mover_seed(spec.scenario_file or spec.family, spec.scenario_seed,
+                          spec.scenario_index, spec.trial)
         mkey = (scenario_key(sc), json.dumps(spec.movers, sort_keys=True), seed)
         try:
             return self._cached(self._movers, mkey, lambda: with_movers(sc, spec.movers, seed),

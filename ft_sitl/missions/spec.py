@@ -79,6 +79,10 @@ class ProtocolRules:
     #: set ``shield_cluster_radius_m`` (None: the navigator's default, the deployment's
     #: sqrt(0.2) m: its DBSCAN compares squared distances with 0.2)
     navrl_shield_cluster_m: float | None = 0.2
+    #: over MAVLink, the navigator's random stream and the bus camera's noise are the
+    #: in-process trial's (streams.trial_streams); before, the wire seeded both its own
+    #: way (streams.legacy_wire_streams). In-process trials fly as before.
+    wire_streams_shared: bool = False
 
 
 #: the versions of the trial protocol this code flies; a trial's spec names its version
@@ -134,6 +138,17 @@ PROTOCOLS = {
                      observe_approach=True, max_acc_m_s2=3.0, footprint_inflation=True,
                      vehicle_body=True, map_fusion_hz=20.0, moving_obstacles=True,
                      arm_fence_check=True, navrl_shield_cluster_m=None),
+    9: ProtocolRules(9, "one trial plan for both transports: a navigator flown over "
+                        "MAVLink draws from the in-process trial's random stream and its "
+                        "bus camera from the in-process camera's noise stream (before, "
+                        "the wire seeded each its own way: PGO's topological sampling and "
+                        "noisy depth frames differed between the transports); trials "
+                        "flown in-process are as in 8",
+                     offboard_acc_clamp=False, benchmark_camera_hz=None,
+                     observe_approach=True, max_acc_m_s2=3.0, footprint_inflation=True,
+                     vehicle_body=True, map_fusion_hz=20.0, moving_obstacles=True,
+                     arm_fence_check=True, navrl_shield_cluster_m=None,
+                     wire_streams_shared=True),
 }
 #: the version new trials and campaigns fly unless they name another
 PROTOCOL_VERSION = max(PROTOCOLS)
@@ -543,46 +558,6 @@ def px4_params(values, owner: str = "params") -> dict | None:
         raise TrialSpecError(f"{owner}: {exc}") from None
     out = {k: ps[k] for k in sorted(values)}
     return out or None
-
-
-def wind_seed(spec: TrialSpec) -> int:
-    """The seed of a trial's turbulence (the camera's noise has stream 1, this 2)."""
-    return _stream_seed(spec, 2)
-
-
-def actuator_seed(spec: TrialSpec) -> int:
-    """The seed of a trial's actuator command noise (stream 3)."""
-    return _stream_seed(spec, 3)
-
-
-def estimator_seed(spec: TrialSpec) -> int:
-    """The seed of a trial's estimator noise (stream 5)."""
-    return _stream_seed(spec, 5)
-
-
-def mover_seed(spec: TrialSpec) -> int:
-    """The seed of a trial's moving obstacles: a function of the scenario (family or file,
-    configuration, scenario seed) and the trial number only, so every algorithm and
-    platform flying trial ``spec.trial`` of a configuration meets the same movers (a
-    paired comparison, and one placement per configuration and trial number for a whole
-    campaign). The movers are scenario content, like the static obstacles: the campaign's
-    ``seed`` does not change them; ``scenario_seed`` does."""
-    import numpy as np  # (kept off this module's import path: specs are built everywhere)
-    where = spec.scenario_file or spec.family
-    key = int.from_bytes(hashlib.sha256(where.encode()).digest()[:4], "little")
-    return int(np.random.SeedSequence([spec.scenario_seed, key, spec.scenario_index,
-                                       spec.trial, 6]).generate_state(1)[0])
-
-
-def perception_rng(spec: TrialSpec):
-    """The random stream of a trial's perception noise and dropouts (stream 4)."""
-    import numpy as np  # (kept off this module's import path: specs are built everywhere)
-    return np.random.default_rng(np.random.SeedSequence([spec.seed, spec.trial, 4]))
-
-
-def _stream_seed(spec: TrialSpec, stream: int) -> int:
-    import numpy as np  # (kept off this module's import path: specs are built everywhere)
-    return int(np.random.SeedSequence([spec.seed, spec.trial, stream]).generate_state(1)[0])
 
 
 def check_protocol(version) -> int:

@@ -32,6 +32,7 @@ import numpy as np
 from ft_sitl.autopilot.commander import MAIN_OFFBOARD
 from ft_sitl.autopilot.setpoints import Setpoint, offboard_problem
 from ft_sitl.missions.perception import Perception
+from ft_sitl.missions.plan import TrialPlan, plan_trial
 from ft_sitl.missions.protocol import (
     STABLE_POS_M,
     TICK_S,
@@ -40,19 +41,11 @@ from ft_sitl.missions.protocol import (
     TrialOutcome,
     TrialReferee,
     arming_failure,
-    navigator_params,
-    trial_task,
     trial_vehicle,
 )
 from ft_sitl.missions.resources import RESOURCES
 from ft_sitl.missions.results import Outcome
-from ft_sitl.missions.spec import (
-    PROTOCOLS,
-    TrialSpec,
-    TrialSpecError,
-    perception_rng,
-    platform_for,
-)
+from ft_sitl.missions.spec import TrialSpec, TrialSpecError, platform_for
 from ft_sitl.missions.watchdog import TRIAL_WALL_BUDGET_S, WallBudgetExceeded, WallWatchdog
 from ft_sitl.navigation.base import GiveUp, Observation, ObstacleStates
 from ft_sitl.navigation.registry import create
@@ -82,28 +75,28 @@ def run_trial(spec: TrialSpec, *, record: bool = False, navigator=None,
         raise ValueError(f"wall_budget_s must be a positive number of seconds or None, got "
                          f"{wall_budget_s!r}")
     wall0 = time.perf_counter()
-    sc, platform = load_scenario_for(spec), platform_for(spec)
+    plan = plan_trial(spec, navigator=navigator)
     nav = navigator if navigator is not None else create(spec.algorithm,
-                                                         navigator_params(spec))
-    guard, fleet = trial_vehicle(spec, sc, platform)
-    ref = TrialReferee(fleet, guard, spec, sc, record=record)
-    eyes = _Eyes(nav, sc, spec)
-    observing = PROTOCOLS[spec.protocol].observe_approach
+                                                         dict(plan.navigator_params))
+    guard, fleet = trial_vehicle(plan)
+    ref = TrialReferee(fleet, guard, plan, record=record)
     watchdog = WallWatchdog(wall0, wall_budget_s)
     try:
+        eyes = _Eyes(nav, plan)
         with watchdog:
-            if observing:  # the navigator sees from arming on (protocol 3)
-                _call(nav.reset, trial_task(spec, sc, platform), "reset", ref.metrics)
-            _approach(fleet, sc, ref, nav if observing else None, eyes)
+            if plan.rules.observe_approach:  # the navigator sees from arming on (protocol 3)
+                _call(nav.reset, plan.task(), "reset", ref.metrics)
+            _approach(fleet, plan.scenario, ref,
+                      nav if plan.rules.observe_approach else None, eyes)
             if ref.phase is Phase.NAVIGATION:
-                _navigate(nav, fleet, sc, platform, spec, ref, watchdog, eyes,
-                          reset=not observing, monitor=monitor)
+                _navigate(nav, fleet, plan, ref, watchdog, eyes,
+                          reset=not plan.rules.observe_approach, monitor=monitor)
     except TrialFailure as f:
         ref.end(f.reason, f.detail)
     except WallBudgetExceeded:
         ref.end(Outcome.NAVIGATOR_ERROR, watchdog.detail(ref.nav_time_s()))
-    row = ref.finish(platform, replans=replan_count(getattr(nav, "replans", 0)), wall0=wall0)
-    return TrialOutcome(row, ref.trajectory(), sc)
+    row = ref.finish(replans=replan_count(getattr(nav, "replans", 0)), wall0=wall0)
+    return TrialOutcome(row, ref.trajectory(), plan.scenario)
 
 
 class _Eyes:
@@ -118,15 +111,18 @@ class _Eyes:
     be fused, so they are not rendered.
     """
 
-    def __init__(self, nav, sc, spec: TrialSpec):
-        cfg = getattr(nav, "camera", None)
-        if cfg is not None and spec.perception is not None:
-            cfg = Perception(spec.perception).camera_config(cfg)
-        self.camera = RESOURCES.camera(cfg, sc) if cfg is not None else None
+    def __init__(self, nav, plan: TrialPlan):
+        if getattr(nav, "camera", None) != plan.camera:
+            raise TrialFailure(Outcome.NAVIGATOR_ERROR,
+                               f"the navigator's camera {getattr(nav, 'camera', None)!r} is "
+                               f"not the one its camera_for() gives for its settings "
+                               f"({plan.camera!r}): the trial plan could not know it")
+        cfg = plan.frame_camera
+        self.camera = RESOURCES.camera(cfg, plan.scenario) if cfg is not None else None
         self.period_us = round(1e6 / cfg.rate_hz) if cfg is not None else 0
-        fuse_hz = PROTOCOLS[spec.protocol].map_fusion_hz
+        fuse_hz = plan.rules.map_fusion_hz
         self.fuse_period_us = round(1e6 / fuse_hz) if cfg is not None and fuse_hz else 0
-        self.rng = np.random.default_rng(np.random.SeedSequence([spec.seed, spec.trial, 1]))
+        self.rng = plan.streams.rng("camera")
         self.start(1, floor=False)
 
     def start(self, quantum_us: int, *, floor: bool) -> None:
@@ -236,20 +232,21 @@ def _approach(fleet, sc, ref: TrialReferee, observer, eyes: _Eyes) -> None:
         ref.after_step()
 
 
-def _navigate(nav, fleet, sc, platform, spec: TrialSpec, ref: TrialReferee,
-              watchdog: WallWatchdog, eyes: _Eyes, *, reset: bool, monitor=None) -> None:
+def _navigate(nav, fleet, plan: TrialPlan, ref: TrialReferee, watchdog: WallWatchdog,
+              eyes: _Eyes, *, reset: bool, monitor=None) -> None:
     """Offboard flight with the navigator in the loop until the protocol's outcome
     (``reset``: the navigator is reset now, as before protocol 3)."""
     cmd = fleet.commanders[0]
     m = ref.metrics
     t_nav0_us = ref.t_nav0_us
+    spec = plan.spec
     if reset:
-        _call(nav.reset, trial_task(spec, sc, platform), "reset", m)
+        _call(nav.reset, plan.task(), "reset", m)
     period_us = _period_us(nav, fleet.sim.dt_us)
     next_nav_us = t_nav0_us
     eyes.start(period_us, floor=False)
     seen = Perception(spec.perception)
-    seen.start(perception_rng(spec))
+    seen.start(plan.streams.rng("perception"))
     judge = ref.judge
     tick_us = round(TICK_S * 1e6)
     while True:

@@ -34,8 +34,6 @@ import tempfile
 import time
 from pathlib import Path
 
-import numpy as np
-
 from ft_sitl import frames
 from ft_sitl.autopilot.commander import FENCE_ARM_DENIAL
 from ft_sitl.bus.broker import EmbeddedBroker
@@ -43,6 +41,7 @@ from ft_sitl.bus.codec import EventType
 from ft_sitl.bus.publisher import BusPublisher
 from ft_sitl.mavlink.instances import InstanceLock
 from ft_sitl.mavlink.server import SitlServer
+from ft_sitl.missions.plan import TrialPlan, plan_trial
 from ft_sitl.missions.protocol import (
     APPROACH_TIMEOUT_S,
     Phase,
@@ -50,16 +49,13 @@ from ft_sitl.missions.protocol import (
     TrialOutcome,
     TrialReferee,
     arming_failure,
-    footprint_m,
-    navigator_params,
     trial_vehicle,
 )
-from ft_sitl.missions.resources import RESOURCES
 from ft_sitl.missions.results import Outcome
-from ft_sitl.missions.spec import PROTOCOLS, TrialSpec, TrialSpecError, platform_for
-from ft_sitl.navigation.registry import create
+from ft_sitl.missions.spec import TrialSpec, TrialSpecError
+from ft_sitl.navigation.base import Task
 from ft_sitl.scenarios.camera import camera_config
-from ft_sitl.wire.navigate import ClientResult, WireTask
+from ft_sitl.wire.navigate import ClientResult, task_env
 from ft_sitl.wire.sitl_bus import SitlBus
 
 COMMAND = "command"  # the pseudo-navigator: a user's program
@@ -87,46 +83,27 @@ def worker_bus(mqtt: str | None) -> dict:
 
 def make_bus_factory(url: str):
     """A factory of the SITL-side bus for one trial's vehicle (its topics named after the
-    trial id); the depth camera is the navigator's (the benchmark camera for a command)."""
+    trial id); the depth camera is the plan's (the benchmark camera for a command), its
+    noise drawn from the plan's camera stream for the wire."""
 
-    def factory(server, fleet, sc, vehicle, spec):
-        camera = None
-        if spec.algorithm != COMMAND:
-
-            camera = getattr(create(spec.algorithm, navigator_params(spec)), "camera", None)
+    def factory(server, fleet, plan: TrialPlan, vehicle):
+        camera = plan.frame_camera
         if camera is None:
-
             camera = camera_config("benchmark", None, None, None)
         bus = SitlBus(lambda on_config: BusPublisher(url, vehicle, on_config=on_config),
-                      fleet, 0, scenario=sc, camera_config=camera,
-                      seed=spec.seed + 1000 * spec.trial)
+                      fleet, 0, scenario=plan.scenario, camera=camera,
+                      rng=plan.wire_streams.rng("camera"))
         bus.pub.wait_connected(10.0)
         return bus
 
     return factory
 
 
-def wire_task(spec: TrialSpec, sc, platform) -> WireTask:
-    ind = platform.indicators()
-    lim = spec.limits
-    return WireTask(goal=list(sc.goal), start=list(sc.start), start_yaw=float(sc.start_yaw),
-                    origin=list(sc.takeoff), max_speed_m_s=lim.max_speed_m_s,
-                    timeout_s=lim.timeout_s, goal_radius_m=lim.goal_radius_m,
-                    hold_s=lim.hold_s, bounds_min=list(sc.bounds_min),
-                    bounds_max=list(sc.bounds_max),
-                    collision_radius_m=platform.collision_radius_m, twr_max=ind.twr_max,
-                    alpha_xy_max=ind.alpha_xy_max_rad_s2, alpha_z_max=ind.alpha_z_max_rad_s2,
-                    seed=int(np.random.SeedSequence([spec.seed, spec.trial]).generate_state(1)[0]),
-                    observe_approach=PROTOCOLS[spec.protocol].observe_approach,
-                    max_acc_m_s2=lim.max_acc_m_s2,
-                    footprint_m=footprint_m(spec, platform),
-                    map_fusion_hz=PROTOCOLS[spec.protocol].map_fusion_hz)
-
-
-def navigator_argv(spec: TrialSpec, wt: WireTask, connect: str, mqtt: str | None,
+def navigator_argv(plan: TrialPlan, task: Task, connect: str, mqtt: str | None,
                    vehicle: str, speed_factor: float) -> tuple[list[str], dict]:
     """The navigator process's command line and extra environment."""
-    env = wt.env(connect, mqtt, vehicle)
+    spec = plan.spec
+    env = task_env(task, connect, mqtt, vehicle)
     env["FT_SITL_SPEED_FACTOR"] = f"{speed_factor:g}"
     if spec.algorithm == COMMAND:
         argv = spec.algorithm_params.get("argv")
@@ -144,9 +121,9 @@ def navigator_argv(spec: TrialSpec, wt: WireTask, connect: str, mqtt: str | None
                              f"{', '.join('{' + k + '}' for k in subst)}") from None
         return argv, env
     argv = [sys.executable, "-m", "ft_sitl", "navigate", "--algorithm", spec.algorithm,
-            "--connect", connect, "--vehicle", vehicle, "--task-json", wt.to_json(),
+            "--connect", connect, "--vehicle", vehicle, "--task-json", env["FT_SITL_TASK"],
             "--speed-factor", f"{speed_factor:g}", "--quiet", "--json"]
-    for k, v in sorted(navigator_params(spec).items()):
+    for k, v in sorted(plan.navigator_params.items()):
         argv += ["--param", f"{k}={json.dumps(v)}"]
     if mqtt:
         argv += ["--mqtt", mqtt]
@@ -162,10 +139,9 @@ def run_trial_wire(spec: TrialSpec, *, speed_factor: float = 2.0, mqtt: str | No
     if spec.perception is not None:
         raise TrialSpecError(PERCEPTION_WIRE)
     wall0 = time.perf_counter()
-    sc, platform = RESOURCES.scenario(spec), platform_for(spec)
-    guard, fleet = trial_vehicle(spec, sc, platform)
-    ref = TrialReferee(fleet, guard, spec, sc, record=record)
-    wt = wire_task(spec, sc, platform)
+    plan = plan_trial(spec)
+    guard, fleet = trial_vehicle(plan)
+    ref = TrialReferee(fleet, guard, plan, record=record)
     vehicle = spec.trial_id
     lock = InstanceLock() if instance is None else None
     inst = lock.__enter__() if lock is not None else instance
@@ -174,12 +150,13 @@ def run_trial_wire(spec: TrialSpec, *, speed_factor: float = 2.0, mqtt: str | No
     try:
         server = SitlServer(fleet, frames.GeoReference(*frames.PX4_SITL_HOME),
                             speed_factor=speed_factor, base_instance=inst)
-        bus = bus_factory(server, fleet, sc, vehicle, spec) if bus_factory else None
+        bus = bus_factory(server, fleet, plan, vehicle) if bus_factory else None
         if bus is not None:
             ref.on_start = lambda: bus.event(EventType.TRIAL_START, trial=spec.trial_id)
         connect = f"udpin://0.0.0.0:{server.links[0].default_remote[1]}"
         try:
-            argv, env = navigator_argv(spec, wt, connect, mqtt, vehicle, speed_factor)
+            argv, env = navigator_argv(plan, plan.task(wire=True), connect, mqtt, vehicle,
+                                       speed_factor)
         except ValueError as exc:
             raise TrialFailure(Outcome.NAVIGATOR_ERROR, str(exc)) from None
         logs = Path(log_dir or tempfile.mkdtemp(prefix="ft-sitl-nav-"))
@@ -206,8 +183,8 @@ def run_trial_wire(spec: TrialSpec, *, speed_factor: float = 2.0, mqtt: str | No
             lock.__exit__(None, None, None)
     # setpoints the client sent (unknown when the judge ended it first)
     ref.metrics.planner_calls = int(client["steps"]) if "steps" in client else -1
-    row = ref.finish(platform, replans=-1, wall0=wall0)
-    return TrialOutcome(row, ref.trajectory(), sc)
+    row = ref.finish(replans=-1, wall0=wall0)
+    return TrialOutcome(row, ref.trajectory(), plan.scenario)
 
 
 async def _serve(server, fleet, ref: TrialReferee, proc, spec, speed_factor: float,

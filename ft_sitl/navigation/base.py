@@ -86,9 +86,25 @@ class Limits:
         return d
 
 
+#: the Task's vectors (world ENU, m), its finite numbers, and its optional positive ones
+TASK_VECTORS = ("start", "goal", "bounds_min", "bounds_max", "origin")
+TASK_NUMBERS = ("start_yaw", "collision_radius_m", "twr_max", "alpha_xy_max", "alpha_z_max")
+TASK_OPTIONAL = ("footprint_m", "map_fusion_hz")
+
+
+class TaskError(ValueError):
+    """A task document is invalid; the message names the field."""
+
+
 @dataclass(frozen=True, eq=False)
 class Task:
-    """What a navigator is told at the start of a navigation phase."""
+    """What a navigator is told at the start of a navigation phase: the trial plan's face
+    towards the navigator (:mod:`ft_sitl.missions.plan`), the same object in-process and
+    over MAVLink, where it travels as :meth:`to_dict` (``ft-sitl navigate --task-json``,
+    a user script's ``FT_SITL_TASK``).
+
+    ``seed`` is the entropy of the navigator's random stream (a tuple of non-negative
+    integers, numpy's ``SeedSequence``); ``rng`` is that stream, made once per task."""
 
     start: np.ndarray
     start_yaw: float
@@ -100,15 +116,104 @@ class Task:
     twr_max: float
     alpha_xy_max: float
     alpha_z_max: float
-    rng: np.random.Generator = field(default_factory=lambda: np.random.default_rng(0))
+    seed: tuple = (0,)
     #: how far navigators keep obstacles away (m): the platform's footprint (its collision
     #: radius) from protocol 4 on, which each planner inflates its map by as a user sets
     #: the original for their airframe; None: the navigator's own default (before 4)
     footprint_m: float | None = None
+    #: where the vehicle took off (world ENU, m): the origin of the flight controller's
+    #: local NED frame, which a navigator flying over MAVLink converts with
+    origin: np.ndarray | None = None
+    #: the navigator is reset before arming and observes the approach (protocol 3 on)
+    observe_approach: bool = False
+    #: the navigator's map takes the latest depth frame at this rate (Hz; protocol 6 on,
+    #: the originals' map timer; None: every frame as it arrives)
+    map_fusion_hz: float | None = None
+    rng: np.random.Generator = field(init=False, repr=False)
+
+    def __post_init__(self):
+        seed = (self.seed,) if isinstance(self.seed, int) else self.seed
+        if not (isinstance(seed, (tuple, list)) and seed and all(
+                isinstance(k, (int, np.integer)) and not isinstance(k, bool) and k >= 0
+                for k in seed)):
+            raise TaskError(f"task seed: {self.seed!r} is not a non-negative integer or a "
+                            f"list of them")
+        object.__setattr__(self, "seed", tuple(int(k) for k in seed))
+        if self.origin is None:
+            object.__setattr__(self, "origin", np.zeros(3))
+        object.__setattr__(self, "rng",
+                           np.random.default_rng(np.random.SeedSequence(list(self.seed))))
 
     @property
     def ceiling(self) -> float:
         return float(self.bounds_max[2])
+
+    def to_dict(self) -> dict:
+        """The task as JSON-able data: one flat table (the limits' fields at its top), the
+        document ``from_dict`` reads back into an equal task."""
+        d = {k: [float(x) for x in getattr(self, k)] for k in TASK_VECTORS}
+        d.update({k: float(getattr(self, k)) for k in TASK_NUMBERS})
+        d.update({k: getattr(self, k) for k in TASK_OPTIONAL})
+        d.update(seed=list(self.seed), observe_approach=self.observe_approach,
+                 max_speed_m_s=self.limits.max_speed_m_s, timeout_s=self.limits.timeout_s,
+                 goal_radius_m=self.limits.goal_radius_m, hold_s=self.limits.hold_s,
+                 max_acc_m_s2=self.limits.max_acc_m_s2)
+        return d
+
+    @classmethod
+    def from_dict(cls, doc) -> Task:
+        """The task of a :meth:`to_dict` document; TaskError naming the field that is
+        missing, unknown or wrong. (A ``seed`` given as one integer is the same stream as
+        the list of that integer: documents written before it became a list read back.)"""
+        if not isinstance(doc, dict):
+            raise TaskError("task: must be a JSON object")
+        limit_keys = ("max_speed_m_s", "timeout_s", "goal_radius_m", "hold_s",
+                      "max_acc_m_s2")
+        known = set(TASK_VECTORS + TASK_NUMBERS + TASK_OPTIONAL + limit_keys) | {
+            "seed", "observe_approach"}
+        unknown = sorted(set(doc) - known)
+        if unknown:
+            raise TaskError(f"task: unknown field(s) {', '.join(unknown)}")
+        missing = [k for k in ("start", "goal", "start_yaw") if k not in doc]
+        if missing:
+            raise TaskError(f"task: missing field(s) {', '.join(missing)}")
+        defaults = TASK_DEFAULTS
+        kw = {}
+        for k in TASK_VECTORS:
+            v = doc.get(k, defaults.get(k))
+            if not (isinstance(v, (list, tuple)) and len(v) == 3 and all(
+                    _finite(x) for x in v)):
+                raise TaskError(f"task {k}: {v!r} is not three finite numbers")
+            kw[k] = np.array([float(x) for x in v])
+        for k in TASK_NUMBERS:
+            v = doc.get(k, defaults.get(k))
+            if not _finite(v):
+                raise TaskError(f"task {k}: {v!r} is not a finite number")
+            kw[k] = float(v)
+        for k in TASK_OPTIONAL:
+            v = doc.get(k)
+            if v is not None and not (_finite(v) and v > 0):
+                raise TaskError(f"task {k}: {v!r} is not a positive number or null")
+            kw[k] = None if v is None else float(v)
+        observe = doc.get("observe_approach", False)
+        if not isinstance(observe, bool):
+            raise TaskError(f"task observe_approach: {observe!r} is not true or false")
+        try:
+            limits = Limits(**{k: doc[k] for k in limit_keys if k in doc})
+        except ValueError as exc:
+            raise TaskError(f"task {exc}") from None
+        return cls(limits=limits, seed=doc.get("seed", 0), observe_approach=observe, **kw)
+
+
+def _finite(v) -> bool:
+    return isinstance(v, (int, float)) and not isinstance(v, bool) and math.isfinite(v)
+
+
+#: what a task document may leave out: a flight volume of 2 km x 2 km x 100 m around the
+#: origin, a 0.3 m vehicle with the indicators of a middling platform
+TASK_DEFAULTS = {"bounds_min": [-1e3, -1e3, 0.0], "bounds_max": [1e3, 1e3, 100.0],
+                 "origin": [0.0, 0.0, 0.0], "collision_radius_m": 0.3, "twr_max": 2.0,
+                 "alpha_xy_max": 50.0, "alpha_z_max": 5.0}
 
 
 @dataclass(frozen=True, eq=False)
@@ -187,6 +292,17 @@ class Navigator:
     def __init__(self, **params):
         self.settings = type(self).schema.resolve(params, f"navigator {self.name!r}")
         self.replans = 0
+
+    @classmethod
+    def camera_for(cls, settings: dict):
+        """The depth camera this navigator asks for with these resolved settings (None:
+        none): the one its camera parameters name (``scenarios.camera.CAMERA_PARAMS``),
+        else the class's ``camera``. The trial plan reads it before the navigator exists;
+        a navigator whose camera depends on anything else overrides this."""
+        if "camera" in settings and "camera_rate_hz" in settings:
+            from ft_sitl.scenarios.camera import camera_of  # (the protocol loads no camera)
+            return camera_of(settings)
+        return cls.camera
 
     @classmethod
     def unavailable(cls) -> str | None:

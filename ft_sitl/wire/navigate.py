@@ -26,7 +26,6 @@ import json
 import logging
 import math
 import time
-from dataclasses import asdict, dataclass, field
 from enum import StrEnum
 
 import numpy as np
@@ -39,9 +38,9 @@ from ft_sitl.navigation.base import (
     STABLE_POS_M,
     STABLE_SPEED_M_S,
     GiveUp,
-    Limits,
     Observation,
     Task,
+    TaskError,
 )
 from ft_sitl.physics.quaternion import qto_euler
 from ft_sitl.wire.convert import ned_to_world, send, to_offboard
@@ -59,111 +58,38 @@ class ClientResult(StrEnum):
     TIMEOUT = "timeout"
 
 
-@dataclass
-class WireTask:
-    """Everything a navigator process is told about its trial (world ENU metres)."""
+def task_env(task: Task, connect: str, mqtt: str | None, vehicle: str) -> dict:
+    """The environment a navigator process is started with (docs/wire.md): the whole task
+    as ``FT_SITL_TASK`` (``Task.to_dict`` as JSON) and its main fields one by one, in
+    world ENU and in the flight controller's local NED frame."""
+    origin = np.asarray(task.origin, dtype=float)
+    env = {
+        "FT_SITL_CONNECT": connect, "FT_SITL_VEHICLE": vehicle,
+        "FT_SITL_TASK": json.dumps(task.to_dict(), sort_keys=True),
+        "FT_SITL_GOAL_ENU": ",".join(f"{x:.3f}" for x in task.goal),
+        "FT_SITL_START_ENU": ",".join(f"{x:.3f}" for x in task.start),
+        "FT_SITL_ORIGIN_ENU": ",".join(f"{x:.3f}" for x in origin),
+        "FT_SITL_GOAL_NED": ",".join(f"{x:.3f}" for x in frames.enu_to_ned(
+            np.asarray(task.goal, dtype=float) - origin)),
+        "FT_SITL_START_NED": ",".join(f"{x:.3f}" for x in frames.enu_to_ned(
+            np.asarray(task.start, dtype=float) - origin)),
+        "FT_SITL_START_YAW_DEG": f"{math.degrees(frames.yaw_enu_to_ned(task.start_yaw)):.2f}",
+        "FT_SITL_MAX_SPEED": f"{task.limits.max_speed_m_s:g}",
+        "FT_SITL_TIMEOUT_S": f"{task.limits.timeout_s:g}",
+    }
+    if mqtt:
+        env["FT_SITL_MQTT"] = mqtt
+    return env
 
-    goal: list
-    start: list
-    start_yaw: float
-    origin: list = field(default_factory=lambda: [0.0, 0.0, 0.0])  # the local NED origin
-    max_speed_m_s: float = 4.0
-    timeout_s: float = 90.0
-    goal_radius_m: float = 2.0
-    hold_s: float = 3.0
-    bounds_min: list = field(default_factory=lambda: [-1e3, -1e3, 0.0])
-    bounds_max: list = field(default_factory=lambda: [1e3, 1e3, 100.0])
-    collision_radius_m: float = 0.3
-    twr_max: float = 2.0
-    alpha_xy_max: float = 50.0
-    alpha_z_max: float = 5.0
-    seed: int = 0
-    #: reset the navigator before arming and let it observe the approach (protocol 3 on)
-    observe_approach: bool = False
-    #: the acceleration limit planners plan with (protocol 3 on; None: their own)
-    max_acc_m_s2: float | None = None
-    #: how far the navigator keeps obstacles away (protocol 4 on; None: its own default)
-    footprint_m: float | None = None
-    #: the navigator's map takes the latest depth frame at this rate (protocol 6 on: 20 Hz,
-    #: the originals' map timer; None: every frame as it arrives)
-    map_fusion_hz: float | None = None
 
-    def __post_init__(self):
-        for name in ("goal", "start", "origin", "bounds_min", "bounds_max"):
-            v = getattr(self, name)
-            if not (isinstance(v, (list, tuple)) and len(v) == 3
-                    and all(isinstance(x, (int, float)) and not isinstance(x, bool)
-                            and math.isfinite(x) for x in v)):
-                raise ValueError(f"task {name}: {v!r} is not three finite numbers")
-            setattr(self, name, [float(x) for x in v])
-        for name in ("start_yaw", "max_speed_m_s", "timeout_s", "goal_radius_m", "hold_s",
-                     "collision_radius_m", "twr_max", "alpha_xy_max", "alpha_z_max"):
-            v = getattr(self, name)
-            if isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v):
-                raise ValueError(f"task {name}: {v!r} is not a finite number")
-        if not isinstance(self.seed, int) or isinstance(self.seed, bool):
-            raise ValueError(f"task seed: {self.seed!r} is not an integer")
-        for name in ("max_acc_m_s2", "footprint_m", "map_fusion_hz"):
-            a = getattr(self, name)
-            if a is not None and (isinstance(a, bool) or not isinstance(a, (int, float))
-                                  or not math.isfinite(a) or a <= 0):
-                raise ValueError(f"task {name}: {a!r} is not a positive number or null")
-        if not isinstance(self.observe_approach, bool):
-            raise ValueError(f"task observe_approach: {self.observe_approach!r} is not true "
-                             f"or false")
-
-    def to_json(self) -> str:
-        return json.dumps(asdict(self), sort_keys=True)
-
-    @classmethod
-    def from_json(cls, text: str) -> WireTask:
-        try:
-            doc = json.loads(text)
-        except json.JSONDecodeError as exc:
-            raise ValueError(f"task: not JSON ({exc})") from None
-        if not isinstance(doc, dict):
-            raise ValueError("task: must be a JSON object")
-        known = set(cls.__dataclass_fields__)
-        unknown = sorted(set(doc) - known)
-        if unknown:
-            raise ValueError(f"task: unknown field(s) {', '.join(unknown)}")
-        try:
-            return cls(**doc)
-        except TypeError as exc:
-            raise ValueError(f"task: {exc}") from None
-
-    def limits(self) -> Limits:
-        return Limits(max_speed_m_s=self.max_speed_m_s, timeout_s=self.timeout_s,
-                      goal_radius_m=self.goal_radius_m, hold_s=self.hold_s,
-                      max_acc_m_s2=self.max_acc_m_s2)
-
-    def task(self) -> Task:
-        return Task(start=np.array(self.start), start_yaw=self.start_yaw,
-                    goal=np.array(self.goal), limits=self.limits(),
-                    bounds_min=np.array(self.bounds_min), bounds_max=np.array(self.bounds_max),
-                    collision_radius_m=self.collision_radius_m, twr_max=self.twr_max,
-                    alpha_xy_max=self.alpha_xy_max, alpha_z_max=self.alpha_z_max,
-                    rng=np.random.default_rng(self.seed), footprint_m=self.footprint_m)
-
-    def env(self, connect: str, mqtt: str | None, vehicle: str) -> dict:
-        """The environment a user's navigator script is started with (docs/wire.md)."""
-        env = {
-            "FT_SITL_CONNECT": connect, "FT_SITL_VEHICLE": vehicle,
-            "FT_SITL_TASK": self.to_json(),
-            "FT_SITL_GOAL_ENU": ",".join(f"{x:.3f}" for x in self.goal),
-            "FT_SITL_START_ENU": ",".join(f"{x:.3f}" for x in self.start),
-            "FT_SITL_ORIGIN_ENU": ",".join(f"{x:.3f}" for x in self.origin),
-            "FT_SITL_GOAL_NED": ",".join(f"{x:.3f}" for x in frames.enu_to_ned(
-                np.array(self.goal) - self.origin)),
-            "FT_SITL_START_NED": ",".join(f"{x:.3f}" for x in frames.enu_to_ned(
-                np.array(self.start) - self.origin)),
-            "FT_SITL_START_YAW_DEG": f"{math.degrees(frames.yaw_enu_to_ned(self.start_yaw)):.2f}",
-            "FT_SITL_MAX_SPEED": f"{self.max_speed_m_s:g}",
-            "FT_SITL_TIMEOUT_S": f"{self.timeout_s:g}",
-        }
-        if mqtt:
-            env["FT_SITL_MQTT"] = mqtt
-        return env
+def task_from_json(text: str) -> Task:
+    """The Task of a JSON document (``--task-json``, ``FT_SITL_TASK``); TaskError naming
+    what is wrong."""
+    try:
+        doc = json.loads(text)
+    except json.JSONDecodeError as exc:
+        raise TaskError(f"task: not JSON ({exc})") from None
+    return Task.from_dict(doc)
 
 
 class NavigateError(RuntimeError):
@@ -275,7 +201,7 @@ async def _bus_state(url: str, vehicle: str, state: _State, camera) -> None:
             await asyncio.sleep(0.5)
 
 
-async def fly(nav, wt: WireTask, connect: str, *, mqtt: str | None = None,
+async def fly(nav, task: Task, connect: str, *, mqtt: str | None = None,
               vehicle: str = "0", speed_factor: float = 1.0,
               connect_timeout_s: float = 60.0, progress=None,
               real_latency: bool = True) -> dict:
@@ -303,7 +229,7 @@ async def fly(nav, wt: WireTask, connect: str, *, mqtt: str | None = None,
         if drone is None:
             raise NavigateError(f"no autopilot at {connect} within {connect_timeout_s:g} s")
         state = _State()
-        origin = np.array(wt.origin)
+        origin = np.array(task.origin, dtype=float)
         if mqtt:
             tasks.append(asyncio.create_task(_bus_state(mqtt, vehicle, state, camera)))
         else:
@@ -323,17 +249,17 @@ async def fly(nav, wt: WireTask, connect: str, *, mqtt: str | None = None,
         await first(tel.subscribe_health(), lambda h: h.is_armable, "the vehicle to be armable",
                     connect_timeout_s)
         wall_limit = 60.0 / speed_factor + 30.0
-        start = np.array(wt.start)
+        start = np.array(task.start, dtype=float)
         start_ned = frames.enu_to_ned(start - origin)
-        yaw_ned_deg = math.degrees(frames.wrap_pi(frames.yaw_enu_to_ned(wt.start_yaw)))
+        yaw_ned_deg = math.degrees(frames.wrap_pi(frames.yaw_enu_to_ned(task.start_yaw)))
         await action.set_takeoff_altitude(float(start[2] - origin[2]))
-        if wt.observe_approach:
-            _reset(nav, wt, real_latency)
+        if task.observe_approach:
+            _reset(nav, task, real_latency)
         await action.arm()
         observer = None
-        if wt.observe_approach:
+        if task.observe_approach:
             observer = asyncio.create_task(_observe(nav, state, speed_factor,
-                                                    wt.map_fusion_hz))
+                                                    task.map_fusion_hz))
             tasks.append(observer)
         await action.takeoff()
         await first(tel.subscribe_position_velocity_ned(),
@@ -372,7 +298,7 @@ async def fly(nav, wt: WireTask, connect: str, *, mqtt: str | None = None,
         tasks.append(asyncio.create_task(watch_texts()))
         if observer is not None:
             observer.cancel()  # navigation starts: steps take the frames from here on
-        return await _navigate(nav, wt, off, state, t_wall0, speed_factor, progress, crash,
+        return await _navigate(nav, task, off, state, t_wall0, speed_factor, progress, crash,
                                real_latency)
     finally:
         for t in tasks:
@@ -388,7 +314,7 @@ def _now(state: _State, t_wall0: float, speed_factor: float) -> float:
     return (time.monotonic() - t_wall0) * speed_factor
 
 
-def _reset(nav, wt: WireTask, real_latency: bool) -> None:
+def _reset(nav, task: Task, real_latency: bool) -> None:
     """The navigator's reset with the trial's task."""
     if real_latency and hasattr(nav, "latency"):
         # over the wire the latency is real (compute, transport, the flight controller's
@@ -396,7 +322,7 @@ def _reset(nav, wt: WireTask, real_latency: bool) -> None:
         nav.latency = 0.0
         if hasattr(nav, "measured_latency"):
             nav.measured_latency = False
-    nav.reset(wt.task())
+    nav.reset(task)
 
 
 class _MapTimer:
@@ -441,19 +367,19 @@ async def _observe(nav, state: _State, speed_factor: float,
         await asyncio.get_running_loop().run_in_executor(None, nav.observe, obs)
 
 
-async def _navigate(nav, wt: WireTask, off, state: _State, t_wall0: float,
+async def _navigate(nav, task: Task, off, state: _State, t_wall0: float,
                     speed_factor: float, progress, crash: list,
                     real_latency: bool = True) -> dict:
 
-    if not wt.observe_approach:
-        _reset(nav, wt, real_latency)
+    if not task.observe_approach:
+        _reset(nav, task, real_latency)
     t0 = _now(state, t_wall0, speed_factor)
     period = 1.0 / float(nav.rate_hz)
     next_step = 0.0
-    goal = np.array(wt.goal)
+    goal = np.array(task.goal, dtype=float)
     entered = None
     steps = 0
-    timer = _MapTimer(wt.map_fusion_hz)
+    timer = _MapTimer(task.map_fusion_hz)
     while True:
         await state.updated.wait()
         state.updated.clear()
@@ -479,19 +405,19 @@ async def _navigate(nav, wt: WireTask, off, state: _State, t_wall0: float,
             return {"result": ClientResult.GAVE_UP.value, "detail": str(exc), "steps": steps}
         if not isinstance(sp, Setpoint):
             raise NavigateError(f"navigator returned {type(sp).__name__}, not a Setpoint")
-        await send(off, to_offboard(sp, wt.origin))
+        await send(off, to_offboard(sp, task.origin))
         steps += 1
         if progress is not None:
             progress(t, obs)
         dist = float(np.linalg.norm(state.position - goal))
-        if dist <= wt.goal_radius_m:
+        if dist <= task.limits.goal_radius_m:
             entered = t if entered is None else entered
-            if t - entered >= wt.hold_s:
+            if t - entered >= task.limits.hold_s:
                 return {"result": ClientResult.SUCCESS.value,
                         "detail": f"goal held at t = {t:.1f} s", "steps": steps}
         else:
             entered = None
-        if entered is None and t >= wt.timeout_s:
+        if entered is None and t >= task.limits.timeout_s:
             return {"result": ClientResult.TIMEOUT.value,
-                    "detail": f"{dist:.1f} m from the goal after {wt.timeout_s:g} s",
+                    "detail": f"{dist:.1f} m from the goal after {task.limits.timeout_s:g} s",
                     "steps": steps}

@@ -38,7 +38,7 @@ log = logging.getLogger("ft_sitl.bus")
 
 class SitlBus:
     def __init__(self, publisher_factory, fleet, index: int = 0, *, scenario=None,
-                 camera_config=None, telemetry_rate_hz: float = 50.0, seed: int = 0):
+                 camera=None, telemetry_rate_hz: float = 50.0, rng=None):
 
         self.fleet, self.i = fleet, index
         self._lock = threading.Lock()
@@ -47,11 +47,13 @@ class SitlBus:
         self._want_depth = False
         self._want_points = False
         self.camera = None
-        self.camera_config = camera_config
-        if scenario is not None and camera_config is not None:
+        self.camera_config = camera
+        if scenario is not None and camera is not None:
 
-            self.camera = DepthCamera(camera_config, scenario.mesh)
-        self._rng = np.random.default_rng(np.random.SeedSequence([seed, 7]))
+            self.camera = DepthCamera(camera, scenario.mesh)
+        # the depth noise's stream (a trial's plan gives its own; a served fleet's is fixed)
+        self._rng = rng if rng is not None else np.random.default_rng(
+            np.random.SeedSequence([0, 7]))
         self._next_frame_us = 0
         self._armed = None
         self._mode = None
@@ -167,7 +169,7 @@ def fleet_buses(opts, fleet, base_instance: int = 0, *, scenario=None,
         vid = str(base_instance + i)
         buses.append(SitlBus(lambda on_config, vid=vid: BusPublisher(opts, vid,
                                                                       on_config=on_config),
-                             fleet, i, scenario=scenario, camera_config=cam,
+                             fleet, i, scenario=scenario, camera=cam,
                              telemetry_rate_hz=telemetry_rate_hz))
     connected = all(b.pub.wait_connected(connect_timeout_s) for b in buses)
     return buses, connected

@@ -307,8 +307,9 @@ def test_bad_axis_values_are_named_by_file_entry_key_and_range(tmp_path, text, m
 
 
 def test_depth_image_noise_replaces_the_navigators_camera_noise(yard):
+    from ft_sitl.missions.plan import plan_trial
     from ft_sitl.missions.protocol import trial_vehicle
-    from ft_sitl.missions.trial import _Eyes, load_scenario_for, platform_for
+    from ft_sitl.missions.trial import _Eyes, load_scenario_for
     from ft_sitl.navigation.registry import create
 
     nav = create("ego", {})
@@ -318,11 +319,11 @@ def test_depth_image_noise_replaces_the_navigators_camera_noise(yard):
     noisy = TrialSpec(**{**clean.__dict__, "perception": {"depth_noise_k": 0.004,
                                                           "depth_dropout": 0.1}})
     sc = load_scenario_for(clean)
-    _, fleet = trial_vehicle(clean, sc, platform_for(clean))
+    _, fleet = trial_vehicle(plan_trial(clean))
     fleet.sim.start_hovering(0, sc.start, sc.start_yaw)
     frames = []
     for spec in (clean, noisy):
-        eyes = _Eyes(nav, sc, spec)
+        eyes = _Eyes(nav, plan_trial(spec, navigator=nav))
         frames.append(eyes.frame(fleet, 0))
     cfg = eyes.camera.config
     assert (cfg.noise_k, cfg.dropout) == (0.004, 0.1)

@@ -662,11 +662,12 @@ def test_the_gain_mode_reaches_the_vehicle_and_the_row(yard):
     """The spec's gains set FT_GAIN_MODE on the trial's vehicle (trial_vehicle, both
     transports) and are written into the row."""
     from ft_sitl.autopilot.params import GAIN_MODES
+    from ft_sitl.missions.plan import plan_trial
     from ft_sitl.missions.protocol import trial_vehicle
 
     for gains, mode in GAIN_MODES.items():
         spec = yard_spec(yard, gains=gains)
-        _, fleet = trial_vehicle(spec, load_scenario_for(spec), platform_for(spec))
+        _, fleet = trial_vehicle(plan_trial(spec))
         assert fleet.params[0]["FT_GAIN_MODE"] == mode
     row = run_trial(yard_spec(yard, gains="px4")).row
     assert row["gains"] == "px4" and json.loads(row["spec"])["gains"] == "px4"
@@ -710,7 +711,7 @@ def test_a_navigators_map_at_navigation_start_holds_what_it_saw_on_the_approach(
     """Protocol 3: the navigator is reset before arming and observes the approach, so its
     map at the first navigation step already holds the trees seen on the way (in protocol
     2 it held nothing yet). The camera runs at 30 Hz (15 Hz in protocols 1 and 2)."""
-    from ft_sitl.missions.protocol import navigator_params
+    from ft_sitl.missions.plan import navigator_params
     from ft_sitl.navigation.planners.ego import EgoPlanner
     from ft_sitl.navigation.registry import create
 
@@ -747,16 +748,14 @@ def test_one_protocol_acceleration_limit_for_every_planner():
     spec = TrialSpec("fast", PLATFORM, "forest", protocol=3)
     assert spec.limits.max_acc_m_s2 == 3.0
     assert json.loads(spec.to_json())["limits"]["max_acc_m_s2"] == 3.0
-    platform = platform_for(spec)
-    sc = load_scenario_for(spec)
-    from ft_sitl.missions.protocol import trial_task
+    from ft_sitl.missions.plan import plan_trial
 
     for name, own in (("ego", 3.0), ("fast", 2.0), ("pgo", 2.0)):
         for protocol, acc, want in ((1, None, own), (3, None, 3.0), (3, 6.5, 6.5)):
             s = TrialSpec(name, PLATFORM, "forest", protocol=protocol,
                           limits=Limits(max_acc_m_s2=acc))
             nav = create(name, {})
-            nav.reset(trial_task(s, sc, platform))
+            nav.reset(plan_trial(s).task())
             assert nav.max_acc == want, (name, protocol, acc)
     with pytest.raises(TrialSpecError, match="limits.max_acc_m_s2: protocol version 1 has "
                                              "no protocol acceleration limit"):
@@ -771,16 +770,14 @@ def test_navigators_keep_their_platforms_footprint_from_protocol_4():
     inflated by it (rounded up to whole voxels, as the originals' obstacles_inflation) and
     NavRL's shield uses it as the agent radius. Fast-Planner on a 4.5 kg platform (0.356 m)
     in Forest 1 passed trunks 0.11 m away under protocol 3 and keeps > 0.3 m under 4."""
-    from ft_sitl.missions.protocol import trial_task
+    from ft_sitl.missions.plan import plan_trial
     from ft_sitl.navigation.maps.mapping import inflation_voxels, local_map_for
     from ft_sitl.navigation.planners.fast import FastPlanner
 
     big = "4.50kg-UAV 14"
-    sc = load_scenario_for(TrialSpec("fast", big, "forest"))
     for protocol, want in ((3, None), (4, platform_for(TrialSpec("fast", big, "forest"))
                                         .collision_radius_m)):
-        task = trial_task(TrialSpec("fast", big, "forest", protocol=protocol), sc,
-                          platform_for(TrialSpec("fast", big, "forest")))
+        task = plan_trial(TrialSpec("fast", big, "forest", protocol=protocol)).task()
         assert task.footprint_m == want
         voxels = 1 if want is None else 4  # 0.356 m -> 4 voxels of 0.1 m
         assert inflation_voxels(task) == voxels
@@ -830,19 +827,19 @@ def test_protocol_5_flies_the_vehicle_body_and_tells_its_half_span():
     """Protocol 5: the guard checks the body (central box and rotor disks) inside the
     bounding sphere, the row's clearance is the body's, and the footprint a navigator
     inflates by is the body's half span (the collision radius in 4)."""
-    from ft_sitl.missions.protocol import trial_task, trial_vehicle
+    from ft_sitl.missions.plan import plan_trial
+    from ft_sitl.missions.protocol import trial_vehicle
 
     spec4 = TrialSpec("straight", PLATFORM, "forest", scenario_index=2, protocol=4)
     spec5 = TrialSpec("straight", PLATFORM, "forest", scenario_index=2, protocol=5)
     platform = platform_for(spec5)
-    sc = load_scenario_for(spec5)
     body = platform.body()
-    g4, _ = trial_vehicle(spec4, sc, platform)
-    g5, _ = trial_vehicle(spec5, sc, platform)
+    g4, _ = trial_vehicle(plan_trial(spec4))
+    g5, _ = trial_vehicle(plan_trial(spec5))
     assert g4.probes == [None] and g4.radii == [platform.collision_radius_m]
     assert g5.probes[0].body == body and g5.radii == [body.bounding_radius_m]
-    assert trial_task(spec4, sc, platform).footprint_m == platform.collision_radius_m
-    assert trial_task(spec5, sc, platform).footprint_m == body.half_span_m
+    assert plan_trial(spec4).task().footprint_m == platform.collision_radius_m
+    assert plan_trial(spec5).task().footprint_m == body.half_span_m
     row = run_trial(spec5, wall_budget_s=None).row
     assert row["protocol_version"] == 5
     assert row["reason"] == "collision" and row["detail"].startswith("hit tree ")
@@ -854,7 +851,7 @@ def test_protocol_6_maps_take_the_latest_30_hz_frame_on_a_20_hz_timer():
     approach and in flight, and the frame is the camera's latest (captured on the 30 Hz
     grid, at most one camera period before); the camera's skipped frames are not rendered.
     Protocol 5 hands over every 30 Hz frame as it is captured."""
-    from ft_sitl.missions.protocol import navigator_params
+    from ft_sitl.missions.plan import navigator_params
     from ft_sitl.navigation.planners.ego import EgoPlanner
 
     class Spy(EgoPlanner):

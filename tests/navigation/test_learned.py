@@ -86,11 +86,13 @@ def test_the_shipped_policy_says_how_it_was_trained():
     assert m["trained_steps"] >= 1_000_000 and m["train"]["seed"] == 0
     assert json.loads(m["software"])["torch"]
     # trained under protocol 7, whose rules the environment still has: 8 changed only the
-    # geofence arming check and NavRL's shield, neither of which a Gym episode has
+    # geofence arming check and NavRL's shield, 9 only the wire's random streams, none of
+    # which a Gym episode has
     trained = PROTOCOLS[m["protocol"]]
-    assert m["protocol"] == 7 and PROTOCOL_VERSION == 8
-    assert dataclasses.replace(PROTOCOLS[8], version=7, summary=trained.summary,
-                               arm_fence_check=False, navrl_shield_cluster_m=0.2) == trained
+    assert m["protocol"] == 7 and PROTOCOL_VERSION == 9
+    assert dataclasses.replace(PROTOCOLS[9], version=7, summary=trained.summary,
+                               arm_fence_check=False, navrl_shield_cluster_m=0.2,
+                               wire_streams_shared=False) == trained
 
 
 def _gym_and_navigator():
