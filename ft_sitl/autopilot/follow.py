@@ -25,6 +25,10 @@ AUTO.FOLLOW_TARGET):
   or descends. PX4 starts its angle at 0 (north of the target); here it starts where the
   vehicle is.
 
+* :class:`FollowMode`: the two above as the commander flies them: a fresh task (and a
+  fresh estimate, when the old target is lost) each time the mode is entered, a hold
+  until the first fix, and the status texts when the target is lost or found again.
+
 Positions are local ENU metres (as the commander's), times integer microseconds.
 """
 
@@ -32,8 +36,16 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, field
+from typing import TYPE_CHECKING
 
 import numpy as np
+
+from ft_sitl.autopilot.modes import MAIN_AUTO, SUB_FOLLOW_TARGET
+from ft_sitl.autopilot.setpoints import Setpoint
+from ft_sitl.autopilot.status import Severity, VehicleState
+
+if TYPE_CHECKING:  # the commander owns the mode object; only its type is needed here
+    from ft_sitl.autopilot.commander import Commander
 
 #: PX4 (TargetEstimator): without a FOLLOW_TARGET for this long the target is lost
 TARGET_TIMEOUT_US = 3_000_000
@@ -173,3 +185,58 @@ class FollowTask:
             self.rate = 0.0
         else:
             self.angle = _wrap(self.angle + move)
+
+
+class FollowMode:
+    """AUTO.FOLLOW_TARGET for one commander: its target estimate and flight task."""
+
+    def __init__(self, cmdr: Commander):
+        self.cmdr = cmdr
+        #: the follow-target estimate (FOLLOW_TARGET messages) and flight task
+        self.target = TargetEstimator()
+        self.task = FollowTask()
+        self.t_us = 0
+        self.lost_said = False
+
+    @property
+    def active(self) -> bool:
+        return self.cmdr.main_mode == MAIN_AUTO and self.cmdr.sub_mode == SUB_FOLLOW_TARGET
+
+    def measurement(self, t_us: int, position: np.ndarray,
+                    velocity: np.ndarray | None) -> None:
+        """See :meth:`Commander.follow_target_measurement`."""
+        self.target.measure(t_us, position, velocity, self.cmdr.params["FLW_TGT_RS"])
+
+    def start(self) -> None:
+        """AUTO.FOLLOW_TARGET: a fresh flight task; a target lost (or never heard) starts
+        a fresh estimate too, as PX4 starts its estimator with the task."""
+        c = self.cmdr
+        if self.target.lost(c.time_us):
+            self.target = TargetEstimator()
+        self.task = FollowTask(yaw=c.yaw_now())
+        self.t_us = c.time_us
+        self.lost_said = False
+        c.auto.hold_here()
+        c.text(Severity.INFO, "Follow target: following")
+
+    def setpoint(self, s: VehicleState) -> Setpoint:
+        c = self.cmdr
+        if s.on_ground:  # PX4 refuses arming in it; on the ground it stays idle here
+            return Setpoint.idle()
+        dt = max(c.time_us - self.t_us, 0) * 1e-6
+        self.t_us = c.time_us
+        est = self.target
+        if not est.valid:  # no target yet: hold where the mode was entered
+            if c.auto.nav.target is None:
+                c.auto.hold_here()
+            return Setpoint.position(c.auto.nav.target, yaw=c.auto.nav.yaw)
+        lost = est.lost(c.time_us)
+        if lost and not self.lost_said:
+            c.text(Severity.WARNING, "Follow target lost: holding")
+        elif not lost and self.lost_said:
+            c.text(Severity.INFO, "Follow target found again")
+        self.lost_said = lost
+        target, target_vel = est.estimate(c.time_us)
+        pos, vel, acc, yaw = self.task.setpoint(dt, s.position, target, target_vel,
+                                                c.params, c.home[2])
+        return Setpoint.trajectory(pos, vel, acc, yaw=yaw)

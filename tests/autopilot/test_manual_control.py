@@ -169,7 +169,7 @@ def test_no_sticks_at_arming_no_loss_failsafe_and_bad_input_refused():
     c = f.commanders[0]
     assert not f.manual_control(0, math.nan, 0, 0.5, 0)
     assert not f.manual_control(0, 0, 0, math.inf, 0)
-    assert c._man_t_us is None
+    assert c.manual.t_us is None
     assert f.manual_control(0, 32.767, -40, 99, 1e9)  # clamped
     assert c.sticks == (1.0, -1.0, 1.0, 1.0)
     f.run(1.0)  # stale before arming: the loss is ignored until the sticks come back
