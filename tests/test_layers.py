@@ -133,12 +133,67 @@ def modules_loaded_by(*names: str) -> list[str]:
 @pytest.mark.e2e
 def test_navigator_protocol_loads_no_map():
     """The Navigator protocol (navigation.base), which every transport imports, loads
-    neither the local map (navigation.maps.mapping, numba kernels) nor anything importing it:
-    a task's map lives with the map."""
+    no module of the maps room (navigation.maps: the local map's numba kernels, the ESDF)
+    nor anything importing one: a task's map lives with the map."""
     loaded = modules_loaded_by("ft_sitl.navigation.base")
     assert "ft_sitl.navigation.base" in loaded
-    assert "ft_sitl.navigation.maps.mapping" not in loaded, sorted(
-        m for m in loaded if m.startswith("ft_sitl."))
+    maps = [m for m in loaded if m.startswith("ft_sitl.navigation.maps")]
+    assert not maps, sorted(m for m in loaded if m.startswith("ft_sitl."))
+
+
+NAVIGATION = PKG / "navigation"
+
+
+def _plant_layout_lines(path: Path) -> list[int]:
+    """Lines of a module that name the plant's state or status indices (``X_*``, ``S_*`` of
+    physics.dynamics), imported by name or read through the module (``d.X_POS``)."""
+    tree = ast.parse(path.read_text())
+    dyn = "ft_sitl.physics.dynamics"
+    names, aliases, lines = set(), {dyn}, []
+    for node in ast.walk(tree):
+        if isinstance(node, ast.ImportFrom) and node.module == dyn:
+            names |= {a.asname or a.name for a in node.names if a.name[:2] in ("X_", "S_")}
+        elif isinstance(node, ast.ImportFrom) and f"{node.module}.dynamics" == dyn:
+            aliases |= {a.asname or a.name for a in node.names if a.name == "dynamics"}
+        elif isinstance(node, ast.Import):
+            aliases |= {a.asname for a in node.names if a.name == dyn and a.asname}
+    for node in ast.walk(tree):
+        if isinstance(node, ast.Name) and node.id in names:
+            lines.append(node.lineno)
+        elif isinstance(node, ast.Attribute) and node.attr[:2] in ("X_", "S_") \
+                and ast.unparse(node.value) in aliases:
+            lines.append(node.lineno)
+    return sorted(set(lines))
+
+
+def test_navigators_read_no_plant_arrays_but_in_compiled_kernels():
+    """A navigator reads the vehicle from its Observation, not from the plant's state
+    arrays (``X_*``/``S_*`` of physics.dynamics), except in a compiled numba kernel shared
+    with the batched simulator (policy_io.observe_state) and where the kernel's input is
+    filled; each such place says why in a comment on the kernel (its decorator or the
+    lines above) or on the statement (that line or the two above a run of them)."""
+    bad = []
+    for path in sorted(NAVIGATION.rglob("*.py")):
+        text = path.read_text().splitlines()
+        tree = ast.parse("\n".join(text))
+        kernels = [n for n in ast.walk(tree) if isinstance(n, ast.FunctionDef)
+                   and any("njit" in ast.unparse(d) for d in n.decorator_list)]
+
+        def said(first: int, last: int, text=text) -> bool:  # a comment on lines first..last
+            return any(ln.strip().startswith("#") or " # " in ln
+                       for ln in text[max(first - 1, 0):last])
+
+        uses = _plant_layout_lines(path)
+        for line in uses:
+            if text[line - 1].lstrip().startswith(("from ", "import ")):
+                continue  # the import: judged by its uses
+            k = next((n for n in kernels if n.lineno <= line <= n.end_lineno), None)
+            top = k.decorator_list[0].lineno if k else line
+            while not k and top - 1 in uses:  # a run of such statements shares its comment
+                top -= 1
+            if not said(top - 3, top - 1 if k else line):
+                bad.append(f"{path.relative_to(PKG.parent)}:{line}: {text[line - 1].strip()}")
+    assert not bad, "plant arrays indexed outside a commented kernel:\n" + "\n".join(bad)
 
 
 @pytest.mark.e2e

@@ -10,9 +10,9 @@ import trimesh
 
 from ft_sitl.autopilot.cascade import SP_POS
 from ft_sitl.missions.trial import TrialSpec, run_trial
+from ft_sitl.navigation.maps.esdf import EsdfGrid
 from ft_sitl.navigation.maps.mapping import LocalMap
 from ft_sitl.navigation.optimisers.fast import (
-    EsdfField,
     FastOptimizer,
     FastParams,
     KnotBSpline,
@@ -35,12 +35,12 @@ AGILE = "0.98kg-EGO Planner DIY"
 RES = 0.1
 
 
-def cylinder_esdf(center=(3.0, 0.05), radius=0.5) -> EsdfField:
+def cylinder_esdf(center=(3.0, 0.05), radius=0.5) -> EsdfGrid:
     """An analytic ESDF (a vertical cylinder) sampled at voxel centres."""
     origin = np.array([-20, -20, 0])
     idx = np.stack(np.meshgrid(np.arange(80), np.arange(40), np.arange(30), indexing="ij"), -1)
     c = (origin + idx + 0.5) * RES
-    return EsdfField(np.hypot(c[..., 0] - center[0], c[..., 1] - center[1]) - radius, origin,
+    return EsdfGrid(np.hypot(c[..., 0] - center[0], c[..., 1] - center[1]) - radius, origin,
                      RES)
 
 
@@ -98,7 +98,7 @@ def test_cost_gradients_match_finite_differences():
 
 def test_esdf_field_answers_as_the_map():
     m = LocalMap(None, 3.0, camera=CameraConfig().subsampled(4))
-    esdf = EsdfField.from_map(m, (0.0, 0.0), 3.0)  # floor and ceiling only
+    esdf = EsdfGrid.from_map(m, (0.0, 0.0), 3.0)  # floor and ceiling only
     pts = np.random.default_rng(2).uniform([-2, -2, 0.2], [2, 2, 2.8], (50, 3))
     d, g = esdf(pts)
     d_map, g_map = m.esdf(pts)
@@ -125,7 +125,7 @@ def pillar_map():
 
 def test_optimiser_pushes_control_points_out_of_the_obstacle_band(pillar_map):
     m = pillar_map
-    esdf = EsdfField.from_map(m, (3.0, 0.0), 6.0)
+    esdf = EsdfGrid.from_map(m, (3.0, 0.0), 6.0)
     spline = straight_spline([0.5, 0.2, 1.5], [5.5, 0.2, 1.5], n=11, ts=0.125)
     d0, _ = esdf(spline.control_points)
     assert d0[3:-3].min() < 0.0  # control points inside the inflated pillar
@@ -240,9 +240,9 @@ def test_a_plan_acts_only_after_its_latency():
     # planned from rest at the start toward the goal, within the limits after re-timing
     tr = nav.traj
     assert tr.start == pytest.approx([0.0, 0.0, 1.5], abs=1e-6)
-    assert tr.pos.position(tr.duration)[0] > 6.0
-    assert np.abs(tr.pos.velocity_control_points()).max() < 4.0 * 1.1
-    assert first_collision(tr.pos, 0.0, nav.map.occupied_inflated) is None
+    assert tr.spline.position(tr.duration)[0] > 6.0
+    assert np.abs(tr.spline.velocity_control_points()).max() < 4.0 * 1.1
+    assert first_collision(tr.spline, 0.0, nav.map.occupied_inflated) is None
     nav2 = FastPlanner(latency_s=0.0, measured_latency=True)
     nav2.reset(open_task())
     nav2.step(obs_at(0.0))

@@ -10,6 +10,7 @@ import trimesh
 
 from ft_sitl.autopilot.cascade import SP_POS
 from ft_sitl.missions.trial import TrialSpec, run_trial
+from ft_sitl.navigation.maps.esdf import EsdfGrid
 from ft_sitl.navigation.maps.mapping import LocalMap
 from ft_sitl.navigation.planners.astar import OccupancyView
 from ft_sitl.navigation.planners.pgo import (
@@ -25,7 +26,6 @@ from ft_sitl.navigation.planners.pgo import (
     plan_segment,
 )
 from ft_sitl.navigation.planners.topo import (
-    EsdfGrid,
     discretize_path,
     find_topo_paths,
     path_length,
@@ -290,13 +290,13 @@ def test_the_esdf_box_of_a_segment_beyond_the_window_is_moved_onto_it():
     # a box centred off the window but still overlapping it stays where it was
     near = np.array([hi[0] + 3.0, 0.0, 1.5])
     np.testing.assert_array_equal(esdf_centre(m, near, 5.5), near)
-    EsdfGrid.from_map(m, None, near, 5.5)
+    EsdfGrid.from_map(m, near, 5.5)
     far = np.array([hi[0] + 9.0, lo[1] - 7.0, 1.5])
     with pytest.raises(ValueError, match="does not overlap"):
-        EsdfGrid.from_map(m, None, far, 5.5)
+        EsdfGrid.from_map(m, far, 5.5)
     c = esdf_centre(m, far, 5.5)
     assert c[0] == pytest.approx(hi[0]) and c[1] == pytest.approx(lo[1]) and c[2] == 1.5
-    grid = EsdfGrid.from_map(m, None, c, 5.5)
+    grid = EsdfGrid.from_map(m, c, 5.5)
     assert grid.field.shape[0] >= 2 and grid.field.shape[1] >= 2
     d, _ = grid.evaluate(np.array([[hi[0] - 1.0, lo[1] + 1.0, 1.5]]))
     assert np.isfinite(d).all()

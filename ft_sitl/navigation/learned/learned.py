@@ -38,7 +38,9 @@ from pathlib import Path
 import numpy as np
 
 from ft_sitl.autopilot.setpoints import Setpoint
+from ft_sitl.frames import wrap_pi
 from ft_sitl.navigation.base import Navigator, Observation, Task
+from ft_sitl.navigation.latency import LATENCY, MEASURED_LATENCY, DelayedCommands
 from ft_sitl.navigation.learned.policy_io import (
     N_STATE,
     STATE_HIGH,
@@ -55,12 +57,6 @@ from ft_sitl.navigation.learned.policy_io import (
     velocity_action,
 )
 from ft_sitl.navigation.maps.mapping import LocalMap, MapConfig
-from ft_sitl.navigation.planners.skeleton import (
-    LATENCY,
-    MEASURED_LATENCY,
-    DelayedCommands,
-    wrap_angle,
-)
 from ft_sitl.physics import dynamics as d
 from ft_sitl.scenarios.camera import CAMERA_PARAMS, camera_of
 from ft_sitl.schema import Param, Schema
@@ -173,7 +169,9 @@ class Learned(Navigator):
             [task.twr_max, task.alpha_xy_max, task.alpha_z_max, footprint],
             *self.platform_range)[None]
         self.last_action = np.zeros((1, 4))
-        self.x = np.zeros((1, d.X_ROTOR))  # (the rotor speeds are not observed)
+        # the input of the compiled kernel observe_state, in the plant's state layout (the
+        # rotor speeds are not observed)
+        self.x = np.zeros((1, d.X_ROTOR))
         self.state = np.empty((1, N_STATE), np.float32)
         self.facing = False
         self.commands = DelayedCommands(self.control_hz, self.latency, self.measured_latency)
@@ -186,6 +184,8 @@ class Learned(Navigator):
     def inputs(self, obs: Observation) -> np.ndarray:
         """The policy's input (1, size) for an observation: the gym's observation parts,
         the scan cast into the map."""
+        # observe_state is the gym's compiled kernel (policy_io), which reads the plant's
+        # state layout: x is its input and nothing else indexes it
         x = self.x
         x[0, d.X_POS:d.X_POS + 3] = obs.position
         x[0, d.X_VEL:d.X_VEL + 3] = obs.velocity
@@ -197,14 +197,14 @@ class Learned(Navigator):
         hits = self.map.first_occupied(np.asarray(obs.position, dtype=float), self.rays_world,
                                        RAY_STEP_M, self.ray_range)
         rays = (np.clip(hits, 0.0, self.ray_range) / self.ray_range)[None]
-        edges = edge_distances(x[:, d.X_POS:d.X_POS + 3], self.frame[None], task.bounds_min,
-                               task.bounds_max)
+        edges = edge_distances(np.array(obs.position, dtype=float)[None], self.frame[None],
+                               task.bounds_min, task.bounds_max)
         return policy_input(self.state, edges, self.platform_vec, self.last_action, rays)
 
     def command(self, obs: Observation) -> Setpoint:
         """One control period: turn to the goal first, then the policy's velocity."""
         if not self.facing:
-            if abs(wrap_angle(self.goal_yaw - obs.yaw)) >= YAW_TOLERANCE_RAD:
+            if abs(wrap_pi(self.goal_yaw - obs.yaw)) >= YAW_TOLERANCE_RAD:
                 return Setpoint.position(self.task.start, yaw=self.goal_yaw)
             self.facing = True
         action = self.policy.act(self.inputs(obs))

@@ -74,18 +74,14 @@ import numpy as np
 from scipy.optimize import minimize
 
 from ft_sitl.autopilot.setpoints import Setpoint
+from ft_sitl.frames import wrap_pi
 from ft_sitl.navigation.base import Navigator, Observation, ObstacleStates, Task
+from ft_sitl.navigation.latency import LATENCY, MEASURED_LATENCY, DelayedCommands
 from ft_sitl.navigation.learned import navrl_detector
 from ft_sitl.navigation.learned.navrl_detector import DynamicObstacleTracker, in_range
 from ft_sitl.navigation.learned.navrl_policy import DYN_DIM, DYN_OBS, CheckpointError, NavRLPolicy
 from ft_sitl.navigation.learned.policy_io import goal_frame
 from ft_sitl.navigation.maps.mapping import local_map_for
-from ft_sitl.navigation.planners.skeleton import (
-    LATENCY,
-    MEASURED_LATENCY,
-    DelayedCommands,
-    wrap_angle,
-)
 from ft_sitl.scenarios.camera import CAMERA_PARAMS, camera_of
 from ft_sitl.schema import Param, Schema
 
@@ -496,7 +492,7 @@ class NavRL(Navigator):
     def command(self, obs: Observation) -> Setpoint | None:
         """One control period; None keeps the previous command (the settling wait)."""
         pos = np.asarray(obs.position, dtype=float)
-        if abs(wrap_angle(self.goal_yaw - obs.yaw)) >= YAW_TOLERANCE_RAD:
+        if abs(wrap_pi(self.goal_yaw - obs.yaw)) >= YAW_TOLERANCE_RAD:
             return Setpoint.position(pos, yaw=self.goal_yaw)
         self.settled += 1
         if self.settled <= SETTLE_PERIODS:

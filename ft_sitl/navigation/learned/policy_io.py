@@ -87,6 +87,9 @@ def normalise_platform(features, lo, hi) -> np.ndarray:
     return np.clip((np.log(f) - lo) / (hi - lo), PLATFORM_LOW, PLATFORM_HIGH)
 
 
+# a compiled kernel indexes the plant's state layout (X_*) directly: it is the gym's batch
+# observation (rows of the batched plant's state), and a named read-out per row would
+# leave numba's loop
 @njit(cache=True)
 def observe_state(xs, goal, frame, floor, ceiling, low, high, out):
     """The state vectors (:data:`STATE_NAMES`) of the states ``xs`` (rows of the

@@ -93,6 +93,7 @@ import numpy as np
 from numba import njit
 
 from ft_sitl.navigation.optimisers.lbfgs import dot_rows, search_direction, store_pair
+from ft_sitl.navigation.optimisers.penalties import smoothness
 from ft_sitl.navigation.planners.astar import AStarMemo, OccupancyView, search
 from ft_sitl.navigation.trajectories.bspline import Feasibility, UniformBSpline
 
@@ -149,24 +150,10 @@ class EgoParams:
 
 
 # ---------------------------------------------------------------------------------------
-# cost terms: numba kernels (one implementation, used by the solver and the Python wrappers).
+# cost terms: numba kernels (one implementation, used by the solver and the Python wrappers;
+# the smoothness is the shared one, optimisers.penalties).
 # Each ``_*_acc`` returns its unweighted cost and adds ``w`` times its gradient to ``grad``.
 # ---------------------------------------------------------------------------------------
-@njit(cache=True)
-def _smooth_acc(q, w, grad):
-    f = 0.0
-    for i in range(q.shape[0] - 3):
-        for d in range(3):
-            j = q[i + 3, d] - 3.0 * q[i + 2, d] + 3.0 * q[i + 1, d] - q[i, d]
-            f += j * j
-            g2 = 2.0 * w * j
-            grad[i + 3, d] += g2
-            grad[i + 2, d] -= 3.0 * g2
-            grad[i + 1, d] += 3.0 * g2
-            grad[i, d] -= g2
-    return f
-
-
 @njit(cache=True)
 def _collision_acc(q, idx, ap, av, c0, w, grad):
     f = 0.0
@@ -243,7 +230,7 @@ def _total_cost(q, grad, mode, w, c0, dt, vmax, amax, idx, ap, av, ref, tan, alo
     """mode 0: rebound (smooth, collision, feasibility); mode 1: refine (smooth, fitness,
     feasibility). ``w`` = [smooth, collision, feasibility, fitness]."""
     grad[:, :] = 0.0
-    f = w[0] * _smooth_acc(q, w[0], grad)
+    f = w[0] * smoothness(q, w[0], grad)
     if mode == 0:
         f += w[1] * _collision_acc(q, idx, ap, av, c0, w[1], grad)
     f += w[2] * _feasibility_acc(q, dt, vmax, amax, w[2], grad)
@@ -263,7 +250,7 @@ def smoothness_cost(q) -> tuple[float, np.ndarray]:
     """``sum ||Q[i+3] - 3 Q[i+2] + 3 Q[i+1] - Q[i]||^2`` and its gradient ``(N, 3)``."""
     q = _as_points(q)
     grad = np.zeros_like(q)
-    return float(_smooth_acc(q, 1.0, grad)), grad
+    return float(smoothness(q, 1.0, grad)), grad
 
 
 def collision_cost(q, idx, p, v, clearance: float) -> tuple[float, np.ndarray]:
@@ -395,7 +382,7 @@ def _lbfgs_run(q, g, dvec, q0, g0, S, Y, rho, alpha, meta, fbox, lo, hi, max_ite
             return _LB_CONVERGED
         if check_smooth > 0.0 and meta[0] > 3:
             scratch[:, :] = 0.0
-            if _smooth_acc(q, 0.0, scratch) / n_free < check_smooth:
+            if smoothness(q, 0.0, scratch) / n_free < check_smooth:
                 return _LB_CHECK
     return _LB_MAXITER
 

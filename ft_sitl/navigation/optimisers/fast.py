@@ -76,12 +76,19 @@ import numpy as np
 from numba import njit
 from scipy.interpolate import BSpline
 
-from ft_sitl.navigation.maps.mapping import esdf_eval
+from ft_sitl.navigation.maps.esdf import EsdfGrid
 from ft_sitl.navigation.optimisers.lbfgs import dot_rows, search_direction, store_pair
+from ft_sitl.navigation.optimisers.penalties import (
+    endpoint,
+    esdf_distance,
+    fast_planner_cost,
+    feasibility,
+    smoothness,
+)
 from ft_sitl.navigation.trajectories.bspline import UniformBSpline
 
 __all__ = [
-    "EsdfField", "FastOptimizer", "FastParams", "FastResult", "KnotBSpline", "cost_terms",
+    "FastOptimizer", "FastParams", "FastResult", "KnotBSpline", "cost_terms",
     "distance_cost", "endpoint_cost", "feasibility_cost", "plan_yaw", "smoothness_cost",
     "total_cost",
 ]
@@ -128,145 +135,6 @@ class FastParams:
                 raise ValueError(f"FastParams.{name} must be a positive integer, got {v!r}")
 
 
-#: half height (m) of the ESDF box around the planning start: the originals' local update
-#: range in z (4.5 m), so a high ceiling (Urban's 10 m) does not double the cost
-ESDF_HALF_HEIGHT_M = 4.5
-
-
-@dataclass(frozen=True, eq=False)
-class EsdfField:
-    """An ESDF sampled at voxel centres: ``field[i, j, k]`` is the distance at the centre of
-    global voxel ``origin + (i, j, k)``, i.e. at ``(origin + (i, j, k) + 0.5) * resolution``;
-    queried by trilinear interpolation exactly as :meth:`LocalMap.esdf` (points beyond the
-    field are clamped onto it)."""
-
-    field: np.ndarray
-    origin: np.ndarray
-    resolution: float
-
-    def __post_init__(self):
-        f = np.ascontiguousarray(self.field, dtype=np.float64)
-        if f.ndim != 3 or min(f.shape) < 2:
-            raise ValueError(f"field: need a 3-D array with >= 2 voxels per axis, got {f.shape}")
-        o = np.asarray(self.origin, dtype=np.int64).reshape(-1)
-        if o.shape != (3,):
-            raise ValueError(f"origin: need 3 integers, got {self.origin!r}")
-        r = float(self.resolution)
-        if not (math.isfinite(r) and r > 0):
-            raise ValueError(f"resolution: must be positive, got {self.resolution!r}")
-        object.__setattr__(self, "field", f)
-        object.__setattr__(self, "origin", o)
-        object.__setattr__(self, "resolution", r)
-
-    @classmethod
-    def from_map(cls, local_map, center_m=None, half_extent_m: float | None = None) -> EsdfField:
-        """Recompute ``local_map``'s ESDF (over the box ``center_m +- half_extent_m``, see
-        :meth:`LocalMap.update_esdf`) and wrap it."""
-        field = local_map.update_esdf(center_m, half_extent_m, ESDF_HALF_HEIGHT_M)
-        return cls(field, local_map.esdf_origin_index, local_map.resolution_m)
-
-    def __call__(self, points) -> tuple[np.ndarray, np.ndarray]:
-        """(distance (M,), gradient (M, 3)) at points (M, 3)."""
-        p = np.ascontiguousarray(np.asarray(points, dtype=np.float64).reshape(-1, 3))
-        d = np.empty(len(p))
-        g = np.empty((len(p), 3))
-        esdf_eval(self.field, self.origin, 1.0 / self.resolution, p, d, g)
-        return d, g
-
-
-# ---------------------------------------------------------------------------------------
-# cost terms (numba). Each ``_*_acc`` returns its unweighted cost and adds ``w`` times its
-# gradient to ``grad``.
-# ---------------------------------------------------------------------------------------
-@njit(cache=True)
-def _smooth_acc(q, w, grad):
-    f = 0.0
-    for i in range(q.shape[0] - 3):
-        for a in range(3):
-            j = q[i + 3, a] - 3.0 * q[i + 2, a] + 3.0 * q[i + 1, a] - q[i, a]
-            f += j * j
-            gj = 2.0 * w * j
-            grad[i, a] -= gj
-            grad[i + 1, a] += 3.0 * gj
-            grad[i + 2, a] -= 3.0 * gj
-            grad[i + 3, a] += gj
-    return f
-
-
-@njit(cache=True)
-def _distance_acc(q, first, last, field, origin, inv_res, d0, w, grad, dist, dgrad):
-    """ESDF term over control points ``first .. last - 1``."""
-    esdf_eval(field, origin, inv_res, q, dist, dgrad)
-    f = 0.0
-    for i in range(first, last):
-        e = dist[i] - d0
-        if e < 0.0:
-            f += e * e
-            for a in range(3):
-                grad[i, a] += w * 2.0 * e * dgrad[i, a]
-    return f
-
-
-@njit(cache=True)
-def _feasibility_acc(q, ts, vmax, amax, w, grad):
-    f = 0.0
-    n = q.shape[0]
-    inv2 = 1.0 / (ts * ts)
-    inv4 = inv2 * inv2
-    vm2 = vmax * vmax
-    am2 = amax * amax
-    for i in range(n - 1):
-        for a in range(3):
-            dv = q[i + 1, a] - q[i, a]
-            ex = dv * dv * inv2 - vm2
-            if ex > 0.0:
-                f += ex * ex
-                g = w * 4.0 * ex * inv2 * dv
-                grad[i + 1, a] += g
-                grad[i, a] -= g
-    for i in range(n - 2):
-        for a in range(3):
-            da = q[i + 2, a] - 2.0 * q[i + 1, a] + q[i, a]
-            ex = da * da * inv4 - am2
-            if ex > 0.0:
-                f += ex * ex
-                g = w * 4.0 * ex * inv4 * da
-                grad[i, a] += g
-                grad[i + 1, a] -= 2.0 * g
-                grad[i + 2, a] += g
-    return f
-
-
-@njit(cache=True)
-def _endpoint_acc(q, end_pt, w, grad):
-    n = q.shape[0]
-    f = 0.0
-    for a in range(3):
-        e = (q[n - 3, a] + 4.0 * q[n - 2, a] + q[n - 1, a]) / 6.0 - end_pt[a]
-        f += e * e
-        g = w * 2.0 * e / 6.0
-        grad[n - 3, a] += g
-        grad[n - 2, a] += 4.0 * g
-        grad[n - 1, a] += g
-    return f
-
-
-@njit(cache=True)
-def _total(q, grad, w, ts, vmax, amax, d0, free_end, end_pt, field, origin, inv_res, dist,
-           dgrad, terms):
-    """``w`` = [smooth, distance, feasibility, endpoint]; ``terms`` receives the unweighted
-    terms. The distance term covers ``Q[3] .. Q[N-4]`` (``.. Q[N-1]`` with a free end)."""
-    n = q.shape[0]
-    grad[:, :] = 0.0
-    terms[0] = _smooth_acc(q, w[0], grad)
-    last = n if free_end else n - ORDER
-    terms[1] = _distance_acc(q, ORDER, last, field, origin, inv_res, d0, w[1], grad, dist,
-                             dgrad)
-    terms[2] = _feasibility_acc(q, ts, vmax, amax, w[2], grad)
-    terms[3] = _endpoint_acc(q, end_pt, w[3], grad) if free_end else 0.0
-    return w[0] * terms[0] + w[1] * terms[1] + w[2] * terms[2] + w[3] * terms[3]
-
-
 # ---------------------------------------------------------------------------------------
 # L-BFGS over rows lo:hi of q (numba)
 # ---------------------------------------------------------------------------------------
@@ -290,11 +158,9 @@ def _lbfgs(q, lo, hi, memory, max_evals, xtol, w, ts, vmax, amax, d0, free_end, 
     Y = np.zeros((memory, n, 3))
     rho = np.zeros(memory)
     alpha = np.zeros(memory)
-    dist = np.empty(n)
-    dgrad = np.empty((n, 3))
     terms = np.zeros(4)
-    f = _total(q, g, w, ts, vmax, amax, d0, free_end, end_pt, field, origin, inv_res, dist,
-               dgrad, terms)
+    f = fast_planner_cost(q, g, w, ts, vmax, amax, d0, free_end, end_pt, field, origin,
+                          inv_res, False, terms)
     evals = 1
     f_best = f
     iters = 0
@@ -329,8 +195,8 @@ def _lbfgs(q, lo, hi, memory, max_evals, xtol, w, ts, vmax, amax, d0, free_end, 
             for i in range(lo, hi):
                 for k in range(3):
                     q[i, k] = q0[i, k] + step * d[i, k]
-            f = _total(q, g, w, ts, vmax, amax, d0, free_end, end_pt, field, origin, inv_res,
-                       dist, dgrad, terms)
+            f = fast_planner_cost(q, g, w, ts, vmax, amax, d0, free_end, end_pt, field, origin,
+                                  inv_res, False, terms)
             evals += 1
             if f < f_best:
                 f_best = f
@@ -383,10 +249,10 @@ def smoothness_cost(q) -> tuple[float, np.ndarray]:
     """``sum ||Q[i+3] - 3 Q[i+2] + 3 Q[i+1] - Q[i]||^2`` and its gradient (N, 3)."""
     q = _as_points(q)
     g = np.zeros_like(q)
-    return float(_smooth_acc(q, 1.0, g)), g
+    return float(smoothness(q, 1.0, g)), g
 
 
-def distance_cost(q, esdf: EsdfField, dist0: float = 0.4, first: int = ORDER,
+def distance_cost(q, esdf: EsdfGrid, dist0: float = 0.4, first: int = ORDER,
                   last: int | None = None) -> tuple[float, np.ndarray]:
     """``sum (d - dist0)^2`` over control points ``first .. last - 1`` (default: ``N - 3``)
     whose ESDF distance ``d`` is below ``dist0``, and its gradient (N, 3)."""
@@ -394,8 +260,8 @@ def distance_cost(q, esdf: EsdfField, dist0: float = 0.4, first: int = ORDER,
     n = q.shape[0]
     last = n - ORDER if last is None else int(last)
     g = np.zeros_like(q)
-    f = _distance_acc(q, int(first), last, esdf.field, esdf.origin, 1.0 / esdf.resolution,
-                      float(dist0), 1.0, g, np.empty(n), np.empty((n, 3)))
+    f = esdf_distance(q, int(first), last, esdf.field, esdf.origin, 1.0 / esdf.resolution,
+                      float(dist0), 1.0, g, False)
     return float(f), g
 
 
@@ -403,7 +269,7 @@ def feasibility_cost(q, ts: float, vmax: float, amax: float) -> tuple[float, np.
     """Per-axis ``(V^2 - vmax^2)^2`` and ``(A^2 - amax^2)^2`` beyond the limits."""
     q = _as_points(q)
     g = np.zeros_like(q)
-    return float(_feasibility_acc(q, float(ts), float(vmax), float(amax), 1.0, g)), g
+    return float(feasibility(q, float(ts), float(vmax), float(amax), 1.0, g)), g
 
 
 def endpoint_cost(q, end_pt) -> tuple[float, np.ndarray]:
@@ -411,39 +277,37 @@ def endpoint_cost(q, end_pt) -> tuple[float, np.ndarray]:
     q = _as_points(q)
     g = np.zeros_like(q)
     e = np.asarray(end_pt, dtype=np.float64).reshape(3)
-    return float(_endpoint_acc(q, e, 1.0, g)), g
+    return float(endpoint(q, e, 1.0, g)), g
 
 
 def _weights(p: FastParams) -> np.ndarray:
     return np.array([p.w_smooth, p.w_distance, p.w_feasibility, p.w_endpoint])
 
 
-def total_cost(q, ts: float, esdf: EsdfField, params: FastParams | None = None,
+def total_cost(q, ts: float, esdf: EsdfGrid, params: FastParams | None = None,
                free_end: bool = False, end_pt=None) -> tuple[float, np.ndarray]:
     """The weighted sum the optimiser minimises and its gradient (N, 3) (gradients of the
     fixed rows included)."""
     p = params or FastParams()
     q = _as_points(q)
-    n = q.shape[0]
     g = np.zeros_like(q)
     e = _curve_end(q) if end_pt is None else np.asarray(end_pt, dtype=np.float64).reshape(3)
-    f = _total(q, g, _weights(p), float(ts), p.max_vel, p.max_acc, p.dist0, bool(free_end), e,
-               esdf.field, esdf.origin, 1.0 / esdf.resolution, np.empty(n), np.empty((n, 3)),
-               np.zeros(4))
+    f = fast_planner_cost(q, g, _weights(p), float(ts), p.max_vel, p.max_acc, p.dist0,
+                          bool(free_end), e, esdf.field, esdf.origin, 1.0 / esdf.resolution,
+                          False, np.zeros(4))
     return float(f), g
 
 
-def cost_terms(q, ts: float, esdf: EsdfField, params: FastParams | None = None,
+def cost_terms(q, ts: float, esdf: EsdfGrid, params: FastParams | None = None,
                free_end: bool = False, end_pt=None) -> dict:
     """The unweighted terms {smooth, distance, feasibility, endpoint} and the total."""
     p = params or FastParams()
     q = _as_points(q)
-    n = q.shape[0]
     e = _curve_end(q) if end_pt is None else np.asarray(end_pt, dtype=np.float64).reshape(3)
     terms = np.zeros(4)
-    f = _total(q, np.zeros_like(q), _weights(p), float(ts), p.max_vel, p.max_acc, p.dist0,
-               bool(free_end), e, esdf.field, esdf.origin, 1.0 / esdf.resolution,
-               np.empty(n), np.empty((n, 3)), terms)
+    f = fast_planner_cost(q, np.zeros_like(q), _weights(p), float(ts), p.max_vel, p.max_acc,
+                          p.dist0, bool(free_end), e, esdf.field, esdf.origin,
+                          1.0 / esdf.resolution, False, terms)
     return {"smooth": float(terms[0]), "distance": float(terms[1]),
             "feasibility": float(terms[2]), "endpoint": float(terms[3]), "total": float(f)}
 
@@ -480,7 +344,7 @@ class FastOptimizer:
         if not isinstance(self.params, FastParams):
             raise TypeError(f"params must be a FastParams, got {type(params).__name__}")
 
-    def optimize(self, spline: UniformBSpline, esdf: EsdfField,
+    def optimize(self, spline: UniformBSpline, esdf: EsdfGrid,
                  free_end: bool = False) -> FastResult:
         """Optimise the interior control points of ``spline`` (and its last three with
         ``free_end``) against ``esdf``; the knot span is kept."""

@@ -48,23 +48,17 @@ import time
 
 import numpy as np
 
-from ft_sitl.autopilot.setpoints import Setpoint
 from ft_sitl.navigation.base import Observation, Task
 from ft_sitl.navigation.optimisers.ego import EgoOptimizer, EgoParams, first_collision_time
 from ft_sitl.navigation.planners.astar import OccupancyView
-from ft_sitl.navigation.planners.skeleton import (
-    HorizonPlanner,
-    SplineTrajectory,
-    checked_setpoint,
-    pursue_yaw,
-)
+from ft_sitl.navigation.planners.skeleton import HorizonPlanner
+from ft_sitl.navigation.trajectories.base import SplineTrajectory
 from ft_sitl.navigation.trajectories.bspline import UniformBSpline
 from ft_sitl.navigation.trajectories.minsnap import global_reference, min_snap, one_segment_time
 
 #: estimated compute time of one EGO replan in the original C++ (optimisation ~1 ms, plus
 #: A* and map work; the paper's authors report a few ms on a desktop CPU)
 DEFAULT_LATENCY_S = 0.01
-SAFETY_CHECK_HZ = 20.0
 #: EGO's control-point spacing of the initial path (m)
 CTRL_PT_DIST_M = 0.4
 
@@ -153,50 +147,24 @@ class EgoPlanner(HorizonPlanner):
         self._adopt(SplineTrajectory(res.spline, 0.0), obs, t_start)
 
     def _adopt(self, traj: SplineTrajectory | None, obs: Observation, t_start: float) -> None:
-        self._adopt_at(traj, obs, self._compute_time(t_start))
-        if traj is not None:
-            self.stop_at = None
+        self._adopt_plan(traj, obs, self._compute_time(t_start))
+
+    # --- the replanning loop's hooks ----------------------------------------------------------
+    def _replan_due(self, obs: Observation) -> bool:
+        """More than ``replan_threshold_m`` from the trajectory's start, the goal farther
+        than ``no_replan_threshold_m`` (both measured at the vehicle)."""
+        goal_dist = float(np.linalg.norm(self.task.goal - obs.position))
+        moved = float(np.linalg.norm(obs.position - self.traj.start))
+        return moved > self.replan_threshold and goal_dist > self.no_replan_threshold
 
     def _collision_ahead(self, t: float) -> float | None:
         """Seconds until the current trajectory's first 2/3 meets an occupied voxel."""
-
-        tr = self.traj
-        if tr is None:
-            return None
-        hit = first_collision_time(tr.spline, self.grid)
+        hit = first_collision_time(self.traj.spline, self.grid)
         if hit is None:
             return None
-        return tr.t0 + hit - t
+        return self.traj.t0 + hit - t
 
-    # --- the step ---------------------------------------------------------------------------
-    def step(self, obs: Observation) -> Setpoint:
-        t = obs.time_s
-        self._perceive(obs)
-        goal_dist = float(np.linalg.norm(self.task.goal - obs.position))
-        if self.traj is not None and self.pending is None and self.stop_at is None:
-            moved = float(np.linalg.norm(obs.position - self.traj.start))
-            if moved > self.replan_threshold and goal_dist > self.no_replan_threshold:
-                self.plan_now = True
-            if t >= self.next_check:
-                self.next_check = t + 1.0 / SAFETY_CHECK_HZ
-                ahead = self._collision_ahead(t)
-                if ahead is not None:
-                    self.plan_now = True
-                    if ahead < self.emergency_time:
-                        self.stop_at = np.array(obs.position)
-                        self.from_rest = True
-                        self.traj = None
-        if self.plan_now and self.pending is None and t >= self.retry_at:
-            self._plan(obs)
-        return self._setpoint(obs)
-
-    def _setpoint(self, obs: Observation) -> Setpoint:
-        t = obs.time_s
-        if self.traj is None:
-            return self._hold(obs, self.yaw)
-        p, v, a = self.traj.state(t)
-        self.yaw = pursue_yaw(self.yaw, self.traj.state(t + 1.0)[0] - p, self.rate_hz)
-        if t > self.traj.end_time:
-            v = np.zeros(3)
-            a = np.zeros(3)
-        return checked_setpoint(t, p, v, a, self.yaw)
+    def _emergency(self, obs: Observation, ahead: float) -> None:
+        """A collision less than ``emergency_time_s`` ahead: stop (then plan from rest)."""
+        if ahead < self.emergency_time:
+            self._stop(np.array(obs.position))

@@ -88,9 +88,10 @@ import time
 import numpy as np
 
 from ft_sitl.autopilot.setpoints import Setpoint
+from ft_sitl.frames import wrap_pi
 from ft_sitl.navigation.base import Observation, Task
+from ft_sitl.navigation.maps.esdf import EsdfGrid
 from ft_sitl.navigation.optimisers.fast import (
-    EsdfField,
     FastOptimizer,
     FastParams,
     KnotBSpline,
@@ -102,7 +103,8 @@ from ft_sitl.navigation.planners.kino_astar import (
     KinoStatus,
     VoxelOccupancy,
 )
-from ft_sitl.navigation.planners.skeleton import HorizonPlanner, checked_setpoint, wrap_angle
+from ft_sitl.navigation.planners.skeleton import HorizonPlanner, checked_setpoint
+from ft_sitl.navigation.trajectories.base import SplineTrajectory
 from ft_sitl.navigation.trajectories.bspline import UniformBSpline
 
 #: estimated time from state to command of one Fast-Planner replan in the original C++ on
@@ -113,7 +115,6 @@ from ft_sitl.navigation.trajectories.bspline import UniformBSpline
 DEFAULT_LATENCY_S = 0.02
 #: half width (m) of the ESDF box around a plan's start: the originals' local update range
 ESDF_HALF_EXTENT_M = 5.5
-SAFETY_CHECK_HZ = 20.0
 #: the original's trajectory check: every 0.02 s of the trajectory up to 6 m ahead
 CHECK_STEP_S = 0.02
 CHECK_RADIUS_M = 6.0
@@ -121,32 +122,6 @@ CHECK_RADIUS_M = 6.0
 CTRL_PT_DIST_M = 0.5
 #: no plan when the goal is this close to the start state (the original: "Close goal")
 CLOSE_GOAL_M = 0.2
-
-
-class _Traj:
-    """A position B-spline and its yaw B-spline started at ``t0`` (navigation time, s)."""
-
-    def __init__(self, pos, yaw, t0: float):
-        self.pos = pos
-        self.yaw = yaw
-        self.t0 = t0
-        self.start = pos.position(0.0)
-
-    @property
-    def duration(self) -> float:
-        return self.pos.duration
-
-    @property
-    def end_time(self) -> float:
-        return self.t0 + self.pos.duration
-
-    def state(self, t: float):
-        tau = min(max(t - self.t0, 0.0), self.pos.duration)
-        return self.pos.pva(tau)
-
-    def yaw_state(self, t: float) -> np.ndarray:
-        tau = min(max(t - self.t0, 0.0), self.yaw.duration)
-        return np.array([v[0] for v in self.yaw.pva(tau)])
 
 
 def first_collision(pos, tau0: float, occupied, step_s: float = CHECK_STEP_S,
@@ -213,7 +188,7 @@ class FastPlanner(HorizonPlanner):
         # perception for this plan: the ESDF box and the search's voxel grid
         t0 = time.perf_counter()
         # the originals' local update box: +-5.5 m around the start, +-4.5 m in height
-        esdf = EsdfField.from_map(self.map, p0, ESDF_HALF_EXTENT_M)
+        esdf = EsdfGrid.from_map(self.map, p0, ESDF_HALF_EXTENT_M)
         res_m = self.map.resolution_m
         grid = VoxelOccupancy(self.map.planning_grid(), self.map.origin_index * res_m, res_m)
         log["map_s"] = time.perf_counter() - t0
@@ -248,80 +223,67 @@ class FastPlanner(HorizonPlanner):
             cur = None
             if self.traj is not None and not self.from_rest:
                 tau = min(max(t_eff - self.traj.t0, 0.0), self.traj.duration)
-                cur = first_collision(self.traj.pos, tau, self._occupied)
+                cur = first_collision(self.traj.spline, tau, self._occupied)
             if cur is None or hit <= cur or hit < self.emergency_time:
                 self._fail(obs, p0, f"collision {hit:.2f} s ahead", log, t_start)
                 return
             log["collides_s"] = hit
         yaw = plan_yaw(pos, yaw0)
         self._succeeded()
-        self._adopt(_Traj(pos, yaw, 0.0), obs, t_start, log)
+        self._adopt(SplineTrajectory(pos, 0.0, yaw), obs, t_start, log)
 
     def _fail(self, obs: Observation, p0: np.ndarray, why: str, log: dict,
               t_start: float) -> None:
         if self.emergency and self.traj is not None:
             # no way around a collision less than emergency_time_s ahead: hover where it
             # is, then plan from rest there
-            self.stop_at = np.array(obs.position, dtype=float)
-            self.from_rest = True
-            self.traj = None
+            self._stop(np.array(obs.position, dtype=float))
             self.stops += 1
         self.emergency = False
         log.update(total_s=time.perf_counter() - t_start, failed=why)
         self.plan_log.append(log)
         self._failed(obs, p0, why, t_start)
 
-    def _adopt(self, traj: _Traj | None, obs: Observation, t_start: float,
+    def _adopt(self, traj: SplineTrajectory | None, obs: Observation, t_start: float,
                log: dict | None = None) -> None:
         latency = self._compute_time(t_start)
         if log is not None:
             log["total_s"] = self.compute_s[-1]
             self.plan_log.append(log)
         self.emergency = False
-        self._adopt_at(traj, obs, latency)
-        if traj is not None:
-            self.stop_at = None
+        self._adopt_plan(traj, obs, latency)
+
+    # --- the replanning loop's hooks ----------------------------------------------------------
+    def _replan_due(self, obs: Observation) -> bool:
+        """The trajectory (the original measures along it, not at the vehicle) more than
+        ``replan_threshold_m`` from its start, or ended, and the goal farther than
+        ``no_replan_threshold_m`` from it."""
+        p_traj = self.traj.state(obs.time_s)[0]
+        moved = float(np.linalg.norm(p_traj - self.traj.start))
+        to_goal = float(np.linalg.norm(self.task.goal - p_traj))
+        return to_goal > self.no_replan_threshold and (
+            moved > self.replan_threshold or obs.time_s >= self.traj.end_time)
 
     def _collision_ahead(self, t: float) -> float | None:
         """Seconds until the current trajectory (checked as the original: 6 m ahead) meets
         a planning-occupied voxel."""
         tr = self.traj
-        if tr is None:
-            return None
         tau = min(max(t - tr.t0, 0.0), tr.duration)
-        return first_collision(tr.pos, tau, self._occupied)
+        return first_collision(tr.spline, tau, self._occupied)
 
-    # --- the step ---------------------------------------------------------------------------
-    def step(self, obs: Observation) -> Setpoint:
-        t = obs.time_s
-        self._perceive(obs)
-        if self.traj is not None and self.pending is None and self.stop_at is None:
-            # the original measures along the trajectory, not at the vehicle
-            p_traj = self.traj.state(t)[0]
-            moved = float(np.linalg.norm(p_traj - self.traj.start))
-            to_goal = float(np.linalg.norm(self.task.goal - p_traj))
-            if to_goal > self.no_replan_threshold and (
-                    moved > self.replan_threshold or t >= self.traj.end_time):
-                self.plan_now = True
-            if t >= self.next_check:
-                self.next_check = t + 1.0 / SAFETY_CHECK_HZ
-                ahead = self._collision_ahead(t)
-                if ahead is not None:
-                    self.plan_now = True
-                    if ahead < self.emergency_time:
-                        # replan now (whatever the retry back-off); stop if that fails
-                        self.emergency = True
-                        self.retry_at = t
-        if self.plan_now and self.pending is None and t >= self.retry_at:
-            self._plan(obs)
-        return self._setpoint(obs)
+    def _emergency(self, obs: Observation, ahead: float) -> None:
+        """A collision less than ``emergency_time_s`` ahead: replan now (whatever the retry
+        back-off); stop if that fails (:meth:`_fail`)."""
+        if ahead < self.emergency_time:
+            self.emergency = True
+            self.retry_at = obs.time_s
 
     def _setpoint(self, obs: Observation) -> Setpoint:
         t = obs.time_s
         if self.traj is None:
             if not math.isfinite(self.yaw):
                 raise FloatingPointError(f"non-finite yaw at t = {t:.2f} s")
-            return self._hold(obs, wrap_angle(self.yaw))
+            return self._hold(obs, wrap_pi(self.yaw))
         p, v, a = self.traj.state(t)
         y = self.traj.yaw_state(t)
         yaw, yaw_rate = float(y[0]), float(y[1])
@@ -329,6 +291,6 @@ class FastPlanner(HorizonPlanner):
             v = np.zeros(3)
             a = np.zeros(3)
             yaw_rate = 0.0
-        sp = checked_setpoint(t, p, v, a, wrap_angle(yaw), yaw_rate)
+        sp = checked_setpoint(t, p, v, a, wrap_pi(yaw), yaw_rate)
         self.yaw = yaw
         return sp

@@ -62,27 +62,24 @@ import numpy as np
 from numba import njit
 from scipy.interpolate import BSpline
 
-from ft_sitl.autopilot.setpoints import Setpoint
 from ft_sitl.navigation.base import Observation, Task
+from ft_sitl.navigation.maps.esdf import EsdfGrid
+from ft_sitl.navigation.optimisers.penalties import fast_planner_cost
 from ft_sitl.navigation.planners.astar import OccupancyView
 from ft_sitl.navigation.planners.skeleton import (
     NO_REPLAN_THRESHOLD,
     ReplanningPlanner,
-    SplineTrajectory,
-    checked_setpoint,
     planner_schema,
-    pursue_yaw,
 )
 from ft_sitl.navigation.planners.topo import (
-    EsdfGrid,
     TopoParams,
     TopoSearch,
     collision_range,
     discretize_path,
     find_topo_paths,
     path_length,
-    trilinear,
 )
+from ft_sitl.navigation.trajectories.base import SplineTrajectory
 from ft_sitl.navigation.trajectories.bspline import UniformBSpline
 from ft_sitl.navigation.trajectories.minsnap import global_reference
 from ft_sitl.schema import Param
@@ -97,13 +94,10 @@ __all__ = ["DEFAULT_LATENCY_S", "PgoParams", "PgoPlan", "PgoPlanner", "first_col
 #: + the refinement (<= 5 ms), i.e. <= ~20 ms of capped work plus thread and message
 #: overheads. The ESDF is maintained by the map's own 20 Hz timer, not per replan.
 DEFAULT_LATENCY_S = 0.03
-SAFETY_CHECK_HZ = 20.0
 #: Fast-Planner's safety check: from the current point up to this far ahead ...
 SAFETY_RADIUS_M = 6.0
 #: ... sampled every this many seconds of the trajectory
 SAFETY_STEP_S = 0.02
-#: yaw points at the trajectory this far ahead (Fast-Planner's planYaw forward_t)
-YAW_LOOKAHEAD_S = 2.0
 #: the fewest knot spans of a fitted segment (3 fixed control points at each end + >= 1)
 MIN_SEGMENTS = 4
 #: :func:`first_collision_time` evaluates at most this many samples at once (the samples
@@ -162,60 +156,14 @@ class PgoParams:
 # Fast-Planner's normal cost and an L-BFGS over it (numba)
 # ---------------------------------------------------------------------------------------
 @njit(cache=True)
-def _normal_cost(q, grad, lo_i, hi_i, dt, ws, wd, wf, d0, vmax, amax, fld, origin, res):
+def _normal_cost(q, grad, dt, ws, wd, wf, d0, vmax, amax, fld, origin, res):
     """``ws`` jerk smoothness + ``wd`` ESDF distance + ``wf`` feasibility (Fast-Planner's
-    ``calcSmoothnessCost``/``calcDistanceCost``/``calcFeasibilityCost``); the distance
-    term acts on the free rows ``lo_i .. hi_i - 1``. Fills ``grad`` (all rows)."""
-    n = q.shape[0]
-    grad[:, :] = 0.0
-    fs = 0.0
-    for i in range(n - 3):
-        for d in range(3):
-            j = q[i + 3, d] - 3.0 * q[i + 2, d] + 3.0 * q[i + 1, d] - q[i, d]
-            fs += j * j
-            g2 = 2.0 * ws * j
-            grad[i, d] -= g2
-            grad[i + 1, d] += 3.0 * g2
-            grad[i + 2, d] -= 3.0 * g2
-            grad[i + 3, d] += g2
-    fd = 0.0
-    g = np.empty(3)
-    for i in range(lo_i, hi_i):
-        dist = trilinear(fld, origin, res, q[i], g)
-        gn = math.sqrt(g[0] * g[0] + g[1] * g[1] + g[2] * g[2])
-        if gn > 1e-4:
-            for d in range(3):
-                g[d] /= gn
-        if dist < d0:
-            fd += (dist - d0) ** 2
-            for d in range(3):
-                grad[i, d] += wd * 2.0 * (dist - d0) * g[d]
-    ff = 0.0
-    if wf > 0.0:
-        inv2 = 1.0 / (dt * dt)
-        inv4 = inv2 * inv2
-        vm2 = vmax * vmax
-        am2 = amax * amax
-        for i in range(n - 1):
-            for d in range(3):
-                v = q[i + 1, d] - q[i, d]
-                vd = v * v * inv2 - vm2
-                if vd > 0.0:
-                    ff += vd * vd
-                    tv = wf * 4.0 * vd * inv2 * v
-                    grad[i, d] -= tv
-                    grad[i + 1, d] += tv
-        for i in range(n - 2):
-            for d in range(3):
-                a = q[i + 2, d] - 2.0 * q[i + 1, d] + q[i, d]
-                ad = a * a * inv4 - am2
-                if ad > 0.0:
-                    ff += ad * ad
-                    ta = wf * 4.0 * ad * inv4 * a
-                    grad[i, d] += ta
-                    grad[i + 1, d] -= 2.0 * ta
-                    grad[i + 2, d] += ta
-    return ws * fs + wd * fd + wf * ff
+    ``calcSmoothnessCost``/``calcDistanceCost``/``calcFeasibilityCost``: the shared
+    :func:`~ft_sitl.navigation.optimisers.penalties.fast_planner_cost` with the original's
+    unit-length ESDF gradient); the distance term acts on the free rows ``3 .. N-4``.
+    Fills ``grad`` (all rows)."""
+    return fast_planner_cost(q, grad, np.array([ws, wd, wf, 0.0]), dt, vmax, amax, d0, False,
+                             np.zeros(3), fld, origin, 1.0 / res, True, np.zeros(4))
 
 
 @njit(cache=True)
@@ -225,7 +173,7 @@ def _eval(x, q, grad, gx, lo_i, hi_i, dt, ws, wd, wf, d0, vmax, amax, fld, origi
         for d in range(3):
             q[i, d] = x[k]
             k += 1
-    f = _normal_cost(q, grad, lo_i, hi_i, dt, ws, wd, wf, d0, vmax, amax, fld, origin, res)
+    f = _normal_cost(q, grad, dt, ws, wd, wf, d0, vmax, amax, fld, origin, res)
     k = 0
     for i in range(lo_i, hi_i):
         for d in range(3):
@@ -370,9 +318,8 @@ def normal_cost(spline: UniformBSpline, grid: EsdfGrid,
     p = params if params is not None else PgoParams()
     q = np.array(spline.control_points)
     grad = np.zeros_like(q)
-    f = _normal_cost(q, grad, ORDER, q.shape[0] - ORDER, spline.dt, p.w_smooth, p.w_distance,
-                     p.w_feasibility, p.dist0, p.max_vel, p.max_acc, grid.field, grid.origin,
-                     grid.resolution)
+    f = _normal_cost(q, grad, spline.dt, p.w_smooth, p.w_distance, p.w_feasibility, p.dist0,
+                     p.max_vel, p.max_acc, grid.field, grid.origin, grid.resolution)
     return float(f), grad
 
 
@@ -642,6 +589,8 @@ class PgoPlanner(ReplanningPlanner):
     """Fast-Planner's topological replanning (Zhou et al. 2020): path-guided optimisation."""
 
     name = "pgo"
+    #: yaw points at the trajectory this far ahead (Fast-Planner's planYaw forward_t)
+    yaw_lookahead_s = 2.0
 
     schema = planner_schema(
         Param("local_segment_m", 7.0, "m", (2.0, 20.0),
@@ -706,9 +655,9 @@ class PgoPlanner(ReplanningPlanner):
         # a box off the map's window (a segment far from the vehicle) has no field at all:
         # it is moved onto the window's edge
         half = 0.5 * self.segment_len + 2.0
-        grid = EsdfGrid.from_map(self.map, self.bounds,
+        grid = EsdfGrid.from_map(self.map,
                                  esdf_centre(self.map, points[len(points) // 2], half),
-                                 half)
+                                 half, bounds=self.bounds)
         plan = plan_segment(init, lambda n: ref.by_duration(t_eff, duration, n), derivs, grid,
                             self.rng, self.params, self.topo_params)
         self.last_plan = plan
@@ -729,7 +678,29 @@ class PgoPlanner(ReplanningPlanner):
             traj = SplineTrajectory(spline, t0)
         self._adopt_at(traj, obs, latency)
 
-    def _collision_distance(self, t: float) -> float | None:
+    # --- the replanning loop's hooks ----------------------------------------------------------
+    def _replan_due(self, obs: Observation) -> bool:
+        """``replan_period_s`` after the trajectory started, unless it ends at the goal and
+        the vehicle is within ``no_replan_threshold_m`` of its end."""
+        t = obs.time_s
+        if t >= self.traj.t0 + self.replan_period:
+            near_end = (self.ref is not None and self.ref.local_reaches_end
+                        and float(np.linalg.norm(self.traj.state(t)[0]
+                                                 - self.traj.state(self.traj.end_time)[0]))
+                        <= self.no_replan_threshold)
+            return not near_end
+        return False
+
+    def _emergency(self, obs: Observation, ahead: float) -> None:
+        """An unsafe point within ``stop_distance_m``: stop (then plan from rest, with a
+        new global reference, at once)."""
+        self.stats["safety_replans"] += 1
+        if ahead <= self.stop_distance:
+            self.stats["stops"] += 1
+            self._stop(np.array(obs.position))
+            self.retry_at = obs.time_s
+
+    def _collision_ahead(self, t: float) -> float | None:
         """Fast-Planner's ``checkTrajCollision``: the current trajectory sampled every
         0.02 s from now, up to 6 m from the current point or its end; the distance from
         the current point to the last free sample before the first occupied one (None if
@@ -752,44 +723,3 @@ class PgoPlanner(ReplanningPlanner):
             return None
         k = int(occ[0])
         return float(radii[k - 1]) if k > 0 else 0.0
-
-    # --- the step ---------------------------------------------------------------------------
-    def step(self, obs: Observation) -> Setpoint:
-        t = obs.time_s
-        if self._perceive(obs):
-            self.stop_at = None  # a stopped vehicle holds its point until the new plan acts
-        if self.traj is not None and self.pending is None and self.stop_at is None:
-            if t >= self.traj.t0 + self.replan_period:
-                near_end = (self.ref is not None and self.ref.local_reaches_end
-                            and float(np.linalg.norm(self.traj.state(t)[0]
-                                                     - self.traj.state(self.traj.end_time)[0]))
-                            <= self.no_replan_threshold)
-                if not near_end:
-                    self.plan_now = True
-            if t >= self.next_check:
-                self.next_check = t + 1.0 / SAFETY_CHECK_HZ
-                dist = self._collision_distance(t)
-                if dist is not None:
-                    self.plan_now = True
-                    self.stats["safety_replans"] += 1
-                    if dist <= self.stop_distance:
-                        self.stats["stops"] += 1
-                        self.stop_at = np.array(obs.position)
-                        self.from_rest = True
-                        self.traj = None
-                        self.retry_at = t
-        if self.plan_now and self.pending is None and t >= self.retry_at:
-            self._plan(obs)
-        return self._setpoint(obs)
-
-    def _setpoint(self, obs: Observation) -> Setpoint:
-        t = obs.time_s
-        if self.traj is None:
-            return self._hold(obs, self.yaw)
-        p, v, a = self.traj.state(t)
-        self.yaw = pursue_yaw(self.yaw, self.traj.state(t + YAW_LOOKAHEAD_S)[0] - p,
-                              self.rate_hz)
-        if t > self.traj.end_time:
-            v = np.zeros(3)
-            a = np.zeros(3)
-        return checked_setpoint(t, p, v, a, self.yaw)

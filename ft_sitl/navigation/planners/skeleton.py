@@ -1,8 +1,10 @@
-"""Pieces the planners share: angle wrapping, a B-spline trajectory started at a time, yaw
-pursuit, the NaN guard on every setpoint, and :class:`ReplanningPlanner`, the skeleton of
-the three optimisation planners (parameters, depth camera, map, the pending plan and its
-latency, failure back-off and giving up). The depth cameras themselves (the benchmark's
-presets, :func:`~ft_sitl.scenarios.camera.camera_config`) live with the camera."""
+"""The replanning skeleton the three optimisation planners (EGO, Fast-Planner, PGO) share:
+:class:`ReplanningPlanner` (parameters, depth camera, map, the replanning loop with its two
+hooks, the trigger and the emergency action, the pending plan and its latency, failure
+back-off and giving up), :class:`HorizonPlanner` (EGO's and Fast-Planner's trigger
+parameters), yaw pursuit and the NaN guard on every setpoint. The depth cameras themselves
+(the benchmark's presets, :func:`~ft_sitl.scenarios.camera.camera_config`) live with the
+camera."""
 
 from __future__ import annotations
 
@@ -12,7 +14,9 @@ import time
 import numpy as np
 
 from ft_sitl.autopilot.setpoints import Setpoint
+from ft_sitl.frames import wrap_pi
 from ft_sitl.navigation.base import GiveUp, Navigator, Observation, Task
+from ft_sitl.navigation.latency import LATENCY, MEASURED_LATENCY
 from ft_sitl.navigation.maps.mapping import local_map_for
 from ft_sitl.scenarios.camera import CAMERA_PARAMS, camera_of
 from ft_sitl.schema import Param, Schema
@@ -26,41 +30,14 @@ RETRY_MAX_S = 1.0
 GIVE_UP_AFTER = 8
 
 
-def wrap_angle(a: float) -> float:
-    """a wrapped into [-pi, pi)."""
-    return (a + math.pi) % (2.0 * math.pi) - math.pi
-
-
-class SplineTrajectory:
-    """A B-spline trajectory started at navigation time ``t0`` (s)."""
-
-    def __init__(self, spline, t0: float):
-        self.spline = spline
-        self.t0 = t0
-        self.start = spline.position(0.0)
-
-    def state(self, t: float):
-        """Position, velocity, acceleration at time t (clamped to the trajectory)."""
-        tau = min(max(t - self.t0, 0.0), self.spline.duration)
-        pva = getattr(self.spline, "pva", None)
-        if pva is not None:
-            return pva(tau)
-        return (self.spline.position(tau), self.spline.velocity(tau),
-                self.spline.acceleration(tau))
-
-    @property
-    def end_time(self) -> float:
-        return self.t0 + self.spline.duration
-
-
 def pursue_yaw(yaw: float, direction, rate_hz: float) -> float:
     """One step of the planners' yaw: toward the horizontal ``direction`` (unchanged when it
     is shorter than 0.1 m), rate-limited to pi rad/s at ``rate_hz``, low-pass 0.5."""
     if float(np.hypot(direction[0], direction[1])) <= 0.1:
         return yaw
-    step = wrap_angle(math.atan2(direction[1], direction[0]) - yaw)
+    step = wrap_pi(math.atan2(direction[1], direction[0]) - yaw)
     limit = math.pi / rate_hz
-    return wrap_angle(yaw + 0.5 * max(-limit, min(limit, step)))
+    return wrap_pi(yaw + 0.5 * max(-limit, min(limit, step)))
 
 
 def checked_setpoint(t: float, p, v, a, yaw: float, yaw_rate: float | None = None) -> Setpoint:
@@ -76,49 +53,8 @@ def checked_setpoint(t: float, p, v, a, yaw: float, yaw_rate: float | None = Non
 MAX_ACC = Param("max_acc_m_s2", 2.0, "m/s^2", (0.5, 20.0),
                 doc="acceleration limit of the planned trajectories (protocol 3 on: the "
                     "campaign's limits.max_acc_m_s2 instead)")
-LATENCY = Param("latency_s", 0.01, "s", (0.0, 1.0),
-                doc="a plan takes effect this long (simulated) after it was asked for: the "
-                    "original's compute time on a desktop CPU")
-MEASURED_LATENCY = Param("measured_latency", False,
-                         doc="use this process's measured compute time instead of latency_s")
 NO_REPLAN_THRESHOLD = Param("no_replan_threshold_m", 2.0, "m", (0.0, 10.0),
                             doc="no new plan once the goal is this close")
-
-
-class DelayedCommands:
-    """A command computed every ``1 / rate_hz`` s (simulated) from the observation of that
-    moment and put in force ``latency_s`` later, or after its measured compute time with
-    ``measured``: how the learned navigators (NavRL, learned) turn a policy's output into
-    the setpoint of each step. ``compute_s`` keeps each computation's wall-clock time."""
-
-    def __init__(self, rate_hz: float, latency_s: float, measured: bool):
-        self.period = 1.0 / float(rate_hz)
-        self.latency = float(latency_s)
-        self.measured = bool(measured)
-        self.next_t = 0.0
-        self.current = None
-        self.pending: tuple[float, object] | None = None
-        self.compute_s: list[float] = []
-
-    def step(self, t: float, compute):
-        """The command in force at ``t``: a pending one whose time has come takes over;
-        when a period is due, ``compute()`` gives the next (None: no new command). None
-        before the first command is in force."""
-        if self.pending is not None and t >= self.pending[0] - 1e-9:
-            self.current, self.pending = self.pending[1], None
-        if t >= self.next_t - 1e-9:
-            self.next_t = t + self.period
-            t0 = time.perf_counter()
-            cmd = compute()
-            dt = time.perf_counter() - t0
-            self.compute_s.append(dt)
-            if cmd is not None:
-                lat = dt if self.measured else self.latency
-                if lat <= 0.0:
-                    self.current = cmd
-                else:
-                    self.pending = (t + lat, cmd)
-        return self.current
 
 
 def planner_schema(*own: Param, **defaults) -> Schema:
@@ -134,11 +70,21 @@ class ReplanningPlanner(Navigator):
     for (or after its measured compute time), retries with a doubling back-off after a
     failed plan, and giving up after :data:`GIVE_UP_AFTER` failures with nothing changed.
 
-    Subclasses implement ``_plan(obs)`` (ending in :meth:`_adopt_at` or :meth:`_failed`)
-    and their ``step``, which starts with :meth:`_perceive`.
+    :meth:`step` is the replanning loop all three run: perceive (and switch to a pending
+    plan whose time has come), then, while flying a trajectory with no plan pending, ask
+    the replanning trigger (:meth:`_replan_due`) and, at :attr:`safety_check_hz`, the
+    safety check (:meth:`_collision_ahead`), whose finding asks for a plan and goes to the
+    emergency action (:meth:`_emergency`); plan when asked and the back-off allows; the
+    setpoint. Subclasses implement ``_plan(obs)`` (ending in :meth:`_adopt_at` or
+    :meth:`_failed`) and the three hooks; :meth:`_setpoint` follows the trajectory with
+    the pursued yaw (Fast-Planner's yaw curve overrides it).
     """
 
     rate_hz = 100.0
+    #: the rate of the safety check of the trajectory ahead (the originals' 20 Hz timer)
+    safety_check_hz = 20.0
+    #: the pursued yaw points at the trajectory this far ahead (s)
+    yaw_lookahead_s = 1.0
 
     schema = planner_schema()
 
@@ -223,6 +169,59 @@ class ReplanningPlanner(Navigator):
     def _succeeded(self) -> None:
         self.failures = self.same_failures = 0
 
+    # --- the replanning loop ------------------------------------------------------------
+    def step(self, obs: Observation) -> Setpoint:
+        t = obs.time_s
+        if self._perceive(obs):
+            # a stopped vehicle holds its point until the new plan acts (EGO and Fast clear
+            # stop_at when they adopt a plan, so for them this changes nothing)
+            self.stop_at = None
+        if self.traj is not None and self.pending is None and self.stop_at is None:
+            if self._replan_due(obs):
+                self.plan_now = True
+            if t >= self.next_check:
+                self.next_check = t + 1.0 / self.safety_check_hz
+                ahead = self._collision_ahead(t)
+                if ahead is not None:
+                    self.plan_now = True
+                    self._emergency(obs, ahead)
+        if self.plan_now and self.pending is None and t >= self.retry_at:
+            self._plan(obs)
+        return self._setpoint(obs)
+
+    def _replan_due(self, obs: Observation) -> bool:
+        """The replanning trigger: whether the current trajectory wants a new plan now."""
+        raise NotImplementedError
+
+    def _collision_ahead(self, t: float) -> float | None:
+        """The safety check: how far ahead (in the planner's measure: s or m) the current
+        trajectory meets an obstacle, or None."""
+        raise NotImplementedError
+
+    def _emergency(self, obs: Observation, ahead: float) -> None:
+        """The emergency action on a collision ``ahead`` (a plan is already asked for)."""
+        raise NotImplementedError
+
+    def _stop(self, point: np.ndarray) -> None:
+        """Hover at ``point`` (where the vehicle is), then plan from rest there."""
+        self.stop_at = point
+        self.from_rest = True
+        self.traj = None
+
+    def _setpoint(self, obs: Observation) -> Setpoint:
+        """Position + velocity + acceleration of the trajectory (velocity and acceleration
+        0 past its end), yaw pursuing the trajectory :attr:`yaw_lookahead_s` ahead."""
+        t = obs.time_s
+        if self.traj is None:
+            return self._hold(obs, self.yaw)
+        p, v, a = self.traj.state(t)
+        self.yaw = pursue_yaw(self.yaw, self.traj.state(t + self.yaw_lookahead_s)[0] - p,
+                              self.rate_hz)
+        if t > self.traj.end_time:
+            v = np.zeros(3)
+            a = np.zeros(3)
+        return checked_setpoint(t, p, v, a, self.yaw)
+
     def _hold(self, obs: Observation, yaw: float) -> Setpoint:
         """Hover at stop_at (or where the vehicle is) while there is no trajectory."""
         hold = self.stop_at if self.stop_at is not None else obs.position
@@ -233,7 +232,7 @@ class HorizonPlanner(ReplanningPlanner):
     """EGO's and Fast-Planner's replanning rule: a plan reaches ``planning_horizon_m``
     ahead; replan when the vehicle is ``replan_threshold_m`` along the current trajectory
     unless the goal is within ``no_replan_threshold_m``; a collision less than
-    ``emergency_time_s`` ahead is an emergency."""
+    ``emergency_time_s`` ahead is an emergency (the planner says what it does)."""
 
     schema = planner_schema(
         Param("planning_horizon_m", 7.5, "m", (2.0, 20.0),
@@ -253,3 +252,9 @@ class HorizonPlanner(ReplanningPlanner):
         self.replan_threshold = float(p["replan_threshold_m"])
         self.no_replan_threshold = float(p["no_replan_threshold_m"])
         self.emergency_time = float(p["emergency_time_s"])
+
+    def _adopt_plan(self, traj, obs: Observation, latency: float) -> None:
+        """``traj`` (None: no new plan) takes effect after ``latency``; a plan ends a stop."""
+        self._adopt_at(traj, obs, latency)
+        if traj is not None:
+            self.stop_at = None

@@ -68,109 +68,20 @@ from dataclasses import dataclass, field
 
 import numpy as np
 from numba import njit
-from scipy.ndimage import distance_transform_edt
 
-from ft_sitl.navigation.maps.mapping import trilinear_point
+from ft_sitl.navigation.maps.esdf import (
+    EsdfGrid,
+    as_path,
+    blocked,
+    coarse_distance,
+    path_free,
+    trilinear,
+)
 
 __all__ = [
-    "EsdfGrid", "TopoParams", "TopoSearch", "collision_range", "discretize_path",
+    "TopoParams", "TopoSearch", "collision_range", "discretize_path",
     "find_topo_paths", "path_length", "prune_equivalent", "same_topo_path", "shortcut_path",
 ]
-
-_BIG = 1e18  # "no bound" for the flight-volume box
-
-
-# ---------------------------------------------------------------------------------------
-# numba kernels on the ESDF snapshot: (field (nx, ny, nz), origin (3,) global voxel index of
-# field[0, 0, 0], resolution, bounds lo (3,), hi (3,))
-# ---------------------------------------------------------------------------------------
-@njit(cache=True)
-def _voxel(fld, origin, i, j, k):
-    """Field value of global voxel (i, j, k), clamped onto the field per axis."""
-    nx, ny, nz = fld.shape
-    x = i - origin[0]
-    y = j - origin[1]
-    z = k - origin[2]
-    x = 0 if x < 0 else (nx - 1 if x > nx - 1 else x)
-    y = 0 if y < 0 else (ny - 1 if y > ny - 1 else y)
-    z = 0 if z < 0 else (nz - 1 if z > nz - 1 else z)
-    return fld[x, y, z]
-
-
-@njit(cache=True)
-def _inside(p, lo, hi):
-    return (lo[0] <= p[0] <= hi[0]) and (lo[1] <= p[1] <= hi[1]) and (lo[2] <= p[2] <= hi[2])
-
-
-@njit(cache=True)
-def _coarse(fld, origin, res, lo, hi, p):
-    """Fast-Planner's coarse distance: the value of the voxel containing ``p``; -1 outside
-    the flight volume."""
-    if not _inside(p, lo, hi):
-        return -1.0
-    inv = 1.0 / res
-    return _voxel(fld, origin, int(math.floor(p[0] * inv)), int(math.floor(p[1] * inv)),
-                  int(math.floor(p[2] * inv)))
-
-
-@njit(cache=True)
-def trilinear(fld, origin, res, p, grad):
-    """Trilinear distance between voxel centres and its gradient (into ``grad``), with the
-    clamping of ``LocalMap.esdf`` (the map's own kernel)."""
-    return trilinear_point(fld, origin, 1.0 / res, p[0], p[1], p[2], grad)
-
-
-@njit(cache=True)
-def _dda_axis(a, b, inv):
-    """Start voxel, voxels to cross, step, first crossing and crossing spacing (in units
-    of the segment's parameter) along one axis."""
-    g0 = a * inv
-    g1 = b * inv
-    c = int(math.floor(g0))
-    n = abs(int(math.floor(g1)) - c)
-    d = g1 - g0
-    if d > 0.0:
-        return c, n, 1, (c + 1.0 - g0) / d, 1.0 / d
-    if d < 0.0:
-        return c, n, -1, (g0 - c) / (-d), -1.0 / d
-    return c, n, 0, np.inf, np.inf
-
-
-@njit(cache=True)
-def _blocked(fld, origin, res, lo, hi, a, b, thresh, pc):
-    """Whether the segment a -> b is blocked: an end outside the flight volume (``pc`` :=
-    that end) or a traversed voxel (3-D DDA, a's voxel first) with value ``<= thresh``
-    (``pc`` := its centre)."""
-    if not _inside(a, lo, hi):
-        pc[:] = a
-        return True
-    if not _inside(b, lo, hi):
-        pc[:] = b
-        return True
-    inv = 1.0 / res
-    cx, nx, sx, tx, dx = _dda_axis(a[0], b[0], inv)
-    cy, ny, sy, ty, dy = _dda_axis(a[1], b[1], inv)
-    cz, nz, sz, tz, dz = _dda_axis(a[2], b[2], inv)
-    n = nx + ny + nz
-    for s in range(n + 1):
-        if _voxel(fld, origin, cx, cy, cz) <= thresh:
-            pc[0] = (cx + 0.5) * res
-            pc[1] = (cy + 0.5) * res
-            pc[2] = (cz + 0.5) * res
-            return True
-        if s == n:
-            break
-        if tx <= ty and tx <= tz:
-            cx += sx
-            tx += dx
-        elif ty <= tz:
-            cy += sy
-            ty += dy
-        else:
-            cz += sz
-            tz += dz
-    return False
-
 
 @njit(cache=True)
 def _length(path):
@@ -240,19 +151,8 @@ def _same_topo(p1, p2, fld, origin, res, lo, hi, thresh):
     b = _discretize_n(p2, n)
     pc = np.empty(3)
     for i in range(n):
-        if _blocked(fld, origin, res, lo, hi, a[i], b[i], thresh, pc):
+        if blocked(fld, origin, res, lo, hi, a[i], b[i], thresh, pc):
             return False
-    return True
-
-
-@njit(cache=True)
-def _path_free(path, fld, origin, res, lo, hi, thresh):
-    pc = np.empty(3)
-    for i in range(path.shape[0] - 1):
-        if _blocked(fld, origin, res, lo, hi, path[i], path[i + 1], thresh, pc):
-            return False
-    if path.shape[0] == 1:
-        return not _blocked(fld, origin, res, lo, hi, path[0], path[0], thresh, pc)
     return True
 
 
@@ -266,7 +166,7 @@ def _shortcut_push(dis, fld, origin, res, lo, hi):
     pc = np.empty(3)
     g = np.empty(3)
     for i in range(1, n):
-        if not _blocked(fld, origin, res, lo, hi, out[k - 1], dis[i], res, pc):
+        if not blocked(fld, origin, res, lo, hi, out[k - 1], dis[i], res, pc):
             continue
         trilinear(fld, origin, res, pc, g)
         gn = math.sqrt(g[0] * g[0] + g[1] * g[1] + g[2] * g[2])
@@ -300,7 +200,7 @@ def _shortcut_greedy(dis, fld, origin, res, lo, hi):
     pc = np.empty(3)
     i = 1
     while i < n:
-        if not _blocked(fld, origin, res, lo, hi, dis[anchor], dis[i], 0.0, pc):
+        if not blocked(fld, origin, res, lo, hi, dis[anchor], dis[i], 0.0, pc):
             last_ok = i
             i += 1
             continue
@@ -334,14 +234,14 @@ def _build_graph(samples, start, end, clearance, fld, origin, res, lo, hi):
     valid = 0
     for s in range(m):
         p = samples[s]
-        if _coarse(fld, origin, res, lo, hi, p) <= clearance:
+        if coarse_distance(fld, origin, res, lo, hi, p) <= clearance:
             continue
         valid += 1
         nv = 0
         for g in range(n):
             if kind[g] != 0:
                 continue
-            if not _blocked(fld, origin, res, lo, hi, p, pos[g], res, pc):
+            if not blocked(fld, origin, res, lo, hi, p, pos[g], res, pc):
                 vis[nv] = g
                 nv += 1
                 if nv > 2:
@@ -379,120 +279,10 @@ def _build_graph(samples, start, end, clearance, fld, origin, res, lo, hi):
 
 
 # ---------------------------------------------------------------------------------------
-# the ESDF snapshot
-# ---------------------------------------------------------------------------------------
-class EsdfGrid:
-    """A snapshot of a signed ESDF on the map's voxel lattice (see the module docstring).
-
-    ``field`` (nx, ny, nz) metres at voxel centres; ``origin_index`` the global voxel index
-    of ``field[0, 0, 0]`` (voxel ``i`` covers ``[i, i+1) * resolution``); ``bounds`` an
-    optional ``(lo, hi)`` flight volume outside which everything is blocked.
-    """
-
-    def __init__(self, esdf_field, origin_index, resolution: float, bounds=None):
-        f = np.ascontiguousarray(esdf_field, dtype=np.float64)
-        if f.ndim != 3 or min(f.shape) < 2:
-            raise ValueError(f"field must be 3-D with >= 2 voxels per axis, got {f.shape}")
-        if not (math.isfinite(resolution) and resolution > 0):
-            raise ValueError(f"resolution must be positive, got {resolution!r}")
-        self.field = f
-        self.origin = np.asarray(origin_index, dtype=np.int64).reshape(3).copy()
-        self.resolution = float(resolution)
-        if bounds is None:
-            self.lo = np.full(3, -_BIG)
-            self.hi = np.full(3, _BIG)
-        else:
-            self.lo = np.asarray(bounds[0], dtype=float).reshape(3).copy()
-            self.hi = np.asarray(bounds[1], dtype=float).reshape(3).copy()
-
-    @classmethod
-    def from_map(cls, local_map, bounds=None, center_m=None,
-                 half_extent_m: float | None = None) -> EsdfGrid:
-        """Recompute the map's ESDF (over the window, or the box ``center_m +-
-        half_extent_m``; +-4.5 m in height, the originals' local update range) and take it."""
-        fld = local_map.update_esdf(center_m, half_extent_m, 4.5)
-        return cls(fld, local_map.esdf_origin_index, local_map.resolution_m, bounds)
-
-    @classmethod
-    def from_occupancy(cls, occupied, origin_index, resolution: float,
-                       bounds=None) -> EsdfGrid:
-        """The signed field of a boolean voxel array, with the local map's conventions
-        (free: distance to the nearest occupied centre; occupied: resolution minus the
-        distance to the nearest free centre). For synthetic maps."""
-
-        occ = np.asarray(occupied, dtype=bool)
-        res = float(resolution)
-        if not occ.any():
-            fld = np.full(occ.shape, 1e3)
-        elif occ.all():
-            fld = np.full(occ.shape, -1e3)
-        else:
-            fld = res * distance_transform_edt(~occ)
-            fld[occ] = res - res * distance_transform_edt(occ)[occ]
-        return cls(fld, origin_index, res, bounds)
-
-    def _args(self):
-        return self.field, self.origin, self.resolution, self.lo, self.hi
-
-    def distance(self, points) -> np.ndarray:
-        """Coarse (per-voxel) distance of points (N, 3); -1 outside the bounds."""
-        p = np.asarray(points, dtype=float).reshape(-1, 3)
-        return _coarse_many(p, *self._args())
-
-    def evaluate(self, points) -> tuple[np.ndarray, np.ndarray]:
-        """Trilinear distance (N,) and gradient (N, 3), as ``LocalMap.esdf``."""
-        p = np.asarray(points, dtype=float).reshape(-1, 3)
-        d = np.empty(len(p))
-        g = np.empty((len(p), 3))
-        _trilinear_many(p, self.field, self.origin, self.resolution, d, g)
-        return d, g
-
-    def in_bounds(self, points) -> np.ndarray:
-        """Whether points (N, 3) lie in the flight volume."""
-        p = np.asarray(points, dtype=float).reshape(-1, 3)
-        return np.all((p >= self.lo) & (p <= self.hi), axis=1)
-
-    def occupied(self, points) -> np.ndarray:
-        """Planning occupancy (distance <= 0, or outside the bounds) of points (N, 3)."""
-        return self.distance(points) <= 0.0
-
-    def visible(self, a, b, thresh: float = 0.0) -> bool:
-        """Line of sight a -> b: no traversed voxel with distance ``<= thresh``."""
-        pc = np.empty(3)
-        return not _blocked(*self._args(), np.asarray(a, dtype=float).reshape(3),
-                            np.asarray(b, dtype=float).reshape(3), float(thresh), pc)
-
-    def path_free(self, path, thresh: float = 0.0) -> bool:
-        """Every piece of the polyline has line of sight."""
-        return bool(_path_free(_as_path(path), *self._args(), float(thresh)))
-
-
-@njit(cache=True)
-def _coarse_many(p, fld, origin, res, lo, hi):
-    out = np.empty(p.shape[0])
-    for i in range(p.shape[0]):
-        out[i] = _coarse(fld, origin, res, lo, hi, p[i])
-    return out
-
-
-@njit(cache=True)
-def _trilinear_many(p, fld, origin, res, d, g):
-    for i in range(p.shape[0]):
-        d[i] = trilinear(fld, origin, res, p[i], g[i])
-
-
-def _as_path(path) -> np.ndarray:
-    p = np.ascontiguousarray(path, dtype=float)
-    if p.ndim != 2 or p.shape[1] != 3 or p.shape[0] < 1:
-        raise ValueError(f"a path must have shape (K >= 1, 3), got {p.shape}")
-    return p
-
-
-# ---------------------------------------------------------------------------------------
 # path utilities
 # ---------------------------------------------------------------------------------------
 def path_length(path) -> float:
-    return float(_length(_as_path(path)))
+    return float(_length(as_path(path)))
 
 
 def discretize_path(path, n: int) -> np.ndarray:
@@ -500,7 +290,7 @@ def discretize_path(path, n: int) -> np.ndarray:
     ``discretizePath(path, pt_num)``)."""
     if n < 2:
         raise ValueError(f"n must be >= 2, got {n}")
-    return _discretize_n(_as_path(path), int(n))
+    return _discretize_n(as_path(path), int(n))
 
 
 def _dedupe(path: np.ndarray) -> np.ndarray:
@@ -511,7 +301,7 @@ def _dedupe(path: np.ndarray) -> np.ndarray:
 
 def same_topo_path(path1, path2, grid: EsdfGrid, thresh: float = 0.0) -> bool:
     """Topological equivalence (module docstring, step 5)."""
-    return bool(_same_topo(_as_path(path1), _as_path(path2), *grid._args(), float(thresh)))
+    return bool(_same_topo(as_path(path1), as_path(path2), *grid.kernel_args(), float(thresh)))
 
 
 def shortcut_path(path, grid: EsdfGrid, iterations: int = 1) -> np.ndarray:
@@ -519,8 +309,8 @@ def shortcut_path(path, grid: EsdfGrid, iterations: int = 1) -> np.ndarray:
     not lengthen the path; a pass that would cross an occupied voxel falls back to the
     greedy shortcut (module docstring). A path that is itself blocked comes back as it is
     when no pass can shorten it safely."""
-    short = _dedupe(_as_path(path))
-    args = grid._args()
+    short = _dedupe(as_path(path))
+    args = grid.kernel_args()
     for _ in range(int(iterations)):
         if short.shape[0] < 2:
             break
@@ -529,7 +319,7 @@ def shortcut_path(path, grid: EsdfGrid, iterations: int = 1) -> np.ndarray:
         if dis.shape[0] < 2:
             break
         cand = _dedupe(_shortcut_push(dis, *args))
-        if not _path_free(cand, *args, 0.0):
+        if not path_free(cand, *args, 0.0):
             cand = _shortcut_greedy(dis, *args)
             if cand.shape[0] == 0:
                 short = last
@@ -545,7 +335,7 @@ def shortcut_path(path, grid: EsdfGrid, iterations: int = 1) -> np.ndarray:
 def prune_equivalent(paths: list[np.ndarray], grid: EsdfGrid) -> list[np.ndarray]:
     """Keep the first path of each topological equivalence class (in the given order)."""
     kept: list[np.ndarray] = []
-    args = grid._args()
+    args = grid.kernel_args()
     for p in paths:
         if not any(_same_topo(p, q, *args, 0.0) for q in kept):
             kept.append(p)
@@ -673,7 +463,7 @@ def find_topo_paths(start, end, start_pts, end_pts, grid: EsdfGrid,
     e = np.asarray(end, dtype=float).reshape(3)
     sp = np.asarray(start_pts, dtype=float).reshape(-1, 3)
     ep = np.asarray(end_pts, dtype=float).reshape(-1, 3)
-    args = grid._args()
+    args = grid.kernel_args()
 
     # 1.-2. samples and roadmap
     half = np.array([0.5 * float(np.linalg.norm(e - s)) + p.sample_inflate[0],
