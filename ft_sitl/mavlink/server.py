@@ -26,7 +26,8 @@ from pymavlink.dialects.v20 import common as mav
 
 from ft_sitl import frames
 from ft_sitl.mavlink import files
-from ft_sitl.mavlink.agent import Outgoing, VehicleAgent
+from ft_sitl.mavlink.agent import VehicleAgent
+from ft_sitl.mavlink.outgoing import Outgoing
 from ft_sitl.sim.fleet import Fleet
 
 API_LISTEN_BASE = 14580

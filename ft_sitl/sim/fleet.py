@@ -116,6 +116,31 @@ class Fleet:
         """Vehicle i as it is (the plant's state): what judges and referees use."""
         return self._state(self.sim.x[i], i)
 
+    # Named read-outs for the layers above (the MAVLink side, the wire): they never index
+    # the plant's arrays themselves, so its layout can change here without them. As with
+    # state(), the attitude and rates are the estimate (what PX4 reports); the rotor
+    # speeds and the specific force are the plant's, which no estimator models.
+    def attitude(self, i: int) -> np.ndarray:
+        """Vehicle i's estimated attitude, q_world_body (ENU to FLU, w x y z), a copy."""
+        return self.sim.estimated(i)[d.X_QUAT : d.X_QUAT + 4].copy()
+
+    def body_rates(self, i: int) -> np.ndarray:
+        """Vehicle i's estimated angular velocity, w_body (FLU, rad/s), a copy."""
+        return self.sim.estimated(i)[d.X_OMEGA : d.X_OMEGA + 3].copy()
+
+    def rotor_speeds(self, i: int) -> np.ndarray:
+        """Vehicle i's rotor speeds (rad/s, the layout's rotor order), a copy."""
+        return self.sim.rotor_speeds(i)
+
+    def rotor_speed_commands(self, i: int) -> np.ndarray:
+        """The rotor speeds the controller last commanded for vehicle i (rad/s), a copy."""
+        return self.sim.w_cmd[i].copy()
+
+    def specific_force(self, i: int) -> np.ndarray:
+        """What a perfect accelerometer on vehicle i read over the last physics step
+        (body FLU, m/s^2), a copy."""
+        return self.sim.plant.status[i, d.S_SPECIFIC_FORCE : d.S_SPECIFIC_FORCE + 3].copy()
+
     def _state(self, x, i: int) -> VehicleState:
         # yaw and tilt as qto_euler()[2] and tilt_angle() compute them (the same operations,
         # bit for bit), in plain floats: two compiled calls cost more than the arithmetic

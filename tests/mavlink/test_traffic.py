@@ -9,7 +9,8 @@ from pymavlink import mavutil
 from pymavlink.dialects.v20 import common as mav
 
 from ft_sitl import frames
-from ft_sitl.mavlink.agent import TRAFFIC_HZ, VehicleAgent
+from ft_sitl.mavlink.agent import VehicleAgent
+from ft_sitl.mavlink.traffic import TRAFFIC_HZ
 from ft_sitl.physics.catalog import get_platform
 from ft_sitl.scenarios.families import build_scenario
 from ft_sitl.scenarios.io import load_scenario

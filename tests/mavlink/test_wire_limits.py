@@ -83,7 +83,7 @@ def test_battery_status_reports_cells_11_to_14_in_the_extension():
 
 
 def test_absent_cells_are_uint16_max_in_voltages_and_0_in_the_extension():
-    from ft_sitl.mavlink.agent import _cell_voltages_mv
+    from ft_sitl.mavlink.telemetry import _cell_voltages_mv
 
     assert _cell_voltages_mv(3.95, 4) == ([3950] * 4 + [65535] * 6, [0, 0, 0, 0])
     assert _cell_voltages_mv(3.95, 14) == ([3950] * 10, [3950] * 4)
