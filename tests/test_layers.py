@@ -232,3 +232,34 @@ def test_in_function_imports_say_why():
                                    f"{here.strip()}")
     assert not bad, f"{len(bad)} in-function imports without a reason:\n" + "\n".join(
         sorted(set(bad)))
+
+
+#: the parts that reach a vehicle's state only through the fleet's (or the simulation's)
+#: named read-outs, never through the plant's array layout (docs/architecture.md, mavlink/);
+#: transport/ holds the simulator's side of the bus that wire/ had
+NAMED_STATE_ONLY = ("mavlink", "wire", "bridge", "transport")
+#: modules of those parts that still index the plant's arrays, each to move to named
+#: read-outs (issue 42) and then come off this list: the test fails for a module listed
+#: here that no longer needs to be (sitl_bus.py under both names while it moves from wire/)
+INDEXES_PLANT_ARRAYS_STILL = {"ft_sitl/transport/sitl_bus.py", "ft_sitl/wire/sitl_bus.py",
+                              "ft_sitl/bridge/vehicle.py"}
+
+
+def test_wire_layers_read_state_through_named_accessors():
+    """mavlink/, wire/, bridge/ and transport/ never index the plant's state arrays: they
+    ask the fleet (attitude(i), body_rates(i), rotor_speeds(i), specific_force(i),
+    state(i)) or the simulation (position(i), ...), so the array layout is physics' and
+    sim's alone."""
+    bad, fixed = [], []
+    for name, path in modules():
+        if part_of(name) not in NAMED_STATE_ONLY:
+            continue
+        rel = str(path.relative_to(PKG.parent))
+        uses = _plant_layout_lines(path)
+        if rel in INDEXES_PLANT_ARRAYS_STILL:
+            if not uses:
+                fixed.append(rel)
+            continue
+        bad += [f"{rel}:{line}" for line in uses]
+    assert not bad, "plant arrays indexed:\n" + "\n".join(bad)
+    assert not fixed, f"no longer index the plant's arrays: take them off the list: {fixed}"
