@@ -1,7 +1,8 @@
 """The package's layering (docs/architecture.md): imports point down only.
 
 physics <- autopilot <- sim <- mavlink / bridge / missions / cli, with scenarios (geometry)
-beside autopilot, navigation and the bus above them, the wire client above those, and the
+beside autopilot, navigation and the bus above them, the wire client above those, the
+transport room (a trial flown over MAVLink, the simulator's side of the bus) and the
 Gymnasium environments (gym) above the missions. Checked
 statically on every import statement of the package (in functions too) and dynamically
 by importing the lower layers in a fresh interpreter.
@@ -30,13 +31,15 @@ ALLOWED = {
     "mavlink": {"physics", "autopilot", "scenarios", "sim"},
     "bridge": {"physics", "autopilot", "scenarios", "sim"},
     "wire": {"physics", "autopilot", "scenarios", "sim", "navigation", "bus"},
-    "missions": {"physics", "autopilot", "scenarios", "sim", "navigation", "bus", "mavlink",
-                 "wire"},
+    # the missions fly no transport: the MAVLink trial is the transport room's, above
+    "missions": {"physics", "autopilot", "scenarios", "sim", "navigation"},
+    "transport": {"physics", "autopilot", "scenarios", "sim", "navigation", "bus", "mavlink",
+                  "wire", "missions"},
     "gym": {"physics", "autopilot", "scenarios", "sim", "navigation", "bus", "mavlink",
             "wire", "missions"},
     "demo": {"physics", "autopilot", "sim"},
     "cli": {"physics", "autopilot", "scenarios", "sim", "navigation", "bus", "mavlink",
-            "bridge", "wire", "missions", "gym", "demo"},
+            "bridge", "wire", "missions", "transport", "gym", "demo"},
     "__main__": {"cli"},
 }
 
@@ -238,28 +241,15 @@ def test_in_function_imports_say_why():
 #: named read-outs, never through the plant's array layout (docs/architecture.md, mavlink/);
 #: transport/ holds the simulator's side of the bus that wire/ had
 NAMED_STATE_ONLY = ("mavlink", "wire", "bridge", "transport")
-#: modules of those parts that still index the plant's arrays, each to move to named
-#: read-outs (issue 42) and then come off this list: the test fails for a module listed
-#: here that no longer needs to be (sitl_bus.py under both names while it moves from wire/)
-INDEXES_PLANT_ARRAYS_STILL = {"ft_sitl/transport/sitl_bus.py", "ft_sitl/wire/sitl_bus.py",
-                              "ft_sitl/bridge/vehicle.py"}
-
-
 def test_wire_layers_read_state_through_named_accessors():
     """mavlink/, wire/, bridge/ and transport/ never index the plant's state arrays: they
     ask the fleet (attitude(i), body_rates(i), rotor_speeds(i), specific_force(i),
     state(i)) or the simulation (position(i), ...), so the array layout is physics' and
     sim's alone."""
-    bad, fixed = [], []
+    bad = []
     for name, path in modules():
         if part_of(name) not in NAMED_STATE_ONLY:
             continue
         rel = str(path.relative_to(PKG.parent))
-        uses = _plant_layout_lines(path)
-        if rel in INDEXES_PLANT_ARRAYS_STILL:
-            if not uses:
-                fixed.append(rel)
-            continue
-        bad += [f"{rel}:{line}" for line in uses]
+        bad += [f"{rel}:{line}" for line in _plant_layout_lines(path)]
     assert not bad, "plant arrays indexed:\n" + "\n".join(bad)
-    assert not fixed, f"no longer index the plant's arrays: take them off the list: {fixed}"

@@ -33,7 +33,6 @@ import numpy as np
 
 from ft_sitl import G, frames
 from ft_sitl.autopilot.setpoints import Setpoint
-from ft_sitl.physics import dynamics as d
 from ft_sitl.physics.layouts import get_layout
 from ft_sitl.physics.quaternion import qrotate_inv
 from ft_sitl.sim.guard import CollisionGuard, GuardEventKind
@@ -126,16 +125,16 @@ class BridgeVehicle:
         return int(self.sim.time_us)
 
     def position_enu(self) -> np.ndarray:
-        return self.sim.plant.x[0, d.X_POS:d.X_POS + 3].copy()
+        return self.sim.position(0)
 
     def velocity_enu(self) -> np.ndarray:
-        return self.sim.plant.x[0, d.X_VEL:d.X_VEL + 3].copy()
+        return self.sim.velocity(0)
 
     def q_enu_flu(self) -> np.ndarray:
-        return self.sim.plant.x[0, d.X_QUAT:d.X_QUAT + 4].copy()
+        return self.sim.attitude(0)
 
     def omega_flu(self) -> np.ndarray:
-        return self.sim.plant.x[0, d.X_OMEGA:d.X_OMEGA + 3].copy()
+        return self.sim.body_rates(0)
 
     def specific_force_flu(self) -> np.ndarray:
         """What a perfect accelerometer reads (body FLU, m/s^2)."""

@@ -19,7 +19,6 @@ from ft_sitl.missions.campaign import (
     DaskExecutor,
     ExecutorError,
     LocalExecutor,
-    Transport,
     report_meta,
     run_campaign,
 )
@@ -40,6 +39,7 @@ from ft_sitl.physics.platform import PlatformError
 from ft_sitl.scenarios.families import describe_family
 from ft_sitl.scenarios.render import render_scenario
 from ft_sitl.scenarios.scenario import ScenarioError
+from ft_sitl.transport import transport as mavlink_transport
 from ft_sitl.wire.navigate import NavigateError, require_mavsdk
 
 
@@ -140,7 +140,7 @@ def cmd_campaign_run(args) -> int:
     executor = _executor(args)
     out = Path(args.out)
     try:
-        transport = Transport(args.transport, args.speed_factor, args.mqtt)
+        transport = mavlink_transport(args.transport, args.speed_factor, args.mqtt)
         if transport.kind == "mavlink":  # each trial's navigator flies as a MAVSDK client
             require_mavsdk()
     except (CampaignError, NavigateError) as exc:

@@ -29,7 +29,7 @@ from ft_sitl.scenarios.io import scenario_from_spec
 from ft_sitl.schema import SchemaError
 from ft_sitl.sim.fleet import Fleet
 from ft_sitl.sim.spawn import SpawnError, spawn_points
-from ft_sitl.wire.sitl_bus import fleet_buses
+from ft_sitl.transport.sitl_bus import fleet_buses
 
 
 def _parse_home(text: str):

@@ -23,6 +23,7 @@ import threading
 import time
 import traceback
 from collections import defaultdict
+from collections.abc import Callable
 from contextlib import contextmanager
 from dataclasses import dataclass
 from pathlib import Path
@@ -30,7 +31,7 @@ from pathlib import Path
 from tqdm import tqdm
 
 from ft_sitl import __version__, numeric_env
-from ft_sitl.missions.campaign_file import Campaign, CampaignError
+from ft_sitl.missions.campaign_file import COMMAND, Campaign, CampaignError
 from ft_sitl.missions.durable import durable_replace
 from ft_sitl.missions.executors import (
     DIED_DETAIL,
@@ -41,13 +42,13 @@ from ft_sitl.missions.executors import (
     SerialExecutor,
     throughput,
 )
+from ft_sitl.missions.plan import PERCEPTION_WIRE
 from ft_sitl.missions.protocol import failed_row
 from ft_sitl.missions.resources import RESOURCES
 from ft_sitl.missions.results import Outcome
 from ft_sitl.missions.spec import TrialSpec, platform_for
 from ft_sitl.missions.store import ResultStore
 from ft_sitl.missions.trial import run_trial
-from ft_sitl.missions.trial_wire import PERCEPTION_WIRE, run_trial_wire, worker_bus
 from ft_sitl.missions.watchdog import TRIAL_WALL_BUDGET_S, wall_budget_from_env
 
 __all__ = ["CHUNK_MAX", "GRID_CACHE_DIR", "DaskExecutor", "Executor", "ExecutorError",
@@ -67,11 +68,16 @@ class Transport:
     """How trials fly: ``inprocess`` (the navigator called in lockstep) or ``mavlink`` (the
     vehicle served over MAVLink at ``speed_factor``, the navigator in another process,
     ``mqtt`` the bus broker URL or None for the embedded one). A ``command`` algorithm
-    always flies over MAVLink."""
+    always flies over MAVLink.
+
+    ``wire`` is what flies one trial over MAVLink (``wire(spec, speed_factor, mqtt)`` ->
+    the row): the transport room above this layer provides it
+    (:func:`ft_sitl.transport.transport`); without it only in-process trials fly."""
 
     kind: str = "inprocess"
     speed_factor: float = 2.0
     mqtt: str | None = None
+    wire: Callable | None = None
 
     def __post_init__(self):
         if self.kind not in ("inprocess", "mavlink"):
@@ -79,6 +85,9 @@ class Transport:
         sf = self.speed_factor
         if isinstance(sf, bool) or not isinstance(sf, (int, float)) or not 0.1 <= sf <= 20:
             raise CampaignError(f"--speed-factor: {sf!r} must be within 0.1..20")
+
+    def over_the_wire(self, spec: TrialSpec) -> bool:
+        return self.kind == "mavlink" or spec.algorithm == COMMAND
 
 
 def run_chunk(specs: list[dict], transport: Transport | None = None,
@@ -90,9 +99,8 @@ def run_chunk(specs: list[dict], transport: Transport | None = None,
     for d in specs:
         spec = TrialSpec.from_dict(d)
         try:
-            if transport.kind == "mavlink" or spec.algorithm == "command":
-                row = run_trial_wire(spec, speed_factor=transport.speed_factor,
-                                     **worker_bus(transport.mqtt)).row
+            if transport.over_the_wire(spec):
+                row = transport.wire(spec, transport.speed_factor, transport.mqtt)
             else:
                 row = run_trial(spec, wall_budget_s=wall_budget_s).row
             out.append((spec.trial_id, row, None))
@@ -219,9 +227,14 @@ def run_campaign(campaign: Campaign, out_dir: str | Path, *, workers: int = 1,
     except ValueError as exc:
         raise CampaignError(str(exc)) from None
     specs = campaign.trial_specs()
-    if (transport or Transport()).kind == "mavlink" and any(
-            s.perception is not None for s in specs):
+    transport = transport or Transport()
+    if transport.kind == "mavlink" and any(s.perception is not None for s in specs):
         raise CampaignError(f"--transport mavlink: {PERCEPTION_WIRE}")
+    if transport.wire is None and any(transport.over_the_wire(s) for s in specs):
+        raise CampaignError("this campaign flies trials over MAVLink (--transport mavlink, or "
+                            "a 'command' algorithm), which needs the MAVLink transport: "
+                            "run it with `ft-sitl campaign run`, or pass "
+                            "transport=ft_sitl.transport.transport(...)")
     meta = {"spec": campaign.spec_dict(), "total_trials": len(specs),
             "code_version": __version__}
     store = ResultStore(out_dir)
@@ -249,7 +262,7 @@ def run_campaign(campaign: Campaign, out_dir: str | Path, *, workers: int = 1,
         if progress:
             bar = tqdm(total=len(specs), initial=skipped, unit="trial", dynamic_ncols=True,
                        desc=campaign.name, smoothing=0.05)
-        fn = functools.partial(run_chunk, transport=transport or Transport(),
+        fn = functools.partial(run_chunk, transport=transport,
                                wall_budget_s=budget)
         for worker, results in ex.imap(fn, _chunks(todo, ex.chunk_max)):
             for tid, row, err in results:
@@ -283,7 +296,7 @@ def run_campaign(campaign: Campaign, out_dir: str | Path, *, workers: int = 1,
             "throughput": throughput(per_worker),
             "machine": machine_info(),
             "numeric": numeric_env.in_force(),
-            "transport": (transport or Transport()).kind,
+            "transport": transport.kind,
             "code_version": __version__})
     if store.done:
         store.write_tables()

@@ -74,7 +74,7 @@ from ft_sitl.missions.spec import (
     px4_params,
     wind_settings,
 )
-from ft_sitl.navigation.base import Limits
+from ft_sitl.navigation.base import LIMITS, Limits
 from ft_sitl.navigation.registry import NavigatorError, available, create
 from ft_sitl.physics.catalog import PlatformRegistry
 from ft_sitl.physics.platform import PlatformError
@@ -87,12 +87,17 @@ TOP_KEYS = ("name", "trials", "seed", "scenario_seed", "platforms", "platform_fi
             "scenarios", "indices", "physics_hz", "protocol", "gains", "algorithms", "limits",
             "weights", "description", "wind", "params", "actuators", "perception",
             "estimator", "failures", "movers", "fence")
-LIMIT_KEYS = ("max_speed_m_s", "timeout_s", "goal_radius_m", "hold_s", "max_acc_m_s2")
+LIMIT_KEYS = tuple(LIMITS.names())
 WEIGHT_KEYS = ("scenarios", "platforms", "beta")
 
 
 class CampaignError(ValueError):
     """A campaign file or request is invalid; the message names the file and the key."""
+
+
+#: the pseudo-navigator of a campaign's ``command`` entry: a user's program, which always
+#: flies over MAVLink
+COMMAND = "command"
 
 
 @dataclass(frozen=True)
@@ -446,7 +451,7 @@ def _command_entry(w: str, item: dict, labels: set) -> AlgorithmEntry:
         raise CampaignError(f"{w}: label {label!r} is used twice; give each entry its "
                             "own label")
     labels.add(label)
-    return AlgorithmEntry("command", label, {"argv": argv})
+    return AlgorithmEntry(COMMAND, label, {"argv": argv})
 
 
 def _platforms(t: Table, base: Path) -> list:

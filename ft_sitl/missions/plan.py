@@ -35,6 +35,11 @@ from ft_sitl.navigation.base import Task
 from ft_sitl.navigation.registry import available
 from ft_sitl.physics.platform import Platform
 
+#: why a trial with perception settings does not fly over MAVLink
+PERCEPTION_WIRE = ("perception: latency, state noise and dropped frames are applied by the "
+                   "in-process driver; over MAVLink the navigator runs in its own process "
+                   "with the transport's own timing (fly this campaign in-process)")
+
 
 @dataclass(frozen=True, eq=False)
 class TrialPlan:

@@ -1,8 +1,9 @@
 """The FLYINGTRUST trial protocol, once, for every transport.
 
 Both ways of flying a trial drive this module: in-process (:mod:`ft_sitl.missions.trial`,
-the navigator called directly in lockstep) and over the wire (:mod:`ft_sitl.missions.trial_wire`,
-the navigator a MAVSDK client in another process). A transport advances the simulation
+the navigator called directly in lockstep) and over MAVLink
+(:mod:`ft_sitl.transport.mavlink_trial`, the navigator a MAVSDK client in another
+process). A transport advances the simulation
 and calls :meth:`TrialReferee.after_step` after every advance; the referee runs the
 phases, judges the outcome and keeps the metrics; :meth:`TrialReferee.finish` writes the
 results row (:mod:`ft_sitl.missions.results`).

@@ -5,7 +5,7 @@ flight-controller code the MAVLink layer serves (a :class:`~ft_sitl.sim.fleet.Fl
 its commander, cascade and plant, and the scenario's collision guard) and returns the
 trial's row of the results table (:mod:`ft_sitl.missions.results`). The protocol itself
 (phases, judges, metrics, the row) is :mod:`ft_sitl.missions.protocol`, shared with the
-MAVLink transport (:mod:`ft_sitl.missions.trial_wire`); this module is the in-process driver:
+MAVLink transport (:mod:`ft_sitl.transport.mavlink_trial`); this module is the in-process driver:
 
 1. *Approach.* Arm, take off (PX4 AUTO.TAKEOFF) to the start altitude, reposition to the
    start waypoint, checked every :data:`~ft_sitl.missions.protocol.TICK_S` of simulated
@@ -49,7 +49,6 @@ from ft_sitl.missions.spec import TrialSpec, TrialSpecError, platform_for
 from ft_sitl.missions.watchdog import TRIAL_WALL_BUDGET_S, WallBudgetExceeded, WallWatchdog
 from ft_sitl.navigation.base import GiveUp, Observation, ObstacleStates
 from ft_sitl.navigation.registry import create
-from ft_sitl.physics import dynamics as d
 
 __all__ = ["TrialSpec", "TrialSpecError", "TrialOutcome", "run_trial", "platform_for",
            "load_scenario_for"]
@@ -182,10 +181,9 @@ def _observation(fleet, t_us: int, s, depth, nav) -> Observation:
     """What the navigator ``nav`` is told at ``t_us`` (its clock) with state ``s``: the
     flight controller's estimate (the truth without an estimator), as PX4 publishes it;
     the moving obstacles' ground truth too when the navigator asks for it."""
-    x = fleet.sim.estimated(0)
     return Observation(time_s=t_us * 1e-6, position=s.position, velocity=s.velocity,
-                       yaw=s.yaw, attitude=x[d.X_QUAT:d.X_QUAT + 4].copy(),
-                       angular_velocity=x[d.X_OMEGA:d.X_OMEGA + 3].copy(),
+                       yaw=s.yaw, attitude=fleet.attitude(0),
+                       angular_velocity=fleet.body_rates(0),
                        depth=depth, movers=_mover_truth(fleet) if getattr(
                            nav, "needs_mover_truth", False) else None)
 

@@ -399,6 +399,10 @@ class Simulation:
     def attitude(self, i: int = 0) -> np.ndarray:
         return self.plant.x[i, d.X_QUAT : d.X_QUAT + 4].copy()
 
+    def body_rates(self, i: int = 0) -> np.ndarray:
+        """Angular velocity, body FLU (rad/s)."""
+        return self.plant.x[i, d.X_OMEGA : d.X_OMEGA + 3].copy()
+
     def euler(self, i: int = 0) -> np.ndarray:
         return qto_euler(self.attitude(i))
 

@@ -9,13 +9,14 @@ import json
 import numpy as np
 import pytest
 
-from ft_sitl.missions.campaign import Transport, run_campaign
+from ft_sitl.missions.campaign import run_campaign
 from ft_sitl.missions.campaign_file import CampaignError, load_campaign
 from ft_sitl.missions.perception import Perception
 from ft_sitl.missions.report import write_report
 from ft_sitl.missions.results import to_frame
 from ft_sitl.missions.spec import TrialSpec
 from ft_sitl.missions.trial import run_trial
+from ft_sitl.transport import transport
 from tests.missions.conftest import campaign_file, read_jsonl, run_exe
 
 WINDY = """\
@@ -222,7 +223,7 @@ def test_perception_is_an_axis_that_reruns_and_is_refused_over_mavlink(yard, tmp
     assert proc.returncode == 0 and "identical" in proc.stdout, proc.stdout + proc.stderr
     with pytest.raises(CampaignError, match="^--transport mavlink: perception: latency"):
         run_campaign(c, tmp_path / "wire", progress=False,
-                     transport=Transport("mavlink"))
+                     transport=transport("mavlink"))
 
 
 # --- the estimator axis ------------------------------------------------------------------------

@@ -13,7 +13,7 @@ import trimesh
 
 from ft_sitl.bus.client import BusClient
 from ft_sitl.missions.trial import TrialSpec, run_trial
-from ft_sitl.missions.trial_wire import run_trial_wire, worker_bus
+from ft_sitl.transport.mavlink_trial import run_trial_wire, worker_bus
 
 from ..bus.conftest import Mosquitto
 

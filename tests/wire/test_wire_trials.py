@@ -15,12 +15,13 @@ import numpy as np
 import pytest
 
 from ft_sitl.bus.client import BusClient
-from ft_sitl.missions.campaign import Transport, run_campaign
+from ft_sitl.missions.campaign import run_campaign
 from ft_sitl.missions.campaign_file import load_campaign
 from ft_sitl.missions.executors import DaskExecutor
 from ft_sitl.missions.results import REASONS
 from ft_sitl.missions.trial import TrialSpec
-from ft_sitl.missions.trial_wire import run_trial_wire, worker_bus
+from ft_sitl.transport import transport
+from ft_sitl.transport.mavlink_trial import run_trial_wire, worker_bus
 
 from ..bus.conftest import Mosquitto, free_port
 
@@ -55,7 +56,7 @@ def test_inprocess_and_mavlink_transports_agree(tmp_path, navrl_checkpoint, monk
     c = load_campaign(p)
     run_campaign(c, tmp_path / "inproc", progress=False)
     run_campaign(c, tmp_path / "wire", progress=False,
-                 transport=Transport("mavlink", speed_factor=3.0))
+                 transport=transport("mavlink", speed_factor=3.0))
     a, b = _rows(tmp_path / "inproc"), _rows(tmp_path / "wire")
     assert a.keys() == b.keys() and len(a) == 3
     for key in a:
@@ -87,7 +88,7 @@ def test_mavlink_trials_on_a_dask_cluster_fly_side_by_side(tmp_path):
     run_campaign(c, tmp_path / "inproc", progress=False)
     ex = DaskExecutor(local_workers=2, chunk_max=1)
     run_campaign(c, tmp_path / "wire", progress=False, executor=ex,
-                 transport=Transport("mavlink", speed_factor=2.0))
+                 transport=transport("mavlink", speed_factor=2.0))
     a, b = _rows(tmp_path / "inproc"), _rows(tmp_path / "wire")
     assert a.keys() == b.keys() and len(a) == 2
     for key in a:

@@ -1,4 +1,4 @@
-"""One trial flown over the wire: the vehicle served over MAVLink, the navigator outside.
+"""One trial flown over MAVLink: the vehicle served here, the navigator in another process.
 
 ``run_trial_wire(spec, ...)`` builds the same vehicle, scenario and collision guard as the
 in-process :func:`~ft_sitl.missions.trial.run_trial`, serves it with the MAVLink
@@ -41,7 +41,8 @@ from ft_sitl.bus.codec import EventType
 from ft_sitl.bus.publisher import BusPublisher
 from ft_sitl.mavlink.instances import InstanceLock
 from ft_sitl.mavlink.server import SitlServer
-from ft_sitl.missions.plan import TrialPlan, plan_trial
+from ft_sitl.missions.campaign_file import COMMAND
+from ft_sitl.missions.plan import PERCEPTION_WIRE, TrialPlan, plan_trial
 from ft_sitl.missions.protocol import (
     APPROACH_TIMEOUT_S,
     Phase,
@@ -55,18 +56,19 @@ from ft_sitl.missions.results import Outcome
 from ft_sitl.missions.spec import TrialSpec, TrialSpecError
 from ft_sitl.navigation.base import Task
 from ft_sitl.scenarios.camera import camera_config
+from ft_sitl.transport.sitl_bus import SitlBus
 from ft_sitl.wire.navigate import ClientResult, task_env
-from ft_sitl.wire.sitl_bus import SitlBus
 
-COMMAND = "command"  # the pseudo-navigator: a user's program
-#: why a trial with perception settings does not fly over MAVLink
-PERCEPTION_WIRE = ("perception: latency, state noise and dropped frames are applied by the "
-                   "in-process driver; over MAVLink the navigator runs in its own process "
-                   "with the transport's own timing (fly this campaign in-process)")
 ARM_TIMEOUT_S = 90.0
 
 
 _BROKER = None  # this process's embedded broker, started on first use
+
+
+def fly_over_mavlink(spec: TrialSpec, speed_factor: float, mqtt: str | None) -> dict:
+    """One campaign trial over MAVLink, on the bus ``mqtt`` (None: this process's embedded
+    broker): its row. What :class:`~ft_sitl.missions.campaign.Transport` calls ``wire``."""
+    return run_trial_wire(spec, speed_factor=speed_factor, **worker_bus(mqtt)).row
 
 
 def worker_bus(mqtt: str | None) -> dict:

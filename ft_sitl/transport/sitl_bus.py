@@ -29,7 +29,6 @@ import numpy as np
 from ft_sitl.bus.codec import MOVER_SIZES, EventType, MoverStates, Telemetry
 from ft_sitl.bus.publisher import BusPublisher
 from ft_sitl.bus.ratelimit import RateGate
-from ft_sitl.physics import dynamics as d
 from ft_sitl.scenarios.camera import DepthCamera, camera_config
 from ft_sitl.sim.guard import GuardEventKind
 
@@ -115,13 +114,12 @@ class SitlBus:
         if gate.take(t_us):
             if movers is not None:
                 self.pub.publish_movers(self.mover_states(movers, t_us))
-            x = fleet.sim.x[i]
-            w = fleet.sim.rotor_speeds(i) / fleet.sim.platforms[i].rotor_speed_max_rad_s
+            sim = fleet.sim
+            w = sim.rotor_speeds(i) / sim.platforms[i].rotor_speed_max_rad_s
             self.pub.publish_telemetry(Telemetry(
-                time_usec=t_us, p_world_m=tuple(x[d.X_POS:d.X_POS + 3]),
-                v_world_m_s=tuple(x[d.X_VEL:d.X_VEL + 3]),
-                q_world_body=tuple(x[d.X_QUAT:d.X_QUAT + 4]),
-                w_body_rad_s=tuple(x[d.X_OMEGA:d.X_OMEGA + 3]),
+                time_usec=t_us, p_world_m=tuple(sim.position(i)),
+                v_world_m_s=tuple(sim.velocity(i)), q_world_body=tuple(sim.attitude(i)),
+                w_body_rad_s=tuple(sim.body_rates(i)),
                 motors=tuple(float(min(max(v, 0.0), 1.0)) for v in w),
                 wind_world_m_s=tuple(fleet.sim.wind_velocity(i))))
         if want_frames and self.camera is not None and t_us >= self._next_frame_us:
