@@ -85,6 +85,7 @@ from ft_sitl.navigation.optimisers.penalties import (
     feasibility,
     smoothness,
 )
+from ft_sitl.navigation.trajectories.base import Trajectory
 from ft_sitl.navigation.trajectories.bspline import UniformBSpline
 
 __all__ = [
@@ -396,11 +397,20 @@ def _deboor(t, c, k, x, out):
         out[a] = work[k, a]
 
 
-class KnotBSpline:
+class KnotBSpline(Trajectory):
     """A cubic B-spline with an arbitrary (non-decreasing) knot vector ``u`` of ``N + 4``
     knots over control points ``(N, d)``; time ``t`` runs from 0 at ``u[3]`` to
     ``duration = u[N] - u[3]`` (Fast-Planner's ``evaluateDeBoorT``), evaluation clamps to
-    that domain. Immutable."""
+    that domain. Immutable.
+
+    Still a second B-spline class beside
+    :class:`~ft_sitl.navigation.trajectories.bspline.UniformBSpline` (issue 42, point 3,
+    left open): this one evaluates by de Boor (scipy's BSpline, :func:`_deboor`) and takes
+    velocity control points from knot differences, the uniform one by the matrix form and
+    ``diff / dt``: the same curve in different floating-point operations, and Fast-Planner's
+    rows were flown with this arithmetic even on uniform knots (a plan needing no
+    re-timing). One class must therefore choose its evaluation by how it was built, not by
+    its knots; that was not done in this change."""
 
     __slots__ = ("_c", "_u", "_b", "_tck")
 
@@ -466,15 +476,6 @@ class KnotBSpline:
         for order, (tk, ck, k) in enumerate(self._tck):
             _deboor(tk, ck, k, x, out[order])
         return out[0], out[1], out[2]
-
-    def position(self, t) -> np.ndarray:
-        return self.evaluate(t, 0)
-
-    def velocity(self, t) -> np.ndarray:
-        return self.evaluate(t, 1)
-
-    def acceleration(self, t) -> np.ndarray:
-        return self.evaluate(t, 2)
 
     def velocity_control_points(self) -> np.ndarray:
         c, u = self._c, self._u

@@ -2,7 +2,15 @@
 ``lo:hi`` of ``(N, 3)`` control-point arrays (numba): the dot product, the two-loop
 recursion for the search direction, and the memory update. Each optimiser keeps its own
 loop around them: its cost function, line search and stopping rules are the original's.
-(PGO's optimiser works on a flat vector; see pgo.py.)"""
+
+Not yet one L-BFGS (issue 42, point 3, left open): EGO's loop (resumable for the rebound
+check, gradient-norm stop) and Fast-Planner's (evaluation cap, best point, xtol on the step
+norm) share these kernels, and PGO's (planners/pgo.py ``_lbfgs``) minimises the same cost
+(:func:`~ft_sitl.navigation.optimisers.penalties.fast_planner_cost`) on a flat vector
+whose dot products are numpy's ``np.dot`` (BLAS ddot: blocked, several partial sums, so a
+different summation order from :func:`dot_rows`' row loop) with a per-variable xtol stop.
+One loop for all three must take the dot product and the stop rule as parameters to keep
+each one's rows bit for bit; that was not done in this change."""
 
 from __future__ import annotations
 

@@ -34,6 +34,8 @@ import numpy as np
 from numba import njit
 from scipy.interpolate import BSpline
 
+from ft_sitl.navigation.trajectories.base import Trajectory
+
 __all__ = ["Feasibility", "UniformBSpline", "basis_matrix", "fit_samples"]
 
 
@@ -112,7 +114,7 @@ class Feasibility:
     max_acc: float
 
 
-class UniformBSpline:
+class UniformBSpline(Trajectory):
     """A uniform B-spline of degree ``degree`` in R^3 with knot span ``dt`` (seconds).
 
     Immutable: the control points are copied and made read-only; operations that change
@@ -231,18 +233,6 @@ class UniformBSpline:
         out = np.empty((3, 3))
         _pva_kernel(self._q, self._dt, self._p, basis_matrix(self._p), float(t), out)
         return out[0], out[1], out[2]
-
-    def position(self, t) -> np.ndarray:
-        return self.evaluate(t, 0)
-
-    def velocity(self, t) -> np.ndarray:
-        return self.evaluate(t, 1)
-
-    def acceleration(self, t) -> np.ndarray:
-        return self.evaluate(t, 2)
-
-    def jerk(self, t) -> np.ndarray:
-        return self.evaluate(t, 3)
 
     # ---- derivative splines ------------------------------------------------------------
     def derivative_control_points(self, order: int = 1) -> np.ndarray:

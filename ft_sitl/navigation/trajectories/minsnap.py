@@ -40,6 +40,8 @@ import numpy as np
 from scipy.sparse import csc_matrix
 from scipy.sparse.linalg import splu
 
+from ft_sitl.navigation.trajectories.base import Trajectory
+
 __all__ = [
     "LocalTarget", "PiecewisePolynomial", "ego_time_allocation", "ego_waypoints",
     "global_reference", "min_snap", "one_segment_time",
@@ -60,7 +62,7 @@ class LocalTarget:
     at_goal: bool  # the scan ran off the end: the target is the goal
 
 
-class PiecewisePolynomial:
+class PiecewisePolynomial(Trajectory):
     """Polynomial segments in R^3 stored in normalised time.
 
     ``coeffs[i, k]`` multiplies ``s^k`` on segment ``i`` (``s = (t - t_i) / T_i``);
@@ -127,15 +129,6 @@ class PiecewisePolynomial:
             rows[:, k] = _falling(k, order) * s ** (k - order)
         out = np.einsum("mk,mkd->md", rows, self._c[seg]) / (T ** order)[:, None]
         return out[0] if scalar else out
-
-    def position(self, t) -> np.ndarray:
-        return self.evaluate(t, 0)
-
-    def velocity(self, t) -> np.ndarray:
-        return self.evaluate(t, 1)
-
-    def acceleration(self, t) -> np.ndarray:
-        return self.evaluate(t, 2)
 
     # ---- arc length --------------------------------------------------------------------
     def _arc_table(self) -> tuple[np.ndarray, np.ndarray]:
