@@ -14,6 +14,7 @@ from pathlib import Path
 from ft_sitl import __version__, numeric_env
 from ft_sitl.bridge import ARDUPILOT_DEFAULT_PORT
 from ft_sitl.cli.common import number
+from ft_sitl.navigation.base import LIMITS  # numpy and the setpoint type: cheap too
 from ft_sitl.scenarios.render import DEFAULT_DPI  # numpy only: cheap at start-up
 
 ACTUATORS_HELP = ("imperfect actuators as KEY=VALUE,... (efficiency, degraded_motor, "
@@ -318,10 +319,15 @@ def _add_navigate(sub) -> None:
                    "and collision radius for the navigator)")
     p.add_argument("--platform-file", action="append", metavar="FILE",
                    help="extra platform definitions")
-    p.add_argument("--max-speed", type=number("--max-speed", above=0, maximum=20),
-                   default=4.0, help="speed cap, at most 20 m/s (default 4 m/s)")
-    p.add_argument("--timeout", type=number("--timeout", above=0), default=90.0,
-                   help="navigation timeout (s; default 90)")
+    speed, timeout = LIMITS["max_speed_m_s"], LIMITS["timeout_s"]
+    p.add_argument("--max-speed", type=number("--max-speed", minimum=speed.range[0],
+                                              maximum=speed.range[1]),
+                   default=speed.default, help=f"{speed.doc} ({speed.allowed()} {speed.unit}; "
+                   f"default {speed.default:g})")
+    p.add_argument("--timeout", type=number("--timeout", minimum=timeout.range[0],
+                                            maximum=timeout.range[1]),
+                   default=timeout.default, help=f"{timeout.doc} ({timeout.allowed()} "
+                   f"{timeout.unit}; default {timeout.default:g})")
     p.add_argument("--speed-factor", type=number("--speed-factor", minimum=0.01, maximum=100),
                    default=1.0, help="the simulator's speed factor, 0.01..100 (time base "
                    "without --mqtt; default 1)")

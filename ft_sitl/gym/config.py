@@ -12,11 +12,11 @@ from __future__ import annotations
 import json
 import math
 from collections.abc import Mapping
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 from ft_sitl.config import did_you_mean
 from ft_sitl.missions.spec import PROTOCOL_VERSION
-from ft_sitl.navigation.base import Limits
+from ft_sitl.navigation.base import LIMITS, Limits
 from ft_sitl.physics.catalog import PlatformRegistry
 from ft_sitl.physics.platform import PlatformError
 from ft_sitl.physics.wind import SCHEMA as WIND_SCHEMA
@@ -80,9 +80,9 @@ ENV_SCHEMA = Schema((
           doc="actions per simulated second; must divide physics_hz"),
     Param("physics_hz", 1000, "Hz", (100, 10000),
           doc="physics and flight-controller rate; must divide 1,000,000"),
-    Param("max_speed_m_s", Limits().max_speed_m_s, "m/s", (0.1, 40.0),
-          doc="velocity action: the horizontal speed of an action of 1 (also the flight "
-              "controller's MPC_XY_VEL_MAX, the benchmark's speed cap)"),
+    replace(LIMITS["max_speed_m_s"],
+            doc="velocity action: the horizontal speed of an action of 1 (also the flight "
+                "controller's MPC_XY_VEL_MAX, the benchmark's speed cap)"),
     Param("max_climb_m_s", 1.0, "m/s", (0.1, 10.0),
           doc="velocity action: the vertical speed of an action of 1"),
     Param("max_acc_m_s2", 5.0, "m/s^2", (0.1, 50.0),
@@ -108,14 +108,11 @@ ENV_SCHEMA = Schema((
           doc="depth: the 640 x 480 benchmark camera (D435 optics, 10 m range) at 1/step "
               "resolution (20: 32 x 24)"),
     # --- episodes -------------------------------------------------------------------------
-    Param("timeout_s", Limits().timeout_s, "s", (0.1, 3600.0),
-          doc="the time limit: an episode not yet in the goal sphere then is truncated "
-              "(the benchmark's timeout)"),
-    Param("goal_radius_m", Limits().goal_radius_m, "m", (0.01, 100.0),
-          doc="the goal sphere's radius (the benchmark's)"),
-    Param("hold_s", Limits().hold_s, "s", (0.001, 600.0),
-          doc="success: the time to stay in the goal sphere after entering it (the "
-              "benchmark's hold)"),
+    replace(LIMITS["timeout_s"],
+            doc="the time limit: an episode not yet in the goal sphere then is truncated "
+                "(the benchmark's timeout)"),
+    LIMITS["goal_radius_m"],
+    LIMITS["hold_s"],
     Param("goal_rule", True,
           doc="end episodes on the goal as the benchmark does (success after the hold, "
               "'unstable' on leaving during it); false: only crashes and the time limit "

@@ -85,71 +85,60 @@ class ProtocolRules:
     wire_streams_shared: bool = False
 
 
+def _versions(first: ProtocolRules, *changes: tuple[str, dict]) -> dict[int, ProtocolRules]:
+    """The versions of the protocol, each declared as what it changes in the one before it
+    (``(summary, {field: new value})``), numbered from ``first``'s on."""
+    out = {first.version: first}
+    rules = first
+    for summary, changed in changes:
+        rules = replace(rules, version=rules.version + 1, summary=summary, **changed)
+        out[rules.version] = rules
+    return out
+
+
 #: the versions of the trial protocol this code flies; a trial's spec names its version
 #: (absent: 1, the rules of every row written before versions were recorded), its row says
 #: which version made it, and ``ft-sitl trial rerun`` flies an old row by its own rules
-PROTOCOLS = {
-    1: ProtocolRules(1, "the rules of the first paper run and docs/results/paper-sample "
-                        "(campaigns up to 2026-11-26)",
-                     offboard_acc_clamp=True, benchmark_camera_hz=15.0,
-                     observe_approach=False, max_acc_m_s2=None),
-    2: ProtocolRules(2, "PX4's offboard rule: MPC_ACC_* no longer clamp the navigator's "
-                        "setpoints (the tilt and thrust limits bound them)",
-                     offboard_acc_clamp=False, benchmark_camera_hz=15.0,
-                     observe_approach=False, max_acc_m_s2=None),
-    3: ProtocolRules(3, "perception as the originals run it (the depth camera at 30 Hz, the "
-                        "navigator observing from arming) and one acceleration limit every "
-                        "planner plans with (limits.max_acc_m_s2, default 3 m/s^2); PX4's "
-                        "offboard rule as in 2",
-                     offboard_acc_clamp=False, benchmark_camera_hz=None,
-                     observe_approach=True, max_acc_m_s2=3.0),
-    4: ProtocolRules(4, "navigators know their vehicle: each inflates its map (NavRL: its "
-                        "shield's agent radius) by the platform's footprint, its collision "
-                        "radius; the rest as in 3",
-                     offboard_acc_clamp=False, benchmark_camera_hz=None,
-                     observe_approach=True, max_acc_m_s2=3.0, footprint_inflation=True),
-    5: ProtocolRules(5, "the vehicle is its body: the central body and the rotor disks, posed "
-                        "by the full attitude, are what touches obstacles and what the "
-                        "clearance measures; the footprint navigators inflate by is the "
-                        "body's half span; the rest as in 4",
-                     offboard_acc_clamp=False, benchmark_camera_hz=None,
-                     observe_approach=True, max_acc_m_s2=3.0, footprint_inflation=True,
-                     vehicle_body=True),
-    6: ProtocolRules(6, "the navigator's map takes the latest frame of the 30 Hz camera on "
-                        "its own 20 Hz timer, as the originals' grid maps do (frames it "
-                        "would never fuse are not rendered); the rest as in 5",
-                     offboard_acc_clamp=False, benchmark_camera_hz=None,
-                     observe_approach=True, max_acc_m_s2=3.0, footprint_inflation=True,
-                     vehicle_body=True, map_fusion_hz=20.0),
-    7: ProtocolRules(7, "navigators perceive moving obstacles as their deployments do: "
-                        "NavRL's depth detector and tracker feed its dynamic-obstacle input, "
-                        "its shield and its map's free regions (before, that input was "
-                        "zero); the rest as in 6",
-                     offboard_acc_clamp=False, benchmark_camera_hz=None,
-                     observe_approach=True, max_acc_m_s2=3.0, footprint_inflation=True,
-                     vehicle_body=True, map_fusion_hz=20.0, moving_obstacles=True),
-    8: ProtocolRules(8, "PX4's arming check on the geofence: a vehicle that breaches the "
-                        "trial's fence on the ground (GF_ACTION not none) is refused arming, "
-                        "\"Preflight Fail: Geofence violation\", and the trial ends as "
-                        "geofence (before, it armed and the breach acted after take-off); "
-                        "NavRL's shield clusters its ray hits as the deployment does, "
-                        "within sqrt(0.2) = 0.447 m (0.2 m before); the rest as in 7",
-                     offboard_acc_clamp=False, benchmark_camera_hz=None,
-                     observe_approach=True, max_acc_m_s2=3.0, footprint_inflation=True,
-                     vehicle_body=True, map_fusion_hz=20.0, moving_obstacles=True,
-                     arm_fence_check=True, navrl_shield_cluster_m=None),
-    9: ProtocolRules(9, "one trial plan for both transports: a navigator flown over "
-                        "MAVLink draws from the in-process trial's random stream and its "
-                        "bus camera from the in-process camera's noise stream (before, "
-                        "the wire seeded each its own way: PGO's topological sampling and "
-                        "noisy depth frames differed between the transports); trials "
-                        "flown in-process are as in 8",
-                     offboard_acc_clamp=False, benchmark_camera_hz=None,
-                     observe_approach=True, max_acc_m_s2=3.0, footprint_inflation=True,
-                     vehicle_body=True, map_fusion_hz=20.0, moving_obstacles=True,
-                     arm_fence_check=True, navrl_shield_cluster_m=None,
-                     wire_streams_shared=True),
-}
+PROTOCOLS = _versions(
+    ProtocolRules(1, "the rules of the first paper run and docs/results/paper-sample "
+                     "(campaigns up to 2026-11-26)",
+                  offboard_acc_clamp=True, benchmark_camera_hz=15.0, observe_approach=False,
+                  max_acc_m_s2=None),
+    ("PX4's offboard rule: MPC_ACC_* no longer clamp the navigator's setpoints (the tilt and "
+     "thrust limits bound them)",
+     {"offboard_acc_clamp": False}),
+    ("perception as the originals run it (the depth camera at 30 Hz, the navigator observing "
+     "from arming) and one acceleration limit every planner plans with "
+     "(limits.max_acc_m_s2, default 3 m/s^2); PX4's offboard rule as in 2",
+     {"benchmark_camera_hz": None, "observe_approach": True, "max_acc_m_s2": 3.0}),
+    ("navigators know their vehicle: each inflates its map (NavRL: its shield's agent "
+     "radius) by the platform's footprint, its collision radius; the rest as in 3",
+     {"footprint_inflation": True}),
+    ("the vehicle is its body: the central body and the rotor disks, posed by the full "
+     "attitude, are what touches obstacles and what the clearance measures; the footprint "
+     "navigators inflate by is the body's half span; the rest as in 4",
+     {"vehicle_body": True}),
+    ("the navigator's map takes the latest frame of the 30 Hz camera on its own 20 Hz timer, "
+     "as the originals' grid maps do (frames it would never fuse are not rendered); the "
+     "rest as in 5",
+     {"map_fusion_hz": 20.0}),
+    ("navigators perceive moving obstacles as their deployments do: NavRL's depth detector "
+     "and tracker feed its dynamic-obstacle input, its shield and its map's free regions "
+     "(before, that input was zero); the rest as in 6",
+     {"moving_obstacles": True}),
+    ("PX4's arming check on the geofence: a vehicle that breaches the trial's fence on the "
+     "ground (GF_ACTION not none) is refused arming, \"Preflight Fail: Geofence "
+     "violation\", and the trial ends as geofence (before, it armed and the breach acted "
+     "after take-off); NavRL's shield clusters its ray hits as the deployment does, within "
+     "sqrt(0.2) = 0.447 m (0.2 m before); the rest as in 7",
+     {"arm_fence_check": True, "navrl_shield_cluster_m": None}),
+    ("one trial plan for both transports: a navigator flown over MAVLink draws from the "
+     "in-process trial's random stream and its bus camera from the in-process camera's "
+     "noise stream (before, the wire seeded each its own way: PGO's topological sampling "
+     "and noisy depth frames differed between the transports); trials flown in-process are "
+     "as in 8",
+     {"wire_streams_shared": True}),
+)
 #: the version new trials and campaigns fly unless they name another
 PROTOCOL_VERSION = max(PROTOCOLS)
 

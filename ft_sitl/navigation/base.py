@@ -35,7 +35,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from ft_sitl.autopilot.setpoints import Setpoint
-from ft_sitl.schema import Schema
+from ft_sitl.schema import Param, Schema
 
 #: navigation starts once the vehicle is stable at the start waypoint: within
 #: STABLE_POS_M of it (m) and slower than STABLE_SPEED_M_S (m/s) for STABLE_FOR_S (s). The
@@ -50,30 +50,53 @@ class GiveUp(Exception):  # noqa: N818 - a signal, not an error
     """Raised by a navigator that has no way to the goal; the message says why."""
 
 
+#: the benchmark's limits, declared once (protocol Sec. IV-B): :class:`Limits` takes its
+#: defaults and ranges from here, and so do campaign files, the Gymnasium environments and
+#: ``ft-sitl navigate``. Which version of the trial protocol changed which limit is in
+#: ``ft_sitl.missions.spec.PROTOCOLS`` (the acceleration limit came with version 3).
+LIMITS = Schema((
+    Param("max_speed_m_s", 4.0, "m/s", (0.1, 40.0),
+          doc="the speed cap: planners plan with it, the flight controller enforces it "
+              "(PX4's MPC_XY_VEL_MAX)"),
+    Param("timeout_s", 90.0, "s", (0.1, 3600.0),
+          doc="a navigation not in the goal sphere this long after it started is a timeout"),
+    Param("goal_radius_m", 2.0, "m", (0.01, 100.0),
+          doc="the goal sphere's radius"),
+    Param("hold_s", 3.0, "s", (0.001, 600.0),
+          doc="success: the time to stay in the goal sphere after entering it"),
+    Param("max_acc_m_s2", None, "m/s^2", (0.1, 100.0), kind="float",
+          doc="the acceleration limit every planner plans with, a planning constraint the "
+              "flight controller does not clamp setpoints to (none: the protocol "
+              "version's, 3 from version 3; before 3 each planner's own max_acc_m_s2)"),
+))
+
+
 @dataclass(frozen=True)
 class Limits:
-    """The benchmark's limits, identical for every algorithm (protocol Sec. IV-B).
+    """The benchmark's limits, identical for every algorithm (:data:`LIMITS` declares
+    each: default, unit, range, meaning).
 
-    ``max_acc_m_s2`` is the acceleration limit every planner plans with (protocol 3 on;
-    None: each planner's own ``max_acc_m_s2`` parameter, the rule before). It is a
-    planning constraint, like the paper's "acceleration constraints": the flight controller
-    does not clamp the navigator's setpoints to it (docs/control.md, stage 3)."""
+    ``max_acc_m_s2`` None means the rule of the trial's protocol version (a spec writes
+    the version's value in; docs/control.md, stage 3, for why the flight controller does
+    not clamp the navigator's setpoints to it)."""
 
-    max_speed_m_s: float = 4.0
-    timeout_s: float = 90.0
-    goal_radius_m: float = 2.0
-    hold_s: float = 3.0
-    max_acc_m_s2: float | None = None
+    max_speed_m_s: float = LIMITS["max_speed_m_s"].default
+    timeout_s: float = LIMITS["timeout_s"].default
+    goal_radius_m: float = LIMITS["goal_radius_m"].default
+    hold_s: float = LIMITS["hold_s"].default
+    max_acc_m_s2: float | None = LIMITS["max_acc_m_s2"].default
 
     def __post_init__(self):
-        for name in ("max_speed_m_s", "timeout_s", "goal_radius_m", "hold_s",
-                     "max_acc_m_s2"):
-            v = getattr(self, name)
-            if v is None and name == "max_acc_m_s2":
+        for param in LIMITS:
+            name, v = param.name, getattr(self, param.name)
+            if v is None and param.nullable:
                 continue
             if isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v) \
                     or v <= 0:
                 raise ValueError(f"limits.{name}: must be a positive number, got {v!r}")
+            if not param.range[0] <= v <= param.range[1]:
+                raise ValueError(f"limits.{name}: must be {param.allowed()} "
+                                 f"({param.unit}), got {v!r}")
             object.__setattr__(self, name, float(v))
 
     def as_dict(self) -> dict:
@@ -167,8 +190,7 @@ class Task:
         the list of that integer: documents written before it became a list read back.)"""
         if not isinstance(doc, dict):
             raise TaskError("task: must be a JSON object")
-        limit_keys = ("max_speed_m_s", "timeout_s", "goal_radius_m", "hold_s",
-                      "max_acc_m_s2")
+        limit_keys = tuple(LIMITS.names())
         known = set(TASK_VECTORS + TASK_NUMBERS + TASK_OPTIONAL + limit_keys) | {
             "seed", "observe_approach"}
         unknown = sorted(set(doc) - known)
