@@ -5,6 +5,7 @@ import pytest
 from scipy.optimize import minimize
 
 from ft_sitl.navigation.optimisers import ego as eo
+from ft_sitl.navigation.optimisers import lbfgs
 from ft_sitl.navigation.optimisers.ego import (
     Anchors,
     EgoOptimizer,
@@ -188,7 +189,7 @@ def test_lbfgs_reaches_scipys_minimum_on_a_convex_problem():
     ours = q0.copy()
     solver = eo._Lbfgs(ours, 16, 1000, 1e-9, args)
     # converged, or stopped when round-off no longer lets the line search decrease f
-    assert solver.run() in (eo._LB_CONVERGED, eo._LB_LINESEARCH)
+    assert solver.run() in (lbfgs.CONVERGED, lbfgs.LINE_SEARCH)
 
     def fun(x):
         q = q0.copy()

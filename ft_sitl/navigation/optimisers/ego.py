@@ -45,12 +45,13 @@ The total is ``w_s smooth + w_c collision + w_f feasibility`` (rebound) or
 
 The solve (:meth:`EgoOptimizer.rebound`): L-BFGS (memory 16, <= 200 iterations) over the
 interior points, stopped like EGO's lbfgs when ``||g|| < 0.01 max(1, ||x||)`` (0.001 when
-refining). The L-BFGS is our own numba implementation (two-loop recursion, Lewis-Overton
-weak-Wolfe line search with EGO's constants c1 = 1e-4, c2 = 0.9, <= 40 trials) rather than
-scipy's L-BFGS-B: on this project's machines scipy's costs 40 us of Python per iteration
-and, with OpenBLAS threads on a loaded machine, up to ~8 ms per iteration (tiny BLAS calls),
-against a budget of < 20 ms for a whole local plan; the tests check it reaches scipy's
-minimum on a convex problem. After each iteration, once past iteration 3 and smooth enough
+refining). The L-BFGS is the project's own numba one (:mod:`.lbfgs`, shared with
+Fast-Planner and PGO: two-loop recursion, Lewis-Overton weak-Wolfe line search with EGO's
+constants c1 = 1e-4, c2 = 0.9, <= 40 trials) rather than scipy's L-BFGS-B: on this project's
+machines scipy's costs 40 us of Python per iteration and, with OpenBLAS threads on a loaded
+machine, up to ~8 ms per iteration (tiny BLAS calls), against a budget of < 20 ms for a
+whole local plan; the tests check it reaches scipy's minimum on a convex problem. After
+each iteration, once past iteration 3 and smooth enough
 (smoothness per free point < 0.1), the control points ``Q[2] .. Q[i_end]`` are checked: an
 occupied point that is not already behind one of its planes (``d < resolution``) is a new
 collision; its stretch (nearest free points on either side) gets A* and anchors and the
@@ -92,8 +93,19 @@ from dataclasses import dataclass, field
 import numpy as np
 from numba import njit
 
-from ft_sitl.navigation.optimisers.lbfgs import dot_rows, search_direction, store_pair
-from ft_sitl.navigation.optimisers.penalties import smoothness
+from ft_sitl.navigation.optimisers.lbfgs import (
+    EVALUATE,
+    EVALUATIONS,
+    F_TRIAL,
+    ITERATED,
+    ITERATIONS,
+    LbfgsRules,
+    StopRule,
+    advance,
+    put_rows,
+    take_rows,
+)
+from ft_sitl.navigation.optimisers.penalties import as_points, smoothness, smoothness_cost
 from ft_sitl.navigation.planners.astar import AStarMemo, OccupancyView, search
 from ft_sitl.navigation.trajectories.bspline import Feasibility, UniformBSpline
 
@@ -239,24 +251,10 @@ def _total_cost(q, grad, mode, w, c0, dt, vmax, amax, idx, ap, av, ref, tan, alo
     return f
 
 
-def _as_points(q) -> np.ndarray:
-    q = np.ascontiguousarray(q, dtype=float)
-    if q.ndim != 2 or q.shape[1] != 3:
-        raise ValueError(f"control points must have shape (N, 3), got {q.shape}")
-    return q
-
-
-def smoothness_cost(q) -> tuple[float, np.ndarray]:
-    """``sum ||Q[i+3] - 3 Q[i+2] + 3 Q[i+1] - Q[i]||^2`` and its gradient ``(N, 3)``."""
-    q = _as_points(q)
-    grad = np.zeros_like(q)
-    return float(smoothness(q, 1.0, grad)), grad
-
-
 def collision_cost(q, idx, p, v, clearance: float) -> tuple[float, np.ndarray]:
     """Anchor-pair cost: for pair ``k`` on control point ``idx[k]``, ``d = (Q - p) . v``,
     ``e = clearance - d``; see the module docstring. Returns (cost, gradient (N, 3))."""
-    q = _as_points(q)
+    q = as_points(q)
     grad = np.zeros_like(q)
     idx = np.ascontiguousarray(idx, dtype=np.int64)
     p = np.ascontiguousarray(p, dtype=float).reshape(-1, 3)
@@ -266,7 +264,7 @@ def collision_cost(q, idx, p, v, clearance: float) -> tuple[float, np.ndarray]:
 
 def feasibility_cost(q, dt: float, vmax: float, amax: float) -> tuple[float, np.ndarray]:
     """Per-axis penalty on velocity and acceleration control points beyond the limits."""
-    q = _as_points(q)
+    q = as_points(q)
     grad = np.zeros_like(q)
     return float(_feasibility_acc(q, float(dt), float(vmax), float(amax), 1.0, grad)), grad
 
@@ -283,7 +281,7 @@ def fitness_cost(q, ref, along: float = 25.0, across: float = 1.0) -> tuple[floa
     """Anisotropic deviation of the knot positions from ``ref`` (``N - 2`` reference points,
     the knots of the reference curve): ``(x.t)^2 / along + |x cross t|^2 / across`` summed
     over the interior knots 1 .. N-4."""
-    q = _as_points(q)
+    q = as_points(q)
     ref = np.ascontiguousarray(ref, dtype=float)
     n = q.shape[0]
     if ref.shape != (n - 2, 3):
@@ -294,134 +292,66 @@ def fitness_cost(q, ref, along: float = 25.0, across: float = 1.0) -> tuple[floa
 
 
 # ---------------------------------------------------------------------------------------
-# L-BFGS (numba), resumable so that Python can look at the map between iterations
+# the solve: the shared L-BFGS (optimisers.lbfgs) with EGO's rules, paused for the rebound
+# check
 # ---------------------------------------------------------------------------------------
-_LB_MAXITER, _LB_CONVERGED, _LB_CHECK, _LB_LINESEARCH = 0, 1, 2, 3
-_LS_MAX = 40  # EGO's max_linesearch
-_C1, _C2 = 1e-4, 0.9  # Armijo and weak-Wolfe curvature constants (EGO's ftol, wolfe)
+_PAUSED = -3  # _solve's code: an iteration passed the rebound check's smoothness test
 
 
 @njit(cache=True)
-def _lbfgs_run(q, g, dvec, q0, g0, S, Y, rho, alpha, meta, fbox, lo, hi, max_iter, g_eps,
-               check_smooth, mode, w, c0, dt, vmax, amax, idx, ap, av, ref, tan, along,
-               across):
-    """Iterate L-BFGS on rows ``lo:hi`` of ``q`` (in place). ``meta`` = [iterations,
-    evaluations, stored pairs, next slot, started]. Returns a ``_LB_*`` code; with
-    ``check_smooth > 0`` it returns ``_LB_CHECK`` after every iteration past the third whose
-    smoothness per free point is below ``check_smooth`` (the caller may resume)."""
-    m = S.shape[0]
-    n_free = hi - lo
+def _solve(st, q, lo, hi, check_smooth, mode, w, c0, dt, vmax, amax, idx, ap, av, ref, tan,
+           along, across):
+    """Drive the L-BFGS state ``st`` over rows ``lo:hi`` of ``q`` (in place) with the
+    rebound or refinement cost. Returns a stop code of :mod:`.lbfgs`, or ``_PAUSED`` after
+    an iteration past the third whose smoothness per free point is below ``check_smooth``
+    (with ``check_smooth > 0``; call again to resume). ``q`` holds the current point."""
+    grad = np.zeros_like(q)
     scratch = np.zeros_like(q)
-    if meta[4] == 0:
-        fbox[0] = _total_cost(q, g, mode, w, c0, dt, vmax, amax, idx, ap, av, ref, tan,
-                              along, across)
-        meta[1] += 1
-        meta[4] = 1
-        if math.sqrt(dot_rows(g, g, lo, hi)) <= g_eps * max(1.0, math.sqrt(dot_rows(q, q, lo, hi))):
-            return _LB_CONVERGED
-    while meta[0] < max_iter:
-        count = meta[2]
-        head = meta[3]
-        dg0 = search_direction(g, dvec, S, Y, rho, alpha, count, head, lo, hi)
-        if not dg0 < 0.0:  # not a descent direction: forget the memory
-            meta[2] = 0
-            count = 0
-            for i in range(lo, hi):
-                for d in range(3):
-                    dvec[i, d] = -g[i, d]
-            dg0 = -dot_rows(g, g, lo, hi)
-        step = 1.0
-        if count == 0:
-            step = min(1.0, 1.0 / math.sqrt(-dg0))
-        f0 = fbox[0]
-        for i in range(lo, hi):
-            for d in range(3):
-                q0[i, d] = q[i, d]
-                g0[i, d] = g[i, d]
-        # Lewis-Overton weak-Wolfe line search
-        s_lo = 0.0
-        s_hi = math.inf
-        ok = False
-        for _ in range(_LS_MAX):
-            for i in range(lo, hi):
-                for d in range(3):
-                    q[i, d] = q0[i, d] + step * dvec[i, d]
-            f = _total_cost(q, g, mode, w, c0, dt, vmax, amax, idx, ap, av, ref, tan,
-                            along, across)
-            meta[1] += 1
-            if not (f <= f0 + _C1 * step * dg0):
-                s_hi = step
-            elif dot_rows(dvec, g, lo, hi) < _C2 * dg0:
-                s_lo = step
-            else:
-                ok = True
-                fbox[0] = f
-                break
-            if s_hi < math.inf:
-                step = 0.5 * (s_lo + s_hi)
-            else:
-                step *= 2.0
-            if step < 1e-20 or step > 1e20:
-                break
-        if not ok:
-            for i in range(lo, hi):
-                for d in range(3):
-                    q[i, d] = q0[i, d]
-                    g[i, d] = g0[i, d]
-            fbox[0] = f0
-            return _LB_LINESEARCH
-        j = meta[3]
-        ys, _ = store_pair(q, q0, g, g0, S, Y, j, lo, hi)
-        if ys > 1e-16:
-            rho[j] = 1.0 / ys
-            meta[3] = (j + 1) % m
-            meta[2] = min(meta[2] + 1, m)
-        meta[0] += 1
-        gn = math.sqrt(dot_rows(g, g, lo, hi))
-        if gn <= g_eps * max(1.0, math.sqrt(dot_rows(q, q, lo, hi))):
-            return _LB_CONVERGED
-        if check_smooth > 0.0 and meta[0] > 3:
-            scratch[:, :] = 0.0
-            if smoothness(q, 0.0, scratch) / n_free < check_smooth:
-                return _LB_CHECK
-    return _LB_MAXITER
+    while True:
+        code = advance(st)
+        if code == EVALUATE:
+            put_rows(st.xn, q, lo, hi)
+            st.reals[F_TRIAL] = _total_cost(q, grad, mode, w, c0, dt, vmax, amax, idx, ap,
+                                            av, ref, tan, along, across)
+            take_rows(grad, st.gn, lo, hi)
+        elif code == ITERATED:  # q holds the point just accepted (the last evaluated)
+            if check_smooth > 0.0 and st.ints[ITERATIONS] > 3:
+                scratch[:, :] = 0.0
+                if smoothness(q, 0.0, scratch) / (hi - lo) < check_smooth:
+                    return _PAUSED
+        else:
+            put_rows(st.x, q, lo, hi)
+            return code
 
 
 class _Lbfgs:
-    """State of one L-BFGS run over the interior rows of ``q`` (modified in place)."""
+    """One L-BFGS solve over the interior rows of ``q`` (modified in place) with EGO's
+    rules: ``memory`` pairs, at most ``max_iter`` iterations, stopped when ``||g|| <=
+    g_epsilon max(1, ||x||)``, line search steps within 1e-20 .. 1e20."""
 
     def __init__(self, q: np.ndarray, memory: int, max_iter: int, g_epsilon: float,
                  cost_args: tuple, check_smooth: float = 0.0):
         self.q = q
-        n = q.shape[0]
-        self.lo, self.hi = ORDER, n - ORDER
-        self.g = np.zeros_like(q)
-        self.d = np.zeros_like(q)
-        self.q0 = np.zeros_like(q)
-        self.g0 = np.zeros_like(q)
-        self.S = np.zeros((memory, n, 3))
-        self.Y = np.zeros((memory, n, 3))
-        self.rho = np.zeros(memory)
-        self.alpha = np.zeros(memory)
-        self.meta = np.zeros(5, dtype=np.int64)
-        self.f = np.zeros(1)
-        self.max_iter = int(max_iter)
-        self.g_eps = float(g_epsilon)
+        self.lo, self.hi = ORDER, q.shape[0] - ORDER
+        rules = LbfgsRules(memory=int(memory), stop=StopRule.GRADIENT,
+                           tolerance=float(g_epsilon), max_iterations=int(max_iter),
+                           step_min=1e-20, step_max=1e20)
+        self.state = rules.start(q[self.lo:self.hi])
         self.check_smooth = float(check_smooth)
         self.cost_args = cost_args
 
     def run(self) -> int:
-        return int(_lbfgs_run(self.q, self.g, self.d, self.q0, self.g0, self.S, self.Y,
-                              self.rho, self.alpha, self.meta, self.f, self.lo, self.hi,
-                              self.max_iter, self.g_eps, self.check_smooth, *self.cost_args))
+        """Solve on; returns a stop code of :mod:`.lbfgs` or ``_PAUSED``."""
+        return int(_solve(self.state, self.q, self.lo, self.hi, self.check_smooth,
+                          *self.cost_args))
 
     @property
     def iterations(self) -> int:
-        return int(self.meta[0])
+        return int(self.state.ints[ITERATIONS])
 
     @property
     def evaluations(self) -> int:
-        return int(self.meta[1])
+        return int(self.state.ints[EVALUATIONS])
 
 
 # ---------------------------------------------------------------------------------------
@@ -769,7 +699,7 @@ class EgoOptimizer:
             interrupted = False
             while True:
                 code = solver.run()
-                if code != _LB_CHECK:
+                if code != _PAUSED:
                     break
                 segs = self._new_collisions(q, anchors)
                 if segs is None:

@@ -24,11 +24,13 @@ cost, with analytic gradients w.r.t. the whole ``(N, 3)`` array:
 - endpoint (free end only) ``||(Q[N-3] + 4 Q[N-2] + Q[N-1]) / 6 - p_end||^2`` with ``p_end``
   the initial curve's end, weight ``w_endpoint`` = 0.01 (``lambda4``).
 
-The solver is our own L-BFGS in numba (memory ``lbfgs_memory``, a Lewis-Overton weak-Wolfe
-line search), stopped after ``max_evaluations`` (300, ``max_iteration_num2``) cost
-evaluations or when a step changes the variables by less than ``xtol_rel`` (1e-5) of their
-norm, as Fast-Planner's NLopt L-BFGS (``set_maxeval``, ``set_xtol_rel``). Like the
-original it returns the best point evaluated (``best_variable_``), not the last.
+The solver is the shared numba L-BFGS (:mod:`.lbfgs`; memory ``lbfgs_memory``, a
+Lewis-Overton weak-Wolfe line search) with Fast-Planner's rules
+(:meth:`FastParams.lbfgs_rules`), stopped after ``max_evaluations`` (300,
+``max_iteration_num2``) cost evaluations or when a step changes the variables by less than
+``xtol_rel`` (1e-5) of their norm, as Fast-Planner's NLopt L-BFGS (``set_maxeval``,
+``set_xtol_rel``). Like the original it returns the best point evaluated
+(``best_variable_``), not the last.
 
 Differences from the original, on purpose:
 
@@ -77,21 +79,38 @@ from numba import njit
 from scipy.interpolate import BSpline
 
 from ft_sitl.navigation.maps.esdf import EsdfGrid
-from ft_sitl.navigation.optimisers.lbfgs import dot_rows, search_direction, store_pair
+from ft_sitl.navigation.optimisers.lbfgs import (
+    CONVERGED,
+    EVALUATE,
+    EVALUATIONS,
+    F_BEST,
+    F_TRIAL,
+    ITERATED,
+    ITERATIONS,
+    LINE_SEARCH,
+    MAX_EVALUATIONS,
+    ZERO_GRADIENT,
+    LbfgsRules,
+    StopRule,
+    advance,
+    put_rows,
+    take_rows,
+)
 from ft_sitl.navigation.optimisers.penalties import (
+    as_points,
     endpoint,
     esdf_distance,
     fast_planner_cost,
     feasibility,
-    smoothness,
+    smoothness_cost,
 )
 from ft_sitl.navigation.trajectories.base import Trajectory
 from ft_sitl.navigation.trajectories.bspline import UniformBSpline
 
 __all__ = [
     "FastOptimizer", "FastParams", "FastResult", "KnotBSpline", "cost_terms",
-    "distance_cost", "endpoint_cost", "feasibility_cost", "plan_yaw", "smoothness_cost",
-    "total_cost",
+    "distance_cost", "endpoint_cost", "feasibility_cost", "minimise",
+    "plan_yaw", "smoothness_cost", "total_cost",
 ]
 
 ORDER = 3
@@ -135,129 +154,48 @@ class FastParams:
             if isinstance(v, bool) or not isinstance(v, int) or v < 1:
                 raise ValueError(f"FastParams.{name} must be a positive integer, got {v!r}")
 
+    def lbfgs_rules(self) -> LbfgsRules:
+        """The solve's rules (Fast-Planner's NLopt L-BFGS): stop after ``max_evaluations``
+        cost evaluations or when a step is shorter than ``xtol_rel`` times the point's
+        norm; the best point evaluated is the result."""
+        return LbfgsRules(memory=self.lbfgs_memory, stop=StopRule.STEP,
+                          tolerance=self.xtol_rel, max_evaluations=self.max_evaluations,
+                          keep_best=True)
+
 
 # ---------------------------------------------------------------------------------------
-# L-BFGS over rows lo:hi of q (numba)
+# the solve: the shared L-BFGS (optimisers.lbfgs) on Fast-Planner's cost (PGO's too)
 # ---------------------------------------------------------------------------------------
-_LS_TRIALS = 40
-_C1, _C2 = 1e-4, 0.9
-
-
 @njit(cache=True)
-def _lbfgs(q, lo, hi, memory, max_evals, xtol, w, ts, vmax, amax, d0, free_end, end_pt,
-           field, origin, inv_res, out):
-    """Minimise over rows ``lo:hi`` of ``q`` (in place; ``q`` ends at the best point
-    evaluated). ``out`` = [evaluations, iterations, final cost, stop code] with stop code
-    0: evaluation cap, 1: small step (xtol), 2: zero gradient, 3: line search failed."""
-    n = q.shape[0]
-    g = np.zeros((n, 3))
-    d = np.zeros((n, 3))
-    q0 = q.copy()
-    g0 = np.zeros((n, 3))
-    best = q.copy()
-    S = np.zeros((memory, n, 3))
-    Y = np.zeros((memory, n, 3))
-    rho = np.zeros(memory)
-    alpha = np.zeros(memory)
+def minimise(st, q, lo, hi, w, ts, vmax, amax, d0, free_end, end_pt, field, origin, inv_res,
+             unit_gradient):
+    """Drive the L-BFGS state ``st`` (:mod:`.lbfgs`) over rows ``lo:hi`` of ``q`` (in place)
+    on :func:`~ft_sitl.navigation.optimisers.penalties.fast_planner_cost`; ``q`` ends at
+    ``st.best`` (the rules keep the best point evaluated, as Fast-Planner's
+    ``best_variable_``). Returns the stop code."""
+    grad = np.zeros_like(q)
     terms = np.zeros(4)
-    f = fast_planner_cost(q, g, w, ts, vmax, amax, d0, free_end, end_pt, field, origin,
-                          inv_res, False, terms)
-    evals = 1
-    f_best = f
-    iters = 0
-    count = 0
-    head = 0
-    code = 0
-    while evals < max_evals:
-        gg = dot_rows(g, g, lo, hi)
-        if gg <= 1e-24:
-            code = 2
-            break
-        dg = search_direction(g, d, S, Y, rho, alpha, count, head, lo, hi)
-        if not dg < 0.0:  # not a descent direction: drop the memory
-            count = 0
-            for i in range(lo, hi):
-                for k in range(3):
-                    d[i, k] = -g[i, k]
-            dg = -gg
-        step = 1.0 if count > 0 else min(1.0, 1.0 / math.sqrt(gg))
-        f0 = f
-        for i in range(lo, hi):
-            for k in range(3):
-                q0[i, k] = q[i, k]
-                g0[i, k] = g[i, k]
-        # weak-Wolfe bracketing line search
-        s_lo = 0.0
-        s_hi = math.inf
-        ok = False
-        for _ in range(_LS_TRIALS):
-            if evals >= max_evals:
-                break
-            for i in range(lo, hi):
-                for k in range(3):
-                    q[i, k] = q0[i, k] + step * d[i, k]
-            f = fast_planner_cost(q, g, w, ts, vmax, amax, d0, free_end, end_pt, field, origin,
-                                  inv_res, False, terms)
-            evals += 1
-            if f < f_best:
-                f_best = f
-                for i in range(lo, hi):
-                    for k in range(3):
-                        best[i, k] = q[i, k]
-            if not (f <= f0 + _C1 * step * dg):
-                s_hi = step
-            elif dot_rows(d, g, lo, hi) < _C2 * dg:
-                s_lo = step
-            else:
-                ok = True
-                break
-            step = 0.5 * (s_lo + s_hi) if s_hi < math.inf else 2.0 * step
-            if step < 1e-16 or step > 1e16:
-                break
-        if not ok:
-            code = 0 if evals >= max_evals else 3
-            break
-        iters += 1
-        j = head
-        ys, ss = store_pair(q, q0, g, g0, S, Y, j, lo, hi)
-        if ys > 1e-16:
-            rho[j] = 1.0 / ys
-            head = (head + 1) % memory
-            count = min(count + 1, memory)
-        if math.sqrt(ss) <= xtol * math.sqrt(dot_rows(q, q, lo, hi)):
-            code = 1
-            break
-    for i in range(lo, hi):
-        for k in range(3):
-            q[i, k] = best[i, k]
-    out[0] = evals
-    out[1] = iters
-    out[2] = f_best
-    out[3] = code
+    code = advance(st)
+    while code == EVALUATE or code == ITERATED:
+        if code == EVALUATE:
+            put_rows(st.xn, q, lo, hi)
+            st.reals[F_TRIAL] = fast_planner_cost(q, grad, w, ts, vmax, amax, d0, free_end,
+                                                  end_pt, field, origin, inv_res,
+                                                  unit_gradient, terms)
+            take_rows(grad, st.gn, lo, hi)
+        code = advance(st)
+    put_rows(st.best, q, lo, hi)
+    return code
 
 
 # ---------------------------------------------------------------------------------------
 # Python wrappers (tests, diagnostics)
 # ---------------------------------------------------------------------------------------
-def _as_points(q) -> np.ndarray:
-    q = np.ascontiguousarray(q, dtype=np.float64)
-    if q.ndim != 2 or q.shape[1] != 3:
-        raise ValueError(f"control points must have shape (N, 3), got {q.shape}")
-    return q
-
-
-def smoothness_cost(q) -> tuple[float, np.ndarray]:
-    """``sum ||Q[i+3] - 3 Q[i+2] + 3 Q[i+1] - Q[i]||^2`` and its gradient (N, 3)."""
-    q = _as_points(q)
-    g = np.zeros_like(q)
-    return float(smoothness(q, 1.0, g)), g
-
-
 def distance_cost(q, esdf: EsdfGrid, dist0: float = 0.4, first: int = ORDER,
                   last: int | None = None) -> tuple[float, np.ndarray]:
     """``sum (d - dist0)^2`` over control points ``first .. last - 1`` (default: ``N - 3``)
     whose ESDF distance ``d`` is below ``dist0``, and its gradient (N, 3)."""
-    q = _as_points(q)
+    q = as_points(q)
     n = q.shape[0]
     last = n - ORDER if last is None else int(last)
     g = np.zeros_like(q)
@@ -268,14 +206,14 @@ def distance_cost(q, esdf: EsdfGrid, dist0: float = 0.4, first: int = ORDER,
 
 def feasibility_cost(q, ts: float, vmax: float, amax: float) -> tuple[float, np.ndarray]:
     """Per-axis ``(V^2 - vmax^2)^2`` and ``(A^2 - amax^2)^2`` beyond the limits."""
-    q = _as_points(q)
+    q = as_points(q)
     g = np.zeros_like(q)
     return float(feasibility(q, float(ts), float(vmax), float(amax), 1.0, g)), g
 
 
 def endpoint_cost(q, end_pt) -> tuple[float, np.ndarray]:
     """``||(Q[N-3] + 4 Q[N-2] + Q[N-1]) / 6 - end_pt||^2``."""
-    q = _as_points(q)
+    q = as_points(q)
     g = np.zeros_like(q)
     e = np.asarray(end_pt, dtype=np.float64).reshape(3)
     return float(endpoint(q, e, 1.0, g)), g
@@ -290,7 +228,7 @@ def total_cost(q, ts: float, esdf: EsdfGrid, params: FastParams | None = None,
     """The weighted sum the optimiser minimises and its gradient (N, 3) (gradients of the
     fixed rows included)."""
     p = params or FastParams()
-    q = _as_points(q)
+    q = as_points(q)
     g = np.zeros_like(q)
     e = _curve_end(q) if end_pt is None else np.asarray(end_pt, dtype=np.float64).reshape(3)
     f = fast_planner_cost(q, g, _weights(p), float(ts), p.max_vel, p.max_acc, p.dist0,
@@ -303,7 +241,7 @@ def cost_terms(q, ts: float, esdf: EsdfGrid, params: FastParams | None = None,
                free_end: bool = False, end_pt=None) -> dict:
     """The unweighted terms {smooth, distance, feasibility, endpoint} and the total."""
     p = params or FastParams()
-    q = _as_points(q)
+    q = as_points(q)
     e = _curve_end(q) if end_pt is None else np.asarray(end_pt, dtype=np.float64).reshape(3)
     terms = np.zeros(4)
     f = fast_planner_cost(q, np.zeros_like(q), _weights(p), float(ts), p.max_vel, p.max_acc,
@@ -320,7 +258,8 @@ def _curve_end(q: np.ndarray) -> np.ndarray:
 # ---------------------------------------------------------------------------------------
 # the optimiser
 # ---------------------------------------------------------------------------------------
-_STOP = {0: "evaluation_cap", 1: "xtol", 2: "zero_gradient", 3: "line_search"}
+_STOP = {MAX_EVALUATIONS: "evaluation_cap", CONVERGED: "xtol", ZERO_GRADIENT: "zero_gradient",
+         LINE_SEARCH: "line_search"}
 
 
 @dataclass(frozen=True, eq=False)
@@ -359,14 +298,15 @@ class FastOptimizer:
         q = np.array(spline.control_points, dtype=np.float64)
         end_pt = _curve_end(q)
         f_init, _ = total_cost(q, spline.dt, esdf, p, free_end, end_pt)
-        out = np.zeros(4)
         hi = n if free_end else n - ORDER
-        _lbfgs(q, ORDER, hi, p.lbfgs_memory, p.max_evaluations, p.xtol_rel, _weights(p),
-               spline.dt, p.max_vel, p.max_acc, p.dist0, bool(free_end), end_pt, esdf.field,
-               esdf.origin, 1.0 / esdf.resolution, out)
-        return FastResult(spline=spline.with_control_points(q), evaluations=int(out[0]),
-                          iterations=int(out[1]), cost=float(out[2]), initial_cost=f_init,
-                          stop=_STOP[int(out[3])], free_end=bool(free_end),
+        st = p.lbfgs_rules().start(q[ORDER:hi])
+        code = minimise(st, q, ORDER, hi, _weights(p), spline.dt, p.max_vel, p.max_acc,
+                        p.dist0, bool(free_end), end_pt, esdf.field, esdf.origin,
+                        1.0 / esdf.resolution, False)
+        return FastResult(spline=spline.with_control_points(q),
+                          evaluations=int(st.ints[EVALUATIONS]),
+                          iterations=int(st.ints[ITERATIONS]), cost=float(st.reals[F_BEST]),
+                          initial_cost=f_init, stop=_STOP[int(code)], free_end=bool(free_end),
                           time_s=time.perf_counter() - t0)
 
 

@@ -15,7 +15,8 @@ Each kernel returns its unweighted cost and adds ``w`` times its gradient to ``g
   end);
 
 and :func:`fast_planner_cost`, Fast-Planner's ``NORMAL_PHASE`` cost (+ ``ENDPOINT``), the
-weighted sum both Fast-Planner's and PGO's optimisers minimise.
+weighted sum both Fast-Planner's and PGO's optimisers minimise. :func:`as_points` and
+:func:`smoothness_cost` are the Python faces EGO's and Fast-Planner's modules share.
 """
 
 from __future__ import annotations
@@ -127,3 +128,18 @@ def fast_planner_cost(q, grad, w, ts, vmax, amax, d0, free_end, end_pt, field, o
     terms[2] = feasibility(q, ts, vmax, amax, w[2], grad)
     terms[3] = endpoint(q, end_pt, w[3], grad) if free_end else 0.0
     return w[0] * terms[0] + w[1] * terms[1] + w[2] * terms[2] + w[3] * terms[3]
+
+
+def as_points(q) -> np.ndarray:
+    """``q`` as a contiguous float ``(N, 3)`` array (a ValueError for any other shape)."""
+    q = np.ascontiguousarray(q, dtype=np.float64)
+    if q.ndim != 2 or q.shape[1] != 3:
+        raise ValueError(f"control points must have shape (N, 3), got {q.shape}")
+    return q
+
+
+def smoothness_cost(q) -> tuple[float, np.ndarray]:
+    """``sum ||Q[i+3] - 3 Q[i+2] + 3 Q[i+1] - Q[i]||^2`` and its gradient ``(N, 3)``."""
+    q = as_points(q)
+    grad = np.zeros_like(q)
+    return float(smoothness(q, 1.0, grad)), grad

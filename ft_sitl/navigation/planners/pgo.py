@@ -64,6 +64,8 @@ from scipy.interpolate import BSpline
 
 from ft_sitl.navigation.base import Observation, Task
 from ft_sitl.navigation.maps.esdf import EsdfGrid
+from ft_sitl.navigation.optimisers.fast import minimise
+from ft_sitl.navigation.optimisers.lbfgs import EVALUATIONS, UNLIMITED, LbfgsRules, StopRule
 from ft_sitl.navigation.optimisers.penalties import fast_planner_cost
 from ft_sitl.navigation.planners.astar import OccupancyView
 from ft_sitl.navigation.planners.skeleton import (
@@ -151,9 +153,19 @@ class PgoParams:
             if isinstance(v, bool) or not isinstance(v, int) or v < 1:
                 raise ValueError(f"PgoParams.{name} must be a positive integer, got {v!r}")
 
+    def lbfgs_rules(self) -> LbfgsRules:
+        """The normal phase's solve: the shared L-BFGS as PGO's own loop was written
+        (numpy's BLAS dot products, stop when no variable moves by more than ``xtol_rel``
+        relative, no line-search trial cap but the ``max_evaluations`` budget, a NaN
+        trial passes the Armijo test), keeping the best point evaluated."""
+        return LbfgsRules(memory=self.lbfgs_memory, stop=StopRule.VARIABLES,
+                          tolerance=self.xtol_rel, max_evaluations=self.max_evaluations,
+                          line_search_trials=UNLIMITED, blas_dot=True,
+                          keep_best=True, nan_passes_armijo=True)
+
 
 # ---------------------------------------------------------------------------------------
-# Fast-Planner's normal cost and an L-BFGS over it (numba)
+# Fast-Planner's normal cost
 # ---------------------------------------------------------------------------------------
 @njit(cache=True)
 def _normal_cost(q, grad, dt, ws, wd, wf, d0, vmax, amax, fld, origin, res):
@@ -164,127 +176,6 @@ def _normal_cost(q, grad, dt, ws, wd, wf, d0, vmax, amax, fld, origin, res):
     Fills ``grad`` (all rows)."""
     return fast_planner_cost(q, grad, np.array([ws, wd, wf, 0.0]), dt, vmax, amax, d0, False,
                              np.zeros(3), fld, origin, 1.0 / res, True, np.zeros(4))
-
-
-@njit(cache=True)
-def _eval(x, q, grad, gx, lo_i, hi_i, dt, ws, wd, wf, d0, vmax, amax, fld, origin, res):
-    k = 0
-    for i in range(lo_i, hi_i):
-        for d in range(3):
-            q[i, d] = x[k]
-            k += 1
-    f = _normal_cost(q, grad, dt, ws, wd, wf, d0, vmax, amax, fld, origin, res)
-    k = 0
-    for i in range(lo_i, hi_i):
-        for d in range(3):
-            gx[k] = grad[i, d]
-            k += 1
-    return f
-
-
-@njit(cache=True)
-def _lbfgs(q, lo_i, hi_i, max_evals, memory, xtol, dt, ws, wd, wf, d0, vmax, amax, fld,
-           origin, res):
-    """Minimise the normal cost over rows ``lo_i .. hi_i - 1`` of ``q`` (in place; ``q``
-    ends at the lowest-cost point evaluated, as Fast-Planner keeps its best). L-BFGS with
-    a weak-Wolfe bracketing line search (c1 1e-4, c2 0.9); stops after ``max_evals``
-    cost evaluations or when no variable moves by more than ``xtol`` relative.
-    Returns (evaluations, best cost)."""
-    nv = 3 * (hi_i - lo_i)
-    grad = np.zeros_like(q)
-    x = np.empty(nv)
-    k = 0
-    for i in range(lo_i, hi_i):
-        for d in range(3):
-            x[k] = q[i, d]
-            k += 1
-    g = np.empty(nv)
-    f = _eval(x, q, grad, g, lo_i, hi_i, dt, ws, wd, wf, d0, vmax, amax, fld, origin, res)
-    evals = 1
-    best_f = f
-    best_x = x.copy()
-    S = np.zeros((memory, nv))
-    Y = np.zeros((memory, nv))
-    rho = np.zeros(memory)
-    alpha = np.zeros(memory)
-    count = 0
-    head = 0
-    xn = np.empty(nv)
-    gn = np.empty(nv)
-    dvec = np.empty(nv)
-    while evals < max_evals and nv > 0:
-        for i in range(nv):
-            dvec[i] = -g[i]
-        for c in range(count):
-            j = (head - 1 - c) % memory
-            a = rho[j] * np.dot(S[j], dvec)
-            alpha[j] = a
-            dvec -= a * Y[j]
-        if count > 0:
-            j = (head - 1) % memory
-            dvec *= 1.0 / (rho[j] * np.dot(Y[j], Y[j]))
-        for c in range(count - 1, -1, -1):
-            j = (head - 1 - c) % memory
-            b = rho[j] * np.dot(Y[j], dvec)
-            dvec += S[j] * (alpha[j] - b)
-        dg = np.dot(dvec, g)
-        if not dg < 0.0:
-            count = 0
-            for i in range(nv):
-                dvec[i] = -g[i]
-            dg = -np.dot(g, g)
-        if dg == 0.0:
-            break
-        step = 1.0 if count > 0 else min(1.0, 1.0 / math.sqrt(-dg))
-        s_lo = 0.0
-        s_hi = np.inf
-        ok = False
-        fn = f
-        while evals < max_evals:
-            for i in range(nv):
-                xn[i] = x[i] + step * dvec[i]
-            fn = _eval(xn, q, grad, gn, lo_i, hi_i, dt, ws, wd, wf, d0, vmax, amax, fld,
-                       origin, res)
-            evals += 1
-            if fn < best_f:
-                best_f = fn
-                best_x[:] = xn
-            if fn > f + 1e-4 * step * dg:
-                s_hi = step
-            elif np.dot(gn, dvec) < 0.9 * dg:
-                s_lo = step
-            else:
-                ok = True
-                break
-            step = 0.5 * (s_lo + s_hi) if s_hi < np.inf else 2.0 * step
-            if step < 1e-16 or step > 1e16:
-                break
-        if not ok:
-            break
-        sy = 0.0
-        moved = False
-        for i in range(nv):
-            si = xn[i] - x[i]
-            S[head, i] = si
-            Y[head, i] = gn[i] - g[i]
-            sy += si * Y[head, i]
-            if abs(si) > xtol * 0.5 * (abs(xn[i]) + abs(x[i])):
-                moved = True
-        if sy > 1e-16:
-            rho[head] = 1.0 / sy
-            head = (head + 1) % memory
-            count = min(count + 1, memory)
-        x[:] = xn
-        g[:] = gn
-        f = fn
-        if not moved:
-            break
-    k = 0
-    for i in range(lo_i, hi_i):
-        for d in range(3):
-            q[i, d] = best_x[k]
-            k += 1
-    return evals, best_f
 
 
 # ---------------------------------------------------------------------------------------
@@ -304,11 +195,12 @@ def normal_phase(spline: UniformBSpline, grid: EsdfGrid,
     _check(spline)
     p = params if params is not None else PgoParams()
     q = np.array(spline.control_points)
-    n = q.shape[0]
-    evals, _ = _lbfgs(q, ORDER, n - ORDER, p.max_evaluations, p.lbfgs_memory, p.xtol_rel,
-                      spline.dt, p.w_smooth, p.w_distance, p.w_feasibility, p.dist0,
-                      p.max_vel, p.max_acc, grid.field, grid.origin, grid.resolution)
-    return spline.with_control_points(q), int(evals)
+    hi = q.shape[0] - ORDER
+    st = p.lbfgs_rules().start(q[ORDER:hi])
+    minimise(st, q, ORDER, hi, np.array([p.w_smooth, p.w_distance, p.w_feasibility, 0.0]),
+             spline.dt, p.max_vel, p.max_acc, p.dist0, False, np.zeros(3), grid.field,
+             grid.origin, 1.0 / grid.resolution, True)
+    return spline.with_control_points(q), int(st.ints[EVALUATIONS])
 
 
 def normal_cost(spline: UniformBSpline, grid: EsdfGrid,
