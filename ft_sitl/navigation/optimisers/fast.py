@@ -346,11 +346,16 @@ class KnotBSpline(Trajectory):
     Still a second B-spline class beside
     :class:`~ft_sitl.navigation.trajectories.bspline.UniformBSpline` (issue 42, point 3,
     left open): this one evaluates by de Boor (scipy's BSpline, :func:`_deboor`) and takes
-    velocity control points from knot differences, the uniform one by the matrix form and
-    ``diff / dt``: the same curve in different floating-point operations, and Fast-Planner's
-    rows were flown with this arithmetic even on uniform knots (a plan needing no
-    re-timing). One class must therefore choose its evaluation by how it was built, not by
-    its knots; that was not done in this change."""
+    velocity control points from knot differences (``3 diff(c) / (u[i+4] - u[i+1])``), the
+    uniform one by the matrix form and ``diff(c) / dt``: the same curve in different
+    floating-point operations, and Fast-Planner's rows were flown with this arithmetic even
+    on uniform knots (a plan needing no re-timing, built by :meth:`from_uniform`). One class
+    must therefore take its evaluation (matrix form or de Boor, and with it the
+    derivative-control-point arithmetic) as a constructor argument, not infer it from its
+    knots, and keep this one's ``(N, d)`` control points (the 1-D yaw curve) and cubic-only
+    re-timing. Nothing stops that merge bit for bit; it was not done in the change that
+    merged the L-BFGS loops (time), so the two classes stay, both implementing
+    :class:`~ft_sitl.navigation.trajectories.base.Trajectory`."""
 
     __slots__ = ("_c", "_u", "_b", "_tck")
 
