@@ -47,6 +47,7 @@ from pathlib import Path
 from pebble import ProcessExpired, ProcessPool
 
 from ft_sitl import __version__, numeric_env
+from ft_sitl.missions.child_pool import ChildDied, ChildPool
 from ft_sitl.missions.resources import RESOURCES
 from ft_sitl.missions.spec import TrialSpec
 from ft_sitl.provenance import code_digest
@@ -91,8 +92,7 @@ def worker_info() -> dict:
     return {"version": __version__, "code": code_digest(),
             "isa": numeric_env.expected_level(),
             "python": ".".join(map(str, sys.version_info[:3])),
-            "host": socket.gethostname(), "pid": os.getpid(),
-            "can_spawn": not mp.current_process().daemon}
+            "host": socket.gethostname(), "pid": os.getpid()}
 
 
 def worker_label() -> str:
@@ -100,7 +100,7 @@ def worker_label() -> str:
 
 
 # --- worker processes -------------------------------------------------------------------------
-def _worker_init(parent_pid: int | None = None, grid_dir: str | None = None) -> None:
+def worker_init(parent_pid: int | None = None, grid_dir: str | None = None) -> None:
     signal.signal(signal.SIGINT, signal.SIG_IGN)  # the parent handles Ctrl-C
     _die_with_parent(parent_pid)
     if grid_dir is not None:
@@ -131,7 +131,7 @@ def _labelled(fn: Callable, chunk: list[dict]) -> tuple[str, list]:
 def new_pool(workers: int, grid_dir: str | None):
     """A pebble pool of ``workers`` spawned processes (ft_sitl imported first in each, so
     its BLAS settings hold) sharing distance grids through ``grid_dir``."""
-    return ProcessPool(max_workers=workers, initializer=_worker_init,
+    return ProcessPool(max_workers=workers, initializer=worker_init,
                        initargs=(os.getpid(), grid_dir), context=mp.get_context("spawn"))
 
 
@@ -155,7 +155,7 @@ def supervise(pool, fn: Callable, trials: list[dict], budget_s: float | None,
                 yield fut.result()
             except TimeoutError:
                 yield "killed", [marker(d, overrun_detail(budget_s))]
-            except ProcessExpired:
+            except (ProcessExpired, ChildDied):
                 deaths[trial_id(d)] += 1
                 if deaths[trial_id(d)] <= DEATH_RETRIES:
                     queue.appendleft(d)
@@ -272,7 +272,9 @@ def dask_chunk(fn: Callable, chunk: list[dict], code: str,
         if _DASK_POOL is None or not _DASK_POOL.active:
             grids = Path(tempfile.gettempdir()) / f"ft-sitl-grids-{code[:12]}"
             grids.mkdir(exist_ok=True)
-            _DASK_POOL = new_pool(1, str(grids))
+            # (started with subprocess: a default Dask worker is a daemonic process, from
+            # which multiprocessing, and so pebble, may not start children)
+            _DASK_POOL = ChildPool(str(grids))
         pool = _DASK_POOL
     results = []
     for _, res in supervise(pool, fn, chunk, budget_s, 1):
@@ -307,14 +309,11 @@ class DaskExecutor(Executor):
         self._cluster = None
 
     def start(self) -> None:
-        import dask  # (dask and distributed load only where Dask is used: ~1 s)
-        from distributed import Client, LocalCluster  # (likewise)
+        from distributed import Client, LocalCluster  # (loads only where Dask is used: ~1 s)
         if self.scheduler is None:
-            # trials fly in a process of each worker's own: workers must not be daemons
-            with dask.config.set({"distributed.worker.daemon": False}):
-                self._cluster = LocalCluster(
-                    n_workers=self.local_workers, threads_per_worker=1, processes=True,
-                    dashboard_address="127.0.0.1:0", silence_logs=logging.ERROR)
+            self._cluster = LocalCluster(
+                n_workers=self.local_workers, threads_per_worker=1, processes=True,
+                dashboard_address="127.0.0.1:0", silence_logs=logging.ERROR)
             self.client = Client(self._cluster)
         else:
             try:
@@ -327,7 +326,7 @@ class DaskExecutor(Executor):
 
     def check_workers(self) -> dict:
         """Every connected worker's :func:`worker_info`; ExecutorError naming the workers
-        that run other code or cannot start the process trials fly in."""
+        that run other code."""
         infos = self.client.run(worker_info)
         mine = worker_info()
         problems = []
@@ -336,10 +335,6 @@ class DaskExecutor(Executor):
                 problems.append(f"{addr} runs ft-sitl {info['version']} with code digest "
                                 f"{info['code'][:12]}, this campaign {mine['version']} "
                                 f"({mine['code'][:12]}): install the same ft-sitl there")
-            elif not info["can_spawn"]:
-                problems.append(f"{addr} is a daemonic process and cannot start the "
-                                f"process its trials fly in: start the workers with "
-                                f"DASK_DISTRIBUTED__WORKER__DAEMON=False (docs/distributed.md)")
         if problems:
             raise ExecutorError("workers refused:\n  " + "\n  ".join(problems))
         return infos

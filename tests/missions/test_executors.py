@@ -25,7 +25,7 @@ import pytest
 from ft_sitl.cli import main as cli_main
 from ft_sitl.missions.campaign import run_campaign
 from ft_sitl.missions.campaign_file import load_campaign
-from ft_sitl.missions.executors import KILL_GRACE_S, DaskExecutor, ExecutorError
+from ft_sitl.missions.executors import DIED_DETAIL, KILL_GRACE_S, DaskExecutor, ExecutorError
 from ft_sitl.missions.results import COLUMNS
 from ft_sitl.provenance import code_digest
 from tests.missions.conftest import EXE, campaign_file, read_jsonl, run_exe, write_yard
@@ -98,7 +98,7 @@ class Cluster:
     """``dask scheduler`` and ``dask worker`` processes on loopback."""
 
     def __init__(self, env: dict, log_dir: Path):
-        self.env = {**env, "DASK_DISTRIBUTED__WORKER__DAEMON": "False"}
+        self.env = dict(env)  # default workers: daemonic processes, as dask-jobqueue's
         self.log_dir = log_dir
         self.port = _free_port()
         self.address = f"tcp://127.0.0.1:{self.port}"
@@ -276,31 +276,47 @@ def test_a_local_dask_cluster_flies_the_campaign(forty, cli_env, tmp_path):
     assert (run["executor"], run["scheduler"], run["workers"]) == ("dask", "local cluster", 2)
 
 
-def test_workers_with_other_code_or_that_cannot_spawn_are_refused(cluster, monkeypatch,
-                                                                  cli_env):
+def test_default_daemonic_workers_fly_trials_in_a_child_that_dies_alone(tmp_path, cluster,
+                                                                        cli_env):
+    """Workers started the default way (daemonic, as dask-jobqueue and managed clusters
+    start them) fly each trial in a child of their own started with subprocess: a
+    navigator hung in compiled code is killed at its budget, one that kills its process
+    fails alone (after one more try in a fresh child), and the others fly."""
+    import multiprocessing as mp
+
+    from distributed import Client
+
+    with Client(cluster.address, timeout=60) as c:
+        assert all(c.run(lambda: mp.current_process().daemon).values())
+    write_yard(tmp_path)
+    campaign = campaign_file(tmp_path, "bad.toml", SPIN.replace(
+        'algorithms = ["straight", "t_spin"]', 'algorithms = ["straight", "t_spin", '
+        '"t_killer"]'))
+    budget = 60.0  # (a fresh child builds the scene and loads compiled kernels first)
+    env = {**cli_env, "FT_SITL_TRIAL_WALL_BUDGET_S": str(budget)}
+    proc = run_exe("campaign", "run", campaign, "--out", tmp_path / "out", "--scheduler",
+                   cluster.address, "--chunk-size", "1", "--no-report", "--quiet", env=env,
+                   timeout=600)
+    assert proc.returncode == 0, proc.stderr
+    rows = read_jsonl(tmp_path / "out" / "trials.jsonl")
+    by = collections.defaultdict(list)
+    for r in rows:
+        by[r["algorithm"]].append(r)
+    assert {k: len(v) for k, v in by.items()} == {"straight": 2, "t_spin": 2, "t_killer": 2}
+    assert [r["reason"] for r in by["straight"]] == ["timeout", "timeout"]
+    assert {r["detail"] for r in by["t_spin"]} == {
+        f"the trial overran its wall-clock budget of {budget:g} s without returning to the "
+        "simulator (hung in compiled code?); its worker process was killed"}
+    assert {r["detail"] for r in by["t_killer"]} == {DIED_DETAIL}
+    assert all(r["reason"] == "navigator_error" for r in by["t_spin"] + by["t_killer"])
+    with Client(cluster.address, timeout=60) as c:
+        assert len(c.scheduler_info()["workers"]) == 2  # no worker was lost on the way
+
+
+def test_workers_with_other_code_are_refused(cluster, monkeypatch):
     ex = DaskExecutor(scheduler=cluster.address)
     ex.start()
     try:
-        # a worker started without DASK_DISTRIBUTED__WORKER__DAEMON=False
-        cluster.env = cli_env
-        cluster._spawn("worker", "worker", cluster.address, "--nthreads", "1",
-                       "--host", "127.0.0.1", "--dashboard-address", "127.0.0.1:0",
-                       "--death-timeout", "60")
-        ex.client.wait_for_workers(3, timeout=120)
-        with pytest.raises(ExecutorError) as exc:
-            ex.check_workers()
-        lines = str(exc.value).splitlines()
-        assert len(lines) == 2, lines
-        assert lines[1].endswith("is a daemonic process and cannot start the process its "
-                                 "trials fly in: start the workers with "
-                                 "DASK_DISTRIBUTED__WORKER__DAEMON=False "
-                                 "(docs/distributed.md)")
-        cluster.procs.pop().kill()  # (its nanny; the worker follows)
-        deadline = time.monotonic() + 60
-        while len(ex.client.scheduler_info()["workers"]) > 2:
-            assert time.monotonic() < deadline
-            time.sleep(0.2)
-
         import ft_sitl.missions.executors as executors
         real = executors.code_digest()
         monkeypatch.setattr(executors, "code_digest", lambda: "0" * 64)
