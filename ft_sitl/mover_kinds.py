@@ -7,6 +7,10 @@ mesh library."""
 #: the shapes of movers, in the order of their codes in ``scenarios.movers.Movers.kind``
 #: (CYLINDER, BOX, SPHERE)
 SHAPES = ("person", "box", "sphere")
+#: each shape's size fields (m), in the order the movers' descriptions and the bus's
+#: movers payload give them: a person is an upright cylinder, a box its edge lengths
+SIZE_FIELDS = {"person": ("radius_m", "height_m"), "box": ("length_m", "width_m", "height_m"),
+               "sphere": ("radius_m",)}
 #: the most movers one field holds (the upper bound of the ``count`` setting), and so the
 #: most one movers payload carries
 MAX_MOVERS = 64

@@ -52,7 +52,7 @@ import numpy as np
 from msgspec import UNSET, Meta, Struct, UnsetType
 
 from ft_sitl.bus.topics import check_vehicle
-from ft_sitl.mover_kinds import MAX_MOVERS
+from ft_sitl.mover_kinds import MAX_MOVERS, SIZE_FIELDS
 from ft_sitl.mover_kinds import SHAPES as MOVER_SHAPES
 from ft_sitl.rotations import matrix_from_quat, quat_from_matrix
 
@@ -681,8 +681,6 @@ def decode_status(payload) -> Status:
 # --- movers ---------------------------------------------------------------------------------
 # MAX_MOVERS (ft_sitl.mover_kinds): the most movers in one payload, as in one field.
 #: The size fields each shape carries (m): as ``scenarios.movers.Movers.describe``.
-MOVER_SIZES = {"person": ("radius_m", "height_m"), "box": ("length_m", "width_m", "height_m"),
-               "sphere": ("radius_m",)}
 #: Decimal places kept in a movers payload: 0.1 mm, 0.1 mm/s, 1 urad, 0.1 mm.
 _MOVER_DECIMALS = {"p_world_m": 4, "v_world_m_s": 4, "heading_rad": 6, "size": 4}
 MoverShape = Annotated[str, Meta(pattern=f"^({'|'.join(MOVER_SHAPES)})$",
@@ -713,7 +711,7 @@ class MoverState(Struct, frozen=True, forbid_unknown_fields=True, omit_defaults=
 
     def __post_init__(self):
         what = f"movers: {self.name!r}"
-        sizes = MOVER_SIZES[self.shape]
+        sizes = SIZE_FIELDS[self.shape]
         for key in ("radius_m", "height_m", "length_m", "width_m"):
             given = getattr(self, key) is not UNSET
             if given != (key in sizes):
@@ -799,7 +797,7 @@ def encode_movers(states: MoverStates) -> bytes:
     dec = _MOVER_DECIMALS
     movers = []
     for m in states.movers:
-        sizes = {k: round(getattr(m, k), dec["size"]) for k in MOVER_SIZES[m.shape]}
+        sizes = {k: round(getattr(m, k), dec["size"]) for k in SIZE_FIELDS[m.shape]}
         movers.append(msgspec.structs.replace(
             m, p_world_m=_round(m.p_world_m, dec["p_world_m"]),
             v_world_m_s=_round(m.v_world_m_s, dec["v_world_m_s"]),

@@ -49,7 +49,7 @@ from dataclasses import dataclass, replace
 import numpy as np
 from numba import njit
 
-from ft_sitl.mover_kinds import MAX_MOVERS, SHAPES
+from ft_sitl.mover_kinds import MAX_MOVERS, SHAPES, SIZE_FIELDS
 from ft_sitl.scenarios.solvability import segment_mesh_distance
 from ft_sitl.schema import Param, Schema, SchemaError
 
@@ -221,10 +221,10 @@ class Movers:
         out = []
         for j in range(self.count):
             k = int(self.kind[j])
-            size = {CYLINDER: {"radius_m": self.dims[j, 0], "height_m": 2 * self.dims[j, 1]},
-                    BOX: {"length_m": 2 * self.dims[j, 0], "width_m": 2 * self.dims[j, 1],
-                          "height_m": 2 * self.dims[j, 2]},
-                    SPHERE: {"radius_m": self.dims[j, 0]}}[k]
+            d = self.dims[j]
+            values = {CYLINDER: (d[0], 2 * d[1]), BOX: (2 * d[0], 2 * d[1], 2 * d[2]),
+                      SPHERE: (d[0],)}[k]
+            size = dict(zip(SIZE_FIELDS[SHAPES[k]], values, strict=True))
             out.append({"name": self.names[j], "shape": SHAPES[k], "path": self.paths[j],
                         **{a: round(float(b), 4) for a, b in size.items()},
                         "speed_m_s": float(self.speed[j]),

@@ -26,9 +26,10 @@ import threading
 
 import numpy as np
 
-from ft_sitl.bus.codec import MOVER_SIZES, EventType, MoverStates, Telemetry
+from ft_sitl.bus.codec import EventType, MoverStates, Telemetry
 from ft_sitl.bus.publisher import BusPublisher
 from ft_sitl.bus.ratelimit import RateGate
+from ft_sitl.mover_kinds import SIZE_FIELDS
 from ft_sitl.scenarios.camera import DepthCamera, camera_config
 from ft_sitl.sim.guard import GuardEventKind
 
@@ -137,7 +138,7 @@ class SitlBus:
         """The bus payload of ``movers`` (scenarios.movers.Movers) at simulated time t_us."""
         if movers is not self._movers:  # names, shapes and sizes: once per field
             self._movers = movers
-            self._mover_static = [{k: d[k] for k in ("name", "shape", *MOVER_SIZES[d["shape"]])}
+            self._mover_static = [{k: d[k] for k in ("name", "shape", *SIZE_FIELDS[d["shape"]])}
                                   for d in movers.describe()]
         poses, vel = movers.poses(t_us), movers.velocities(t_us)
         return MoverStates(t_us, [
