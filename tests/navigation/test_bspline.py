@@ -1,15 +1,23 @@
-"""Uniform B-splines: evaluation against scipy and finite differences, fitting, re-timing."""
+"""B-splines, both evaluations (matrix form and de Boor): against scipy and finite
+differences, against each other, fitting, re-timing."""
 
 import numpy as np
 import pytest
-from scipy.interpolate import BSpline
+from scipy.interpolate import BSpline as ScipyBSpline
 
-from ft_sitl.navigation.trajectories.bspline import UniformBSpline, basis_matrix, fit_samples
+from ft_sitl.navigation.trajectories.bspline import (
+    BSpline,
+    Evaluation,
+    basis_matrix,
+    fit_samples,
+)
+
+BOTH = list(Evaluation)
 
 
-def _random_spline(degree=3, n=12, dt=0.3, seed=0):
+def _random_spline(degree=3, n=12, dt=0.3, seed=0, evaluation=Evaluation.MATRIX):
     rng = np.random.default_rng(seed)
-    return UniformBSpline(rng.normal(size=(n, 3)) * 2.0, dt, degree)
+    return BSpline(rng.normal(size=(n, 3)) * 2.0, dt, degree, evaluation=evaluation)
 
 
 def test_cubic_basis_matrix_is_the_textbook_one():
@@ -26,12 +34,13 @@ def test_basis_is_a_partition_of_unity(degree):
     assert np.all(w >= -1e-12)
 
 
+@pytest.mark.parametrize("evaluation", BOTH)
 @pytest.mark.parametrize("degree", [1, 2, 3, 4, 5])
-def test_evaluation_matches_scipy_bspline_with_the_same_knots(degree):
-    sp = _random_spline(degree=degree, n=10, dt=0.25, seed=degree)
+def test_evaluation_matches_scipy_bspline_with_the_same_knots(degree, evaluation):
+    sp = _random_spline(degree=degree, n=10, dt=0.25, seed=degree, evaluation=evaluation)
     n = sp.num_control_points
     knots = (np.arange(n + degree + 1) - degree) * sp.dt
-    ref = BSpline(knots, np.array(sp.control_points), degree)
+    ref = ScipyBSpline(knots, np.array(sp.control_points), degree)
     t = np.concatenate([np.linspace(0, sp.duration, 97), sp.knot_times()])
     assert sp.duration == pytest.approx((n - degree) * 0.25)
     for order in range(degree + 1):
@@ -40,8 +49,9 @@ def test_evaluation_matches_scipy_bspline_with_the_same_knots(degree):
     np.testing.assert_allclose(sp.to_scipy()(t), ref(t), atol=1e-12)
 
 
-def test_scalar_and_vector_evaluation_agree_and_domain_is_clamped():
-    sp = _random_spline()
+@pytest.mark.parametrize("evaluation", BOTH)
+def test_scalar_and_vector_evaluation_agree_and_domain_is_clamped(evaluation):
+    sp = _random_spline(evaluation=evaluation)
     t = np.array([0.0, 0.41, 1.7, sp.duration])
     vec = sp.position(t)
     for i, ti in enumerate(t):
@@ -52,9 +62,10 @@ def test_scalar_and_vector_evaluation_agree_and_domain_is_clamped():
     assert np.all(sp.evaluate(t, 4) == 0.0)
 
 
+@pytest.mark.parametrize("evaluation", BOTH)
 @pytest.mark.parametrize("degree", [1, 2, 3, 5])
-def test_pva_is_evaluate_of_orders_0_to_2_at_one_time(degree):
-    sp = _random_spline(degree=degree, n=9, dt=0.37, seed=10 + degree)
+def test_pva_is_evaluate_of_orders_0_to_2_at_one_time(degree, evaluation):
+    sp = _random_spline(degree=degree, n=9, dt=0.37, seed=10 + degree, evaluation=evaluation)
     # inside, on the knots, and clamped outside the domain
     times = np.concatenate([np.linspace(-0.5, sp.duration + 0.5, 41), sp.knot_times()])
     for t in times:
@@ -65,8 +76,9 @@ def test_pva_is_evaluate_of_orders_0_to_2_at_one_time(degree):
         assert np.all(sp.pva(0.1)[2] == 0.0)  # above the degree: zero
 
 
-def test_derivatives_match_central_finite_differences():
-    sp = _random_spline(seed=3)
+@pytest.mark.parametrize("evaluation", BOTH)
+def test_derivatives_match_central_finite_differences(evaluation):
+    sp = _random_spline(seed=3, evaluation=evaluation)
     h = 1e-5
     # stay away from the knots, where the third derivative jumps
     t = (np.arange(sp.num_segments) + 0.37) * sp.dt
@@ -76,13 +88,15 @@ def test_derivatives_match_central_finite_differences():
         np.testing.assert_allclose(fn(t), fd, rtol=1e-5, atol=1e-5 * (1 + np.abs(lower).max()))
 
 
-def test_derivative_spline_has_difference_control_points_and_same_domain():
-    sp = _random_spline(seed=4)
+@pytest.mark.parametrize("evaluation", BOTH)
+def test_derivative_spline_has_difference_control_points_and_same_domain(evaluation):
+    sp = _random_spline(seed=4, evaluation=evaluation)
     vel = sp.derivative()
     acc = sp.derivative(2)
     np.testing.assert_allclose(vel.control_points, np.diff(sp.control_points, axis=0) / sp.dt)
     np.testing.assert_allclose(acc.control_points, sp.acceleration_control_points())
     assert vel.degree == 2 and acc.degree == 1
+    assert vel.evaluation is acc.evaluation is evaluation
     assert vel.duration == pytest.approx(sp.duration) == pytest.approx(acc.duration)
     t = np.linspace(0, sp.duration, 41)
     np.testing.assert_allclose(vel.position(t), sp.velocity(t), atol=1e-10)
@@ -103,7 +117,7 @@ def test_velocity_control_points_bound_the_curve_velocity_per_axis():
 def test_fit_recovers_a_spline_from_its_own_knots_and_end_derivatives():
     sp = _random_spline(seed=6, n=15, dt=0.2)
     T = sp.duration
-    fit = UniformBSpline.fit(sp.knot_points(), sp.dt, sp.velocity(0.0), sp.velocity(T),
+    fit = BSpline.fit(sp.knot_points(), sp.dt, sp.velocity(0.0), sp.velocity(T),
                              sp.acceleration(0.0), sp.acceleration(T))
     np.testing.assert_allclose(fit.control_points, sp.control_points, atol=1e-9)
 
@@ -111,7 +125,7 @@ def test_fit_recovers_a_spline_from_its_own_knots_and_end_derivatives():
 def test_fit_of_a_constant_speed_line_is_that_line():
     v = np.array([2.0, -1.0, 0.5])
     pts = np.array([1.0, 2.0, 3.0]) + np.arange(9)[:, None] * 0.1 * v
-    sp = UniformBSpline.fit(pts, 0.1, v, v, np.zeros(3), np.zeros(3))
+    sp = BSpline.fit(pts, 0.1, v, v, np.zeros(3), np.zeros(3))
     assert sp.num_control_points == 9 + 2
     t = np.linspace(0, sp.duration, 30)
     np.testing.assert_allclose(sp.velocity(t), np.tile(v, (30, 1)), atol=1e-9)
@@ -133,7 +147,7 @@ def test_fit_is_the_least_squares_solution_of_the_sample_and_end_equations():
     def basis(j, order, at):
         c = np.zeros(n)
         c[j] = 1.0
-        b = BSpline(knots, c, k)
+        b = ScipyBSpline(knots, c, k)
         return (b.derivative(order) if order else b)(at)
 
     rows = [[basis(j, 0, ti) for j in range(n)] for ti in t]
@@ -141,7 +155,7 @@ def test_fit_is_the_least_squares_solution_of_the_sample_and_end_equations():
                                                                  (2, T))]
     rhs = np.vstack([pts, v0, v1, a0, a1])
     want, *_ = np.linalg.lstsq(np.array(rows), rhs, rcond=None)
-    sp = UniformBSpline.fit(pts, dt, v0, v1, a0, a1)
+    sp = BSpline.fit(pts, dt, v0, v1, a0, a1)
     np.testing.assert_allclose(sp.control_points, want, atol=1e-9)
 
 
@@ -195,15 +209,99 @@ def test_fit_samples_follows_ego_spacing_rules_and_ends_on_the_end_point():
 
 def test_invalid_inputs_are_rejected():
     with pytest.raises(ValueError):
-        UniformBSpline(np.zeros((3, 3)), 0.1, 3)
+        BSpline(np.zeros((3, 3)), 0.1, 3)
     with pytest.raises(ValueError):
-        UniformBSpline(np.zeros((5, 2)), 0.1, 3)
+        BSpline(np.zeros((5, 3, 1)), 0.1, 3)
     with pytest.raises(ValueError):
-        UniformBSpline(np.zeros((5, 3)), 0.0, 3)
+        BSpline(np.zeros((5, 3)), 0.0, 3)
     with pytest.raises(ValueError):
-        UniformBSpline.fit(np.zeros((1, 3)), 0.1, *np.zeros((4, 3)))
+        BSpline.fit(np.zeros((1, 3)), 0.1, *np.zeros((4, 3)))
     with pytest.raises(ValueError):
         _random_spline().stretch_time(-1.0)
     sp = _random_spline()
     with pytest.raises(ValueError):
         sp.control_points[0, 0] = 1.0  # read-only
+    with pytest.raises(ValueError):
+        sp.knots[0] = 1.0
+    # dt or knots, not both, not neither; the matrix form needs uniform knots
+    with pytest.raises(ValueError):
+        BSpline(np.zeros((5, 3)), 0.1, knots=np.arange(9.0))
+    with pytest.raises(ValueError):
+        BSpline(np.zeros((5, 3)))
+    with pytest.raises(ValueError):
+        BSpline(np.zeros((5, 3)), knots=np.arange(9.0), evaluation=Evaluation.MATRIX)
+    with pytest.raises(ValueError):
+        BSpline(np.zeros((5, 3)), knots=[0, 1, 2, 2, 3, 4, 5, 6, 7])  # not increasing
+    with pytest.raises(ValueError):
+        BSpline(np.zeros((5, 3)), knots=np.arange(8.0))  # one short
+    with pytest.raises(ValueError):
+        BSpline(np.zeros((5, 3)), knots=np.arange(9.0)).stretch_time(2.0)  # no single dt
+    with pytest.raises(ValueError):
+        _random_spline(degree=4).reallocate_time(1.0, 1.0)  # Fast-Planner's: cubic only
+    with pytest.raises(ValueError):
+        _random_spline(degree=2).lengthen_time(1.5)
+    with pytest.raises(ValueError):
+        _random_spline().lengthen_time(0.0)
+
+
+@pytest.mark.parametrize("degree", [1, 2, 3, 4])
+def test_the_two_evaluations_are_the_same_curve(degree):
+    """Matrix form and de Boor agree to rounding on uniform knots (not bit for bit: they
+    are different operations, which is why the choice is the constructor's)."""
+    mat = _random_spline(degree=degree, n=11, dt=0.21, seed=20 + degree)
+    boor = mat.with_evaluation(Evaluation.DE_BOOR)
+    assert boor.evaluation is Evaluation.DE_BOOR and mat.evaluation is Evaluation.MATRIX
+    assert boor.duration == mat.duration and boor.uniform and boor.dt == mat.dt
+    np.testing.assert_array_equal(boor.knots, mat.knots)
+    t = np.concatenate([np.linspace(-0.2, mat.duration + 0.2, 53), mat.knot_times()])
+    for order in range(degree + 2):
+        np.testing.assert_allclose(boor.evaluate(t, order), mat.evaluate(t, order),
+                                   rtol=1e-9, atol=1e-9)
+    for order in range(degree + 1):
+        np.testing.assert_allclose(boor.derivative_control_points(order),
+                                   mat.derivative_control_points(order), rtol=1e-12,
+                                   atol=1e-9)
+    for ti in t[::7]:
+        for a, b in zip(boor.pva(float(ti)), mat.pva(float(ti))):
+            np.testing.assert_allclose(a, b, rtol=1e-9, atol=1e-9)
+    # operations keep the evaluation they were asked for
+    assert boor.stretch_time(1.5).evaluation is Evaluation.DE_BOOR
+    assert boor.with_control_points(mat.control_points * 2).evaluation is Evaluation.DE_BOOR
+    assert mat.stretch_time(1.5).evaluation is Evaluation.MATRIX
+
+
+def test_any_dimension_and_non_uniform_knots():
+    rng = np.random.default_rng(7)
+    knots = np.cumsum(rng.uniform(0.1, 0.5, 12))
+    yaw = BSpline(rng.normal(size=8), knots=knots)  # 1-D: one column
+    assert yaw.control_points.shape == (8, 1) and yaw.dim == 1
+    assert yaw.evaluation is Evaluation.DE_BOOR and not yaw.uniform
+    assert yaw.duration == pytest.approx(knots[8] - knots[3])
+    ref = ScipyBSpline(knots, yaw.control_points, 3)
+    t = np.linspace(0, yaw.duration, 31)
+    np.testing.assert_allclose(yaw.position(t), ref(t + knots[3]), atol=1e-12)
+    np.testing.assert_allclose(yaw.knot_times(), knots[3:9] - knots[3])
+    # derivative control points from knot differences bound the velocity (convex hull)
+    v = yaw.velocity(np.linspace(0, yaw.duration, 400))
+    assert np.abs(v).max() <= np.abs(yaw.velocity_control_points()).max() + 1e-12
+    vel = yaw.derivative()
+    np.testing.assert_allclose(vel.position(t), yaw.velocity(t), atol=1e-10)
+    plane = BSpline(rng.normal(size=(9, 2)), 0.2)  # 2-D, matrix form
+    assert plane.position(0.3).shape == (2,) and plane.pva(0.3)[2].shape == (2,)
+
+
+def test_lengthen_time_keeps_the_shape_and_the_end_speeds():
+    sp = _random_spline(seed=8, n=14, dt=0.2)
+    out = sp.lengthen_time(1.4)
+    assert out.evaluation is Evaluation.DE_BOOR
+    np.testing.assert_array_equal(out.control_points, sp.control_points)
+    # the duration grows by 0.4 of the stretched spans' (all but the first two and last two)
+    assert out.duration == pytest.approx(sp.duration + 0.4 * (sp.num_segments - 4) * sp.dt)
+    np.testing.assert_allclose(out.velocity(0.0), sp.velocity(0.0), atol=1e-9)
+    np.testing.assert_allclose(out.velocity(out.duration), sp.velocity(sp.duration),
+                               atol=1e-9)
+    np.testing.assert_allclose(out.position(out.duration), sp.position(sp.duration),
+                               atol=1e-9)
+    # too few knots to keep the ends: a uniform stretch
+    short = _random_spline(seed=9, n=7, dt=0.2).lengthen_time(2.0)
+    assert short.duration == pytest.approx(2.0 * 4 * 0.2)

@@ -15,7 +15,6 @@ from ft_sitl.navigation.maps.mapping import LocalMap
 from ft_sitl.navigation.optimisers.fast import (
     FastOptimizer,
     FastParams,
-    KnotBSpline,
     cost_terms,
     distance_cost,
     endpoint_cost,
@@ -26,7 +25,7 @@ from ft_sitl.navigation.optimisers.fast import (
 )
 from ft_sitl.navigation.planners.fast import FastPlanner, first_collision
 from ft_sitl.navigation.registry import available
-from ft_sitl.navigation.trajectories.bspline import UniformBSpline
+from ft_sitl.navigation.trajectories.bspline import BSpline, Evaluation
 from ft_sitl.scenarios.camera import CameraConfig, DepthCamera
 
 from .planner_util import obs_at, open_task
@@ -44,10 +43,10 @@ def cylinder_esdf(center=(3.0, 0.05), radius=0.5) -> EsdfGrid:
                      RES)
 
 
-def straight_spline(a, b, n=25, ts=0.125, speed=4.0) -> UniformBSpline:
+def straight_spline(a, b, n=25, ts=0.125, speed=4.0) -> BSpline:
     a, b = np.asarray(a, float), np.asarray(b, float)
     v = speed * (b - a) / np.linalg.norm(b - a)
-    return UniformBSpline.fit(np.linspace(a, b, n), ts, v, v, np.zeros(3), np.zeros(3))
+    return BSpline.fit(np.linspace(a, b, n), ts, v, v, np.zeros(3), np.zeros(3))
 
 
 def numeric_gradient(f, q, h=1e-6):
@@ -150,11 +149,12 @@ def test_optimiser_pushes_control_points_out_of_the_obstacle_band(pillar_map):
 
 # --- time re-allocation and yaw ---------------------------------------------------------
 @pytest.mark.parametrize("dim", [1, 3])
-def test_knot_spline_pva_is_evaluate_at_one_time(dim):
+def test_de_boor_pva_is_evaluate_at_one_time(dim):
     rng = np.random.default_rng(dim)
     for _ in range(10):
         n = int(rng.integers(4, 14))
-        spline = KnotBSpline(rng.normal(size=(n, dim)), np.cumsum(rng.uniform(0.05, 0.6, n + 4)))
+        spline = BSpline(rng.normal(size=(n, dim)),
+                         knots=np.cumsum(rng.uniform(0.05, 0.6, n + 4)))
         times = np.concatenate([rng.uniform(-0.5, spline.duration + 0.5, 30),
                                 [0.0, spline.duration], spline.knots[4:n] - spline.knots[3]])
         for t in times:
@@ -167,8 +167,8 @@ def test_knot_spline_pva_is_evaluate_at_one_time(dim):
 def test_time_reallocation_stretches_the_infeasible_spans_only():
     q = np.zeros((14, 3))
     q[:, 1] = np.cumsum(np.r_[0.0, [0.5] * 6, [1.0] * 3, [0.5] * 4])  # 4 m/s, then 8 m/s
-    spline = KnotBSpline.uniform(q, 0.125)
-    assert not spline.feasible(4.0, 20.0)
+    spline = BSpline(q, 0.125, evaluation=Evaluation.DE_BOOR)
+    assert not spline.feasibility(4.0, 20.0).ok
     out, passes = spline.retimed(4.0, 20.0, limit_ratio=1.1, passes=3)
     assert passes == 3
     np.testing.assert_array_equal(out.control_points, q)  # same geometry
@@ -181,7 +181,7 @@ def test_time_reallocation_stretches_the_infeasible_spans_only():
     assert v.max() < np.abs(spline.velocity_control_points()[:, 1]).max() / 1.2
     # too fast from the start: the start state is kept (the original's stretch of the
     # first intervals would change it)
-    fast = KnotBSpline.uniform(q, 0.05)
+    fast = BSpline(q, 0.05, evaluation=Evaluation.DE_BOOR)
     kept, _ = fast.retimed(4.0, 20.0)
     moved, _ = fast.retimed(4.0, 20.0, keep_start=False)
     for order in range(3):
@@ -190,7 +190,7 @@ def test_time_reallocation_stretches_the_infeasible_spans_only():
     assert np.linalg.norm(moved.velocity(0.0) - fast.velocity(0.0)) > 0.5
     assert kept.duration > fast.duration * 1.3 and moved.duration > fast.duration * 1.3
     # a feasible spline is left alone
-    slow = KnotBSpline.uniform(q, 0.5)
+    slow = BSpline(q, 0.5, evaluation=Evaluation.DE_BOOR)
     assert slow.retimed(4.0, 20.0) == (slow, 0)
     # derivatives of the non-uniform spline are consistent with its positions
     t = np.linspace(0.1, out.duration - 0.1, 7)
@@ -202,7 +202,7 @@ def test_time_reallocation_stretches_the_infeasible_spans_only():
 def test_yaw_points_ahead_continuously_from_the_start_state():
     q = np.zeros((20, 3))
     q[:, 1] = np.arange(20) * 0.5  # north at 4 m/s
-    pos = KnotBSpline.uniform(q, 0.125)
+    pos = BSpline(q, 0.125, evaluation=Evaluation.DE_BOOR)
     start = (-math.pi + 0.2 + 4 * math.pi, 0.5, 0.0)  # unwrapped, 2 turns up
     yaw = plan_yaw(pos, start)
     assert yaw.duration == pytest.approx(pos.duration)

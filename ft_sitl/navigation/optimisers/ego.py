@@ -2,7 +2,7 @@
 
 Behaviours and defaults are EGO-Planner's (Zhou et al., RA-L 2021; ZJU-FAST-Lab/ego-planner,
 see /work/shared/docs/planner-facts.md); the code is our own. The trajectory is a uniform
-cubic B-spline (:class:`~ft_sitl.navigation.trajectories.bspline.UniformBSpline`) with control
+cubic B-spline (:class:`~ft_sitl.navigation.trajectories.bspline.BSpline`) with control
 points
 ``Q[0..N-1]``; the first and last three are fixed (they pin the start and end state) and the
 interior ones are optimised.
@@ -107,7 +107,7 @@ from ft_sitl.navigation.optimisers.lbfgs import (
 )
 from ft_sitl.navigation.optimisers.penalties import as_points, smoothness, smoothness_cost
 from ft_sitl.navigation.planners.astar import AStarMemo, OccupancyView, search
-from ft_sitl.navigation.trajectories.bspline import Feasibility, UniformBSpline
+from ft_sitl.navigation.trajectories.bspline import BSpline, Feasibility
 
 __all__ = [
     "Anchors", "EgoOptimizer", "EgoParams", "EgoResult", "EgoStatus", "anchors_for_segment",
@@ -552,7 +552,7 @@ def anchors_for_segment(q: np.ndarray, segment: tuple[int, int], path: np.ndarra
     return len(js)
 
 
-def first_collision_time(spline: UniformBSpline, grid: OccupancyView,
+def first_collision_time(spline: BSpline, grid: OccupancyView,
                          fraction: float = 2.0 / 3.0) -> float | None:
     """Time of the first occupied sample of the curve over ``[0, fraction * duration)``,
     sampled at most half a voxel apart (the control-polygon length bounds the curve
@@ -587,7 +587,7 @@ class EgoResult:
     anchor pairs), wall time and, for refinements, ``info["ratio"]``."""
 
     status: EgoStatus
-    spline: UniformBSpline  # the last trajectory, also on failure
+    spline: BSpline  # the last trajectory, also on failure
     feasibility: Feasibility
     rebounds: int = 0
     rounds: int = 0
@@ -678,7 +678,7 @@ class EgoOptimizer:
                 p.fitness_along, p.fitness_across)
 
     # ---- public ------------------------------------------------------------------------
-    def rebound(self, spline: UniformBSpline) -> EgoResult:
+    def rebound(self, spline: BSpline) -> EgoResult:
         """EGO's ``BsplineOptimizeTrajRebound`` (with ``initControlPoints`` first)."""
         t0 = time.perf_counter()
         self._check_spline(spline)
@@ -739,7 +739,7 @@ class EgoOptimizer:
                          evaluations=evaluations, astar_calls=stats["astar_calls"],
                          time_s=time.perf_counter() - t0, anchors=len(anchors))
 
-    def refine(self, spline: UniformBSpline, v0, v1, a0, a1,
+    def refine(self, spline: BSpline, v0, v1, a0, a1,
                ratio: float | None = None) -> EgoResult:
         """EGO's ``refineTrajAlgo``: stretch time by ``ratio`` (default the spline's
         feasibility ratio, at least 1), re-fit the knot positions with the end derivatives
@@ -751,7 +751,7 @@ class EgoOptimizer:
         if ratio is None:
             ratio = spline.feasibility(p.max_vel, p.max_acc).ratio
         ratio = max(float(ratio), 1.0)
-        fitted = UniformBSpline.fit(spline.knot_points(), spline.dt * ratio, v0, v1, a0, a1)
+        fitted = BSpline.fit(spline.knot_points(), spline.dt * ratio, v0, v1, a0, a1)
         ref = fitted.knot_points()
         q = np.array(fitted.control_points)
         dt = fitted.dt
@@ -769,7 +769,7 @@ class EgoOptimizer:
                          rounds=1, iterations=it, evaluations=ev, refined=True,
                          time_s=time.perf_counter() - t0, info={"ratio": ratio})
 
-    def optimize(self, spline: UniformBSpline, v0, v1, a0, a1) -> EgoResult:
+    def optimize(self, spline: BSpline, v0, v1, a0, a1) -> EgoResult:
         """EGO's ``reboundReplan`` steps 2-3: :meth:`rebound`; if the result is infeasible
         (beyond ``feasibility_tolerance``), :meth:`refine` it with the end derivatives
         ``v0, v1, a0, a1`` (those the initial fit used)."""
@@ -788,7 +788,7 @@ class EgoOptimizer:
                          time_s=time.perf_counter() - t0, anchors=first.anchors, info=info)
 
     @staticmethod
-    def _check_spline(spline: UniformBSpline) -> None:
+    def _check_spline(spline: BSpline) -> None:
         if spline.degree != ORDER:
             raise ValueError(f"EGO optimises cubic B-splines, got degree {spline.degree}")
         if spline.num_control_points < 2 * ORDER + 1:

@@ -41,8 +41,10 @@ Differences from the original, on purpose:
 - no wall-clock cap (the original also stops after 5 ms): deterministic; the evaluation cap
   binds first at our problem sizes (a solve takes a few ms in numba).
 
-Time re-allocation (:meth:`KnotBSpline.reallocate_time`, the original's ``reallocateTime``):
-the optimised curve becomes a non-uniform B-spline (:class:`KnotBSpline`); every velocity
+Time re-allocation (:meth:`~ft_sitl.navigation.trajectories.bspline.BSpline.reallocate_time`,
+the original's ``reallocateTime``): the optimised curve becomes a B-spline evaluated by de Boor
+(``Evaluation.DE_BOOR``, as the original's ``NonUniformBspline``, even while its knots are
+still uniform), whose knots the re-allocation then moves; every velocity
 control point ``p (Q[i+1] - Q[i]) / (u[i+4] - u[i+1])`` beyond ``vmax`` on an axis lengthens
 the three knot intervals it spans, together by ``min(max|V| / vmax + 1e-4, 1.1)``; every
 acceleration control point beyond ``amax`` its two intervals by ``min(sqrt(max|A| / amax) +
@@ -76,7 +78,6 @@ from dataclasses import dataclass
 
 import numpy as np
 from numba import njit
-from scipy.interpolate import BSpline
 
 from ft_sitl.navigation.maps.esdf import EsdfGrid
 from ft_sitl.navigation.optimisers.lbfgs import (
@@ -104,19 +105,15 @@ from ft_sitl.navigation.optimisers.penalties import (
     feasibility,
     smoothness_cost,
 )
-from ft_sitl.navigation.trajectories.base import Trajectory
-from ft_sitl.navigation.trajectories.bspline import UniformBSpline
+from ft_sitl.navigation.trajectories.bspline import BSpline, Evaluation
 
 __all__ = [
-    "FastOptimizer", "FastParams", "FastResult", "KnotBSpline", "cost_terms",
+    "FastOptimizer", "FastParams", "FastResult", "cost_terms",
     "distance_cost", "endpoint_cost", "feasibility_cost", "minimise",
     "plan_yaw", "smoothness_cost", "total_cost",
 ]
 
 ORDER = 3
-#: knot intervals 0 .. 4 of a cubic B-spline shape its state (position, velocity,
-#: acceleration) at the start of its domain, u[3]
-START_INTERVALS = 5
 
 
 @dataclass(frozen=True)
@@ -266,7 +263,7 @@ _STOP = {MAX_EVALUATIONS: "evaluation_cap", CONVERGED: "xtol", ZERO_GRADIENT: "z
 class FastResult:
     """An optimised uniform B-spline with the solver's counters."""
 
-    spline: UniformBSpline
+    spline: BSpline
     evaluations: int
     iterations: int
     cost: float
@@ -284,7 +281,7 @@ class FastOptimizer:
         if not isinstance(self.params, FastParams):
             raise TypeError(f"params must be a FastParams, got {type(params).__name__}")
 
-    def optimize(self, spline: UniformBSpline, esdf: EsdfGrid,
+    def optimize(self, spline: BSpline, esdf: EsdfGrid,
                  free_end: bool = False) -> FastResult:
         """Optimise the interior control points of ``spline`` (and its last three with
         ``free_end``) against ``esdf``; the knot span is kept."""
@@ -311,200 +308,6 @@ class FastOptimizer:
 
 
 # ---------------------------------------------------------------------------------------
-# non-uniform B-splines and time re-allocation
-# ---------------------------------------------------------------------------------------
-@njit(cache=True)
-def _deboor(t, c, k, x, out):
-    """The spline (knots t, coefficients c (n, d), degree k) at x in [t[k], t[n]] (the
-    last span closed at its right end, as scipy's BSpline) into out (d,)."""
-    n = c.shape[0]
-    i = k
-    while i < n - 1 and t[i + 1] <= x:
-        i += 1
-    d = c.shape[1]
-    work = np.empty((k + 1, d))
-    for j in range(k + 1):
-        for a in range(d):
-            work[j, a] = c[i - k + j, a]
-    for r in range(1, k + 1):
-        for j in range(k, r - 1, -1):
-            lo = t[i - k + j]
-            hi = t[i + 1 + j - r]
-            alpha = (x - lo) / (hi - lo)
-            for a in range(d):
-                work[j, a] = (1.0 - alpha) * work[j - 1, a] + alpha * work[j, a]
-    for a in range(d):
-        out[a] = work[k, a]
-
-
-class KnotBSpline(Trajectory):
-    """A cubic B-spline with an arbitrary (non-decreasing) knot vector ``u`` of ``N + 4``
-    knots over control points ``(N, d)``; time ``t`` runs from 0 at ``u[3]`` to
-    ``duration = u[N] - u[3]`` (Fast-Planner's ``evaluateDeBoorT``), evaluation clamps to
-    that domain. Immutable.
-
-    Still a second B-spline class beside
-    :class:`~ft_sitl.navigation.trajectories.bspline.UniformBSpline` (issue 42, point 3,
-    left open): this one evaluates by de Boor (scipy's BSpline, :func:`_deboor`) and takes
-    velocity control points from knot differences (``3 diff(c) / (u[i+4] - u[i+1])``), the
-    uniform one by the matrix form and ``diff(c) / dt``: the same curve in different
-    floating-point operations, and Fast-Planner's rows were flown with this arithmetic even
-    on uniform knots (a plan needing no re-timing, built by :meth:`from_uniform`). One class
-    must therefore take its evaluation (matrix form or de Boor, and with it the
-    derivative-control-point arithmetic) as a constructor argument, not infer it from its
-    knots, and keep this one's ``(N, d)`` control points (the 1-D yaw curve) and cubic-only
-    re-timing. Nothing stops that merge bit for bit; it was not done in the change that
-    merged the L-BFGS loops (time), so the two classes stay, both implementing
-    :class:`~ft_sitl.navigation.trajectories.base.Trajectory`."""
-
-    __slots__ = ("_c", "_u", "_b", "_tck")
-
-    def __init__(self, control_points, knots):
-        c = np.array(control_points, dtype=np.float64)
-        if c.ndim == 1:
-            c = c[:, None]
-        u = np.array(knots, dtype=np.float64).reshape(-1)
-        if c.ndim != 2 or c.shape[0] < ORDER + 1:
-            raise ValueError(f"control_points: need (N >= 4, d), got {c.shape}")
-        if u.shape != (c.shape[0] + ORDER + 1,):
-            raise ValueError(f"knots: need {c.shape[0] + ORDER + 1}, got {u.shape}")
-        if not (np.all(np.isfinite(c)) and np.all(np.isfinite(u))):
-            raise ValueError("control points and knots must be finite")
-        if np.any(np.diff(u) <= 0.0):
-            raise ValueError("knots must be strictly increasing")
-        c.setflags(write=False)
-        u.setflags(write=False)
-        self._c, self._u = c, u
-        b0 = BSpline(u, c, ORDER, extrapolate=False)
-        self._b = (b0, b0.derivative(1), b0.derivative(2), b0.derivative(3))
-        # knots, coefficients (n, d) and degree of the spline and its first two derivatives
-        self._tck = tuple((np.ascontiguousarray(b.t), np.ascontiguousarray(b.c), int(b.k))
-                          for b in self._b[:3])
-
-    @classmethod
-    def uniform(cls, control_points, dt: float) -> KnotBSpline:
-        """The uniform B-spline with knot span ``dt`` (knots ``(i - 3) dt``)."""
-        c = np.asarray(control_points, dtype=np.float64)
-        return cls(c, (np.arange(c.shape[0] + ORDER + 1) - ORDER) * float(dt))
-
-    @classmethod
-    def from_uniform(cls, spline: UniformBSpline) -> KnotBSpline:
-        return cls.uniform(spline.control_points, spline.dt)
-
-    @property
-    def control_points(self) -> np.ndarray:
-        return self._c
-
-    @property
-    def knots(self) -> np.ndarray:
-        return self._u
-
-    @property
-    def duration(self) -> float:
-        n = self._c.shape[0]
-        return float(self._u[n] - self._u[ORDER])
-
-    def evaluate(self, t, order: int = 0) -> np.ndarray:
-        """The ``order``-th derivative at ``t`` (clamped to [0, duration]); ``(d,)`` for a
-        scalar, ``(M, d)`` for an array."""
-        x = np.clip(np.asarray(t, dtype=np.float64), 0.0, self.duration) + self._u[ORDER]
-        n = self._c.shape[0]
-        x = np.minimum(x, self._u[n])
-        return self._b[order](x)
-
-    def pva(self, t: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        """:meth:`evaluate` of orders 0, 1, 2 at one time ``t`` in one compiled call each
-        (the 100 Hz setpoint path)."""
-        n = self._c.shape[0]
-        x = min(min(max(float(t), 0.0), self.duration) + self._u[ORDER], self._u[n])
-        out = np.empty((3, self._c.shape[1]))
-        for order, (tk, ck, k) in enumerate(self._tck):
-            _deboor(tk, ck, k, x, out[order])
-        return out[0], out[1], out[2]
-
-    def velocity_control_points(self) -> np.ndarray:
-        c, u = self._c, self._u
-        n = c.shape[0]
-        return ORDER * np.diff(c, axis=0) / (u[ORDER + 1:n + ORDER] - u[1:n])[:, None]
-
-    def acceleration_control_points(self) -> np.ndarray:
-        c, u = self._c, self._u
-        n = c.shape[0]
-        v = self.velocity_control_points()
-        span = (u[ORDER + 1:n + ORDER - 1] - u[2:n])[:, None]
-        return (ORDER - 1) * np.diff(v, axis=0) / span
-
-    def feasible(self, vmax: float, amax: float, vel_norm: bool = False) -> bool:
-        """Fast-Planner's ``checkFeasibility``: every velocity / acceleration control point
-        within ``vmax`` / ``amax`` (+ 1e-4) on every axis (``vel_norm``: the velocity
-        control points' Euclidean norm within ``vmax``)."""
-        v = self.velocity_control_points()
-        vm = np.linalg.norm(v, axis=1) if vel_norm else np.abs(v)
-        return bool(np.all(vm <= vmax + 1e-4)
-                    and np.all(np.abs(self.acceleration_control_points()) <= amax + 1e-4))
-
-    def reallocate_time(self, vmax: float, amax: float, limit_ratio: float = 1.1,
-                        vel_norm: bool = False,
-                        keep_start: bool = True) -> tuple[KnotBSpline, bool]:
-        """One pass of Fast-Planner's ``reallocateTime`` (module docstring): returns the
-        re-timed spline and whether this pass found everything feasible (nothing changed).
-        ``vel_norm`` bounds the velocity control points' norm instead of each axis;
-        ``keep_start`` leaves the knot intervals that shape the start state (the first
-        ``START_INTERVALS``) as they are, so the re-timed curve starts in the same position,
-        velocity and acceleration (the original stretches them too)."""
-        c = self._c
-        h = np.diff(self._u)  # knot intervals; interval k is [u[k], u[k+1]]
-        n = c.shape[0]
-        p = ORDER
-        frozen = START_INTERVALS if keep_start else 0
-
-        def grow(k: int, dt: float) -> None:
-            if k >= frozen:
-                h[k] += dt
-
-        feasible = True
-        for i in range(n - 1):  # velocity control point i spans intervals i+1 .. i+3
-            span = h[i + 1] + h[i + 2] + h[i + 3]
-            v = p * (c[i + 1] - c[i]) / span
-            vm = float(np.linalg.norm(v)) if vel_norm else float(np.max(np.abs(v)))
-            if vm > vmax + 1e-4:
-                feasible = False
-                ratio = min(vm / vmax + 1e-4, limit_ratio)
-                for k in range(i + 1, i + p + 1):
-                    grow(k, (ratio - 1.0) * span / p)
-        for i in range(n - 2):  # acceleration control point i spans intervals i+2, i+3
-            v0 = (c[i + 1] - c[i]) / (h[i + 1] + h[i + 2] + h[i + 3])
-            v1 = (c[i + 2] - c[i + 1]) / (h[i + 2] + h[i + 3] + h[i + 4])
-            span = h[i + 2] + h[i + 3]
-            a = p * (p - 1) * (v1 - v0) / span
-            am = float(np.max(np.abs(a)))
-            if am > amax + 1e-4:
-                feasible = False
-                ratio = min(math.sqrt(am / amax) + 1e-4, limit_ratio)
-                inc = (ratio - 1.0) * span / (p - 1)
-                # the original's special case for i = 1, 2: the first four intervals
-                for k in (range(1, 5) if i in (1, 2) else range(i + 2, i + p)):
-                    grow(k, inc)
-        u = np.concatenate([[self._u[0]], self._u[0] + np.cumsum(h)])
-        return KnotBSpline(c, u), feasible
-
-    def retimed(self, vmax: float, amax: float, limit_ratio: float = 1.1, passes: int = 3,
-                vel_norm: bool = False, keep_start: bool = True) -> tuple[KnotBSpline, int]:
-        """The planner manager's loop: re-allocate while infeasible, at most ``passes``
-        times. Returns the spline and the number of passes made."""
-        out = self
-        if out.feasible(vmax, amax, vel_norm):
-            return out, 0
-        k = 0
-        while k < passes:
-            out, ok = out.reallocate_time(vmax, amax, limit_ratio, vel_norm, keep_start)
-            k += 1
-            if ok:
-                break
-        return out, k
-
-
-# ---------------------------------------------------------------------------------------
 # yaw
 # ---------------------------------------------------------------------------------------
 def _next_yaw(last: float, yaw: float) -> float:
@@ -521,9 +324,9 @@ def _states_to_points(state, dt: float) -> np.ndarray:
                      y + dt * yd + dt * dt / 3.0 * ydd])
 
 
-def plan_yaw(pos: KnotBSpline, start_state, dt_yaw: float = 0.3, forward_t: float = 2.0,
-             w_smooth: float = 10.0, w_waypoint: float = 100.0) -> KnotBSpline:
-    """Fast-Planner's ``planYaw`` (module docstring): a 1-D uniform B-spline over
+def plan_yaw(pos: BSpline, start_state, dt_yaw: float = 0.3, forward_t: float = 2.0,
+             w_smooth: float = 10.0, w_waypoint: float = 100.0) -> BSpline:
+    """Fast-Planner's ``planYaw`` (module docstring): a 1-D uniform B-spline (de Boor) over
     ``pos.duration`` starting in ``start_state`` (yaw, rate, acceleration); the yaw is
     continuous (not wrapped)."""
     duration = pos.duration
@@ -566,4 +369,4 @@ def plan_yaw(pos: KnotBSpline, start_state, dt_yaw: float = 0.3, forward_t: floa
         b = b - a[:, fixed] @ y[fixed]
         sol, *_ = np.linalg.lstsq(a[:, free], b, rcond=None)
         y[free] = sol
-    return KnotBSpline.uniform(y[:, None], dt)
+    return BSpline(y[:, None], dt, evaluation=Evaluation.DE_BOOR)

@@ -53,7 +53,7 @@ from ft_sitl.navigation.optimisers.ego import EgoOptimizer, EgoParams, first_col
 from ft_sitl.navigation.planners.astar import OccupancyView
 from ft_sitl.navigation.planners.skeleton import HorizonPlanner
 from ft_sitl.navigation.trajectories.base import SplineTrajectory
-from ft_sitl.navigation.trajectories.bspline import UniformBSpline
+from ft_sitl.navigation.trajectories.bspline import BSpline
 from ft_sitl.navigation.trajectories.minsnap import global_reference, min_snap, one_segment_time
 
 #: estimated compute time of one EGO replan in the original C++ (optimisation ~1 ms, plus
@@ -138,7 +138,7 @@ class EgoPlanner(HorizonPlanner):
                                                                                    target.point])
         points = _resample(path, CTRL_PT_DIST_M)
         dt = CTRL_PT_DIST_M / vmax * 1.2 if len(points) > 2 else CTRL_PT_DIST_M / vmax * 5
-        spline = UniformBSpline.fit(points, dt, v0, target.velocity, a0, np.zeros(3))
+        spline = BSpline.fit(points, dt, v0, target.velocity, a0, np.zeros(3))
         res = self.optimizer.optimize(spline, v0, target.velocity, a0, np.zeros(3))
         if not res.success:
             self._failed(obs, p0, res.status.value, t_start)

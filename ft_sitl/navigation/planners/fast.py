@@ -94,7 +94,6 @@ from ft_sitl.navigation.maps.esdf import EsdfGrid
 from ft_sitl.navigation.optimisers.fast import (
     FastOptimizer,
     FastParams,
-    KnotBSpline,
     plan_yaw,
 )
 from ft_sitl.navigation.planners.kino_astar import (
@@ -105,7 +104,7 @@ from ft_sitl.navigation.planners.kino_astar import (
 )
 from ft_sitl.navigation.planners.skeleton import HorizonPlanner, checked_setpoint
 from ft_sitl.navigation.trajectories.base import SplineTrajectory
-from ft_sitl.navigation.trajectories.bspline import UniformBSpline
+from ft_sitl.navigation.trajectories.bspline import BSpline, Evaluation
 
 #: estimated time from state to command of one Fast-Planner replan in the original C++ on
 #: a desktop CPU: kinodynamic search a few ms, B-spline optimisation <= 300 evaluations
@@ -204,10 +203,11 @@ class FastPlanner(HorizonPlanner):
         # back end
         t0 = time.perf_counter()
         ts, pts, sv, ev, sa, ea = found.bspline_samples(CTRL_PT_DIST_M / self.vmax)
-        spline = UniformBSpline.fit(pts, ts, sv, ev, sa, ea)
+        spline = BSpline.fit(pts, ts, sv, ev, sa, ea)
         opt = self.optimizer.optimize(spline, esdf,
                                       free_end=found.status is not KinoStatus.REACHED_GOAL)
-        pos, passes = KnotBSpline.from_uniform(opt.spline).retimed(
+        # flown evaluated by de Boor, as the original's NonUniformBspline
+        pos, passes = opt.spline.with_evaluation(Evaluation.DE_BOOR).retimed(
             self.vmax, self.max_acc, self.optimizer.params.limit_ratio,
             self.optimizer.params.realloc_passes, vel_norm=True)
         log.update(opt_s=time.perf_counter() - t0, evaluations=opt.evaluations,

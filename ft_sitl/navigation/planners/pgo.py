@@ -60,7 +60,6 @@ from dataclasses import dataclass, field
 
 import numpy as np
 from numba import njit
-from scipy.interpolate import BSpline
 
 from ft_sitl.navigation.base import Observation, Task
 from ft_sitl.navigation.maps.esdf import EsdfGrid
@@ -82,7 +81,7 @@ from ft_sitl.navigation.planners.topo import (
     path_length,
 )
 from ft_sitl.navigation.trajectories.base import SplineTrajectory
-from ft_sitl.navigation.trajectories.bspline import UniformBSpline
+from ft_sitl.navigation.trajectories.bspline import BSpline
 from ft_sitl.navigation.trajectories.minsnap import global_reference
 from ft_sitl.schema import Param
 
@@ -181,15 +180,15 @@ def _normal_cost(q, grad, dt, ws, wd, wf, d0, vmax, amax, fld, origin, res):
 # ---------------------------------------------------------------------------------------
 # the optimisation steps
 # ---------------------------------------------------------------------------------------
-def _check(spline: UniformBSpline) -> None:
+def _check(spline: BSpline) -> None:
     if spline.degree != ORDER or spline.num_control_points < 2 * ORDER + 1:
         raise ValueError(f"PGO optimises cubic B-splines with >= {2 * ORDER + 1} control "
                          f"points, got degree {spline.degree} with "
                          f"{spline.num_control_points}")
 
 
-def normal_phase(spline: UniformBSpline, grid: EsdfGrid,
-                 params: PgoParams | None = None) -> tuple[UniformBSpline, int]:
+def normal_phase(spline: BSpline, grid: EsdfGrid,
+                 params: PgoParams | None = None) -> tuple[BSpline, int]:
     """Fast-Planner's ``NORMAL_PHASE``: smoothness + ESDF distance + feasibility over the
     free control points (the first and last 3 fixed). Returns (spline, evaluations)."""
     _check(spline)
@@ -203,7 +202,7 @@ def normal_phase(spline: UniformBSpline, grid: EsdfGrid,
     return spline.with_control_points(q), int(st.ints[EVALUATIONS])
 
 
-def normal_cost(spline: UniformBSpline, grid: EsdfGrid,
+def normal_cost(spline: BSpline, grid: EsdfGrid,
                 params: PgoParams | None = None) -> tuple[float, np.ndarray]:
     """The normal cost of a spline and its gradient (N, 3) (all rows; the optimiser uses
     the free ones)."""
@@ -239,7 +238,7 @@ def guide_phase(control_points, guide, w_smooth: float = 10.0,
     return q
 
 
-def jerk_cost(spline: UniformBSpline) -> float:
+def jerk_cost(spline: BSpline) -> float:
     """Fast-Planner's ``getJerk``: knot span x sum of the squared jerk control points."""
     j = spline.derivative_control_points(3)
     return float(spline.dt * np.sum(j * j))
@@ -259,7 +258,7 @@ def near_occupied(occupied, resolution: float, points) -> np.ndarray:
 _CORNERS = np.array([[(i >> a) & 1 for a in range(3)] for i in range(8)], dtype=float)
 
 
-def first_collision_time(spline: UniformBSpline, grid: EsdfGrid) -> float | None:
+def first_collision_time(spline: BSpline, grid: EsdfGrid) -> float | None:
     """Time of the first unsafe sample along the whole curve (:func:`near_occupied` on the
     snapshot, which includes the flight volume's bounds; samples at most half a voxel apart
     from the control-polygon length). None if safe: the same test as the navigator's
@@ -285,36 +284,25 @@ def first_collision_time(spline: UniformBSpline, grid: EsdfGrid) -> float | None
     return None
 
 
-def lengthen_time(spline: UniformBSpline, ratio: float) -> tuple[np.ndarray, float]:
-    """Fast-Planner's ``lengthenTime`` + ``reparamBspline``: the knot spans between the
-    first two and the last two are stretched so that the duration grows by ``(ratio - 1)``
-    times theirs (the curve's shape is unchanged and its start and end keep their speed);
-    the result is sampled at ``N - 3 + 1`` equal time steps. Returns (points, dt)."""
-
-    n = spline.num_control_points
-    knots = np.array(spline.knots)  # u_i = (i - 3) dt, i = 0 .. N + 3
-    num1, num2 = 5, knots.shape[0] - 1 - 5
-    if num2 > num1:
-        delta = (float(ratio) - 1.0) * (knots[num2] - knots[num1])
-        inc = delta / (num2 - num1)
-        knots[num1 + 1:num2 + 1] += np.arange(1, num2 - num1 + 1) * inc
-        knots[num2 + 1:] += delta
-    else:  # too few knots to keep the ends: stretch uniformly
-        knots = knots * float(ratio)
-    curve = BSpline(knots, np.array(spline.control_points), ORDER, extrapolate=False)
-    t0, t1 = knots[ORDER], knots[n]
-    seg_num = n - ORDER
-    t = np.clip(np.linspace(t0, t1, seg_num + 1), t0, t1)
-    return curve(t), (t1 - t0) / seg_num
+def lengthen_time(spline: BSpline, ratio: float) -> tuple[np.ndarray, float]:
+    """Fast-Planner's ``lengthenTime`` (:meth:`BSpline.lengthen_time`: the knot spans between
+    the first two and the last two are stretched so that the duration grows by ``(ratio -
+    1)`` times theirs; the curve's shape is unchanged and its start and end keep their speed)
+    + ``reparamBspline``: the result sampled at ``N - 3 + 1`` equal time steps. Returns
+    (points, dt)."""
+    curve = spline.lengthen_time(ratio)
+    seg_num = spline.num_control_points - ORDER
+    duration = curve.duration
+    return curve.position(np.linspace(0.0, duration, seg_num + 1)), duration / seg_num
 
 
-def refine(spline: UniformBSpline, derivs, ratio: float, grid: EsdfGrid,
-           params: PgoParams | None = None) -> UniformBSpline:
+def refine(spline: BSpline, derivs, ratio: float, grid: EsdfGrid,
+           params: PgoParams | None = None) -> BSpline:
     """Fast-Planner's ``refineTraj``: time lengthened by ``ratio`` (:func:`lengthen_time`,
     the same knot count), re-fitted with the segment's end derivatives ``(v0, v1, a0,
     a1)``, then the normal optimisation."""
     points, dt = lengthen_time(spline, ratio)
-    fitted = UniformBSpline.fit(points, dt, *derivs)
+    fitted = BSpline.fit(points, dt, *derivs)
     return normal_phase(fitted, grid, params)[0]
 
 
@@ -330,9 +318,9 @@ class PgoPlan:
     """
 
     status: str
-    spline: UniformBSpline | None
+    spline: BSpline | None
     search: TopoSearch | None = None
-    candidates: list[UniformBSpline] = field(default_factory=list)
+    candidates: list[BSpline] = field(default_factory=list)
     chosen: int = -1  # index into candidates
     refined: bool = False
     evaluations: int = 0
@@ -342,7 +330,7 @@ class PgoPlan:
         return self.spline is not None
 
 
-def plan_segment(init: UniformBSpline, resample: Callable[[int], tuple[np.ndarray, float]],
+def plan_segment(init: BSpline, resample: Callable[[int], tuple[np.ndarray, float]],
                  derivs, grid: EsdfGrid, rng: np.random.Generator,
                  params: PgoParams | None = None,
                  topo_params: TopoParams | None = None) -> PgoPlan:
@@ -358,7 +346,7 @@ def plan_segment(init: UniformBSpline, resample: Callable[[int], tuple[np.ndarra
     colli_start, colli_end, start_pts, end_pts = collision_range(init, grid, tp.clearance)
     evals = 0
     search = None
-    candidates: list[UniformBSpline] = []
+    candidates: list[BSpline] = []
     if not colli_start:
         status = "free"
         out, evals = normal_phase(init, grid, p)
@@ -374,7 +362,7 @@ def plan_segment(init: UniformBSpline, resample: Callable[[int], tuple[np.ndarra
         for path in search.paths:
             seg_num = max(int(path_length(path) / p.ctrl_pt_dist), MIN_SEGMENTS)
             pts, dt = resample(seg_num)
-            c0 = UniformBSpline.fit(pts, dt, *derivs)
+            c0 = BSpline.fit(pts, dt, *derivs)
             guide = discretize_path(path, c0.num_control_points - 2)[2:-2]
             c1 = c0.with_control_points(guide_phase(c0.control_points, guide, p.w_smooth,
                                                     p.w_guide))
@@ -408,7 +396,7 @@ class _Reference:
     def __init__(self, poly, t0: float):
         self.poly = poly
         self.t0 = float(t0)
-        self.local: UniformBSpline | None = None
+        self.local: BSpline | None = None
         self.local_t0 = -math.inf
         self.local_t1 = -math.inf
         self.time_increase = 0.0
@@ -467,7 +455,7 @@ class _Reference:
         return (self.evaluate(t_start + np.linspace(0.0, duration, seg_num + 1)),
                 duration / seg_num)
 
-    def set_local(self, spline: UniformBSpline, t0: float, time_inc: float) -> None:
+    def set_local(self, spline: BSpline, t0: float, time_inc: float) -> None:
         self.local = spline
         self.local_t0 = float(t0)
         self.local_t1 = float(t0) + spline.duration
@@ -541,7 +529,7 @@ class PgoPlanner(ReplanningPlanner):
             return
         points, dt, duration = seg
         derivs = ref.derivs(t_eff, t_eff + duration)
-        init = UniformBSpline.fit(points, dt, *derivs)
+        init = BSpline.fit(points, dt, *derivs)
         # the ESDF over a box around the segment's middle that holds the segment and the
         # topological sampling box around any stretch of it (+-(L/2 + 1) along, 3.5 across);
         # a box off the map's window (a segment far from the vehicle) has no field at all:
@@ -560,7 +548,7 @@ class PgoPlanner(ReplanningPlanner):
         self._succeeded()
         self._adopt(plan.spline, obs, t_start, duration)
 
-    def _adopt(self, spline: UniformBSpline | None, obs: Observation, t_start: float,
+    def _adopt(self, spline: BSpline | None, obs: Observation, t_start: float,
                seg_duration: float = 0.0) -> None:
         latency = self._compute_time(t_start)
         traj = None
