@@ -60,7 +60,7 @@ from ft_sitl.navigation.planners.kino_astar import (  # noqa: E402
     KinodynamicAstar,
     VoxelOccupancy,
 )
-from ft_sitl.navigation.trajectories.bspline import UniformBSpline, fit_samples  # noqa: E402
+from ft_sitl.navigation.trajectories.bspline import BSpline, fit_samples  # noqa: E402
 
 RES = 0.1
 
@@ -194,7 +194,7 @@ def bench_ego(repeats: int) -> dict:
         return start + (goal - start) * (np.asarray(t) / duration)[:, None]
 
     pts, dt = fit_samples(line, duration, 4.0)
-    sp = UniformBSpline.fit(pts, dt, vel, vel, zero, zero)
+    sp = BSpline.fit(pts, dt, vel, vel, zero, zero)
     opt = EgoOptimizer(OccupancyView(occupied, RES), EgoParams(max_vel=4.0, max_acc=3.0))
     out = {}
 

@@ -21,7 +21,7 @@ from ft_sitl.navigation.optimisers.ego import (
     smoothness_cost,
 )
 from ft_sitl.navigation.planners.astar import OccupancyView, search
-from ft_sitl.navigation.trajectories.bspline import UniformBSpline, fit_samples
+from ft_sitl.navigation.trajectories.bspline import BSpline, fit_samples
 
 RES = 0.1
 INFLATION = 0.1  # one voxel, as the local map inflates
@@ -55,7 +55,7 @@ def _straight_spline(speed=SPEED, vmax=4.0):
         return START + (GOAL - START) * (np.asarray(t) / duration)[:, None]
 
     pts, dt = fit_samples(line, duration, vmax)
-    return UniformBSpline.fit(pts, dt, vel, vel, ZERO, ZERO), vel
+    return BSpline.fit(pts, dt, vel, vel, ZERO, ZERO), vel
 
 
 def _numeric_grad(fun, q, h=1e-6):
@@ -139,7 +139,7 @@ def test_feasibility_cost_is_zero_within_limits_and_has_exact_gradient():
 def test_fitness_cost_weights_along_tangent_1_25_and_across_1():
     n = 12
     ref = np.outer(np.arange(n - 2), [0.4, 0.0, 0.0])  # straight reference along x
-    spline_knots = UniformBSpline.fit(ref, 0.1, [4, 0, 0], [4, 0, 0], ZERO, ZERO)
+    spline_knots = BSpline.fit(ref, 0.1, [4, 0, 0], [4, 0, 0], ZERO, ZERO)
     q = np.array(spline_knots.control_points)
     f0, _ = fitness_cost(q, ref)
     assert f0 == pytest.approx(0.0, abs=1e-12)
@@ -181,7 +181,7 @@ def test_lbfgs_reaches_scipys_minimum_on_a_convex_problem():
     rng = np.random.default_rng(8)
     n = 20
     ref = np.cumsum(rng.normal(size=(n - 2, 3)) * 0.3, axis=0)
-    q0 = UniformBSpline.fit(ref, 0.5, ZERO, ZERO, ZERO, ZERO).control_points.copy()
+    q0 = BSpline.fit(ref, 0.5, ZERO, ZERO, ZERO, ZERO).control_points.copy()
     q0[3:-3] += rng.normal(size=(n - 6, 3)) * 0.3
     w = np.array([1.0, 0.0, 0.1, 1.0])
     args = (1, w, 0.5, 0.5, 100.0, 100.0, np.zeros(0, dtype=np.int64), np.zeros((0, 3)),

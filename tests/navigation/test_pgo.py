@@ -33,7 +33,7 @@ from ft_sitl.navigation.planners.topo import (
     same_topo_path,
     shortcut_path,
 )
-from ft_sitl.navigation.trajectories.bspline import UniformBSpline
+from ft_sitl.navigation.trajectories.bspline import BSpline
 from ft_sitl.scenarios.camera import CameraConfig, DepthCamera
 
 from .planner_util import obs_at, open_task
@@ -146,7 +146,7 @@ def _straight(speed=3.0, a=(0.0, 0.0, 1.5), b=(7.0, 0.0, 1.5)):
 
     derivs = (vel, vel, np.zeros(3), np.zeros(3))
     pts, dt = resample(23)
-    return UniformBSpline.fit(pts, dt, *derivs), resample, derivs
+    return BSpline.fit(pts, dt, *derivs), resample, derivs
 
 
 @pytest.mark.slow
@@ -190,7 +190,7 @@ def test_the_check_of_a_diverged_candidate_stays_small_in_memory():
     # ~0.5 GB at once) swinging through the pillar.
     grid = _world(pillars=[(5.0, 0.0, 0.5)])
     q = np.array([[5.0, 1500.0 * (-1) ** i, 1.5] for i in range(36)])
-    spline = UniformBSpline(q, 0.1)
+    spline = BSpline(q, 0.1)
     tracemalloc.start()
     try:
         t = first_collision_time(spline, grid)
@@ -207,7 +207,7 @@ def test_the_blockwise_check_gives_the_one_shot_result(into_pillar):
     grid = _world(pillars=[(5.0, 0.0, 0.5)])
     q = [[1.0, 2.0 * (-1) ** i, 1.5] for i in range(2000)]
     q += [[5.0, 0.0, 1.5]] * 4 if into_pillar else [[1.0, 0.0, 1.5]] * 4
-    spline = UniformBSpline(np.array(q), 0.05)
+    spline = BSpline(np.array(q), 0.05)
     expected = _one_shot_first_collision(spline, grid)
     assert (expected is not None) == into_pillar
     assert first_collision_time(spline, grid) == expected
@@ -215,7 +215,7 @@ def test_the_blockwise_check_gives_the_one_shot_result(into_pillar):
 
 def test_time_lengthening_keeps_the_shape_and_the_end_speeds():
     init, _, derivs = _straight()
-    curve = UniformBSpline(init.control_points + np.column_stack(
+    curve = BSpline(init.control_points + np.column_stack(
         [np.zeros(init.num_control_points), np.sin(np.arange(init.num_control_points)),
          np.zeros(init.num_control_points)]), init.dt)
     for ratio in (1.4, 0.8):
@@ -226,7 +226,7 @@ def test_time_lengthening_keeps_the_shape_and_the_end_speeds():
         assert dt * curve.num_segments == pytest.approx(curve.duration + (ratio - 1) * inner)
         np.testing.assert_allclose(pts[[0, -1]], curve.position([0.0, curve.duration]),
                                    atol=1e-9)
-        fitted = UniformBSpline.fit(pts, dt, *derivs)
+        fitted = BSpline.fit(pts, dt, *derivs)
         np.testing.assert_allclose(fitted.velocity(0.0), derivs[0], atol=0.2)
 
 
@@ -245,7 +245,7 @@ def test_guide_phase_and_normal_cost():
                                                       np.zeros((3, 3))])
     assert np.abs(grad[3:-3]).max() < 1e-8
     # the normal cost's gradient against finite differences (near the pillar, feasibility on)
-    spline = UniformBSpline(np.column_stack([np.linspace(2.0, 5.0, 12), 0.2 * np.sin(
+    spline = BSpline(np.column_stack([np.linspace(2.0, 5.0, 12), 0.2 * np.sin(
         np.arange(12.0)) + 0.6, np.full(12, 1.5)]), 0.05)
     params = PgoParams(w_feasibility=1e-3)
     f, g = normal_cost(spline, PILLAR, params)

@@ -595,13 +595,6 @@ class BSpline(Trajectory):
             b[n_pts + r] = np.asarray(rhs, dtype=float).reshape(dim)
         q, *_ = np.linalg.lstsq(a, b, rcond=None)
         return cls(q, dt, degree)
-
-
-#: the name this class had while it took uniform knots only, kept for bench/bench_search.py
-#: (outside navigation): the same class, not a second one
-UniformBSpline = BSpline
-
-
 def fit_samples(position_fn, duration: float, max_vel: float, ctrl_pt_dist: float = 0.4,
                 min_points: int = 7) -> tuple[np.ndarray, float]:
     """Sample a trajectory for :meth:`BSpline.fit` the way EGO's planner does.
