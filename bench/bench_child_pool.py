@@ -5,11 +5,13 @@ the per-trial round trip (pickles over pipes), alternated trial by trial.
     python bench/bench_child_pool.py [--trials N]
 """
 
+# isort: off
 import ft_sitl  # noqa: F401  (first: the numeric pins hold in this process)
+# isort: on
 
-import argparse
-import statistics
-import time
+import argparse  # noqa: E402
+import statistics  # noqa: E402
+import time  # noqa: E402
 
 from ft_sitl.missions.campaign import run_chunk
 from ft_sitl.missions.child_pool import ChildPool
