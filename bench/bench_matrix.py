@@ -123,6 +123,8 @@ def main(argv=None) -> int:
                     help=f"size classes per cell, of {', '.join(SIZES)}")
     ap.add_argument("--rounds", type=int, default=2, help="A B rounds (default 2)")
     ap.add_argument("--cpu", type=int, default=-1, help="pin the flights to this CPU")
+    ap.add_argument("--algorithms", default=None,
+                    help="comma-separated algorithms to keep (default: all)")
     ap.add_argument("--limit", type=int, default=None,
                     help="the first N rows of the sample only (a smoke run)")
     ap.add_argument("--work", type=Path, default=Path(tempfile.gettempdir()) / "bench-matrix")
@@ -131,6 +133,11 @@ def main(argv=None) -> int:
     if not sizes or set(sizes) - set(SIZES) or args.rounds < 1:
         ap.error(f"--sizes: some of {', '.join(SIZES)}; --rounds: at least 1")
     rows = sample(sizes)
+    if args.algorithms:
+        keep = set(args.algorithms.split(","))
+        rows = rows[rows["algorithm"].astype(str).isin(keep)]
+        if rows.empty:
+            ap.error(f"--algorithms: none of {sorted(keep)} is in the sample")
     if args.limit is not None:
         rows = rows.iloc[:args.limit]
     stored = {r["trial_id"]: r for r in rows.to_dict("records")}
