@@ -21,6 +21,10 @@ what it left out and why (the degenerate cases never raise):
 * rows with a missing indicator are left out (counted);
 * an indicator that is constant over the rows kept, or a linear combination of the ones
   before it in the order above (e.g. too few platforms), is left out of the fit;
+* no platform's success rate differs from another's within any family fitted
+  (:func:`varies_between_platforms`; the straight baseline, whose vehicles all meet the
+  same fate in a configuration): not estimable, and said so, rather than slopes of
+  exactly 0 with p = 1;
 * fewer than :data:`MIN_EVENTS_PER_COEF` successes or failures per coefficient: not
   fitted;
 * separation (some combination of the indicators and families predicts every outcome
@@ -290,6 +294,13 @@ def _fit_one(algo: str, g: pd.DataFrame) -> SuccessFit:
     if not cols:
         fit.note = "; ".join(notes + ["no indicator varies over the trials fitted"])
         return fit
+    if not varies_between_platforms(fam_kept, g["platform"].astype(str).to_numpy()[keep_rows],
+                                    y):
+        fit.note = "; ".join(notes + [
+            f"not estimable: no variation between platforms (in each of the {len(fams)} "
+            f"famil{'y' if len(fams) == 1 else 'ies'} fitted every platform succeeds as "
+            "often as the others, so the indicators have nothing to explain)"])
+        return fit
     fit.means = {c: float(xs[c].mean()) for c in cols}
     fit.ranges = {c: (float(x_raw[c][keep_rows].min()), float(x_raw[c][keep_rows].max()))
                   for c in cols}
@@ -327,6 +338,21 @@ def _fit_one(algo: str, g: pd.DataFrame) -> SuccessFit:
                      "intervals approximate")
     fit.note = "; ".join(notes)
     return fit
+
+
+def varies_between_platforms(families: np.ndarray, platforms: np.ndarray,
+                             success: np.ndarray) -> bool:
+    """Whether some platform's success rate differs from another's within a family. When
+    none does (e.g. the straight baseline, whose every vehicle meets the same fate in a
+    given configuration), the maximum-likelihood slope of every indicator is exactly 0,
+    with p = 1: not an estimate of "no effect" but of nothing, as the outcomes carry no
+    information on the platforms."""
+    d = pd.DataFrame({"f": families, "p": platforms, "y": np.asarray(success, dtype=float)})
+    per_platform = d.groupby(["f", "p"], sort=False)["y"].mean()
+    per_family = d.groupby("f", sort=False)["y"].mean()
+    family_of = per_platform.index.get_level_values("f")
+    return not np.allclose(per_platform.to_numpy(), per_family.loc[family_of].to_numpy(),
+                           rtol=0.0, atol=1e-12)
 
 
 def _scaled(X: np.ndarray) -> np.ndarray:
@@ -468,7 +494,11 @@ def reading(fit: SuccessFit, column: str) -> str:
     detectable effect of footprint (...)", or why there is no estimate."""
     ind = _INDICATOR[column]
     if not fit.fitted:
-        return f"not fitted ({fit.note})" if fit.note else "not fitted"
+        if not fit.note:
+            return "not fitted"
+        # a note that says it was not fitted (or not estimable) is the reading itself
+        said = ("not fitted:" in fit.note) or ("not estimable:" in fit.note)
+        return fit.note if said else f"not fitted ({fit.note})"
     c = fit.coefficient(column)
     if c is None:
         why = dict(fit.dropped_indicators).get(ind.label, "not in the fit")

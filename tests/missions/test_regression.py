@@ -149,6 +149,24 @@ def test_an_algorithm_that_always_fails_is_not_fitted_and_says_why():
     assert table["p"].isna().all() and (table["method"] == "").all()
 
 
+def test_outcomes_the_same_on_every_platform_are_not_estimable_not_zero_slopes():
+    # the straight baseline on the quick preset: in each configuration every vehicle meets
+    # the same fate, so each platform's rate equals its family's (here 1/2 in forest and
+    # urban, 0 elsewhere); maximum likelihood would print slopes of exactly 0 with p = 1
+    df = _table(lambda p, ind, fam: 0.0, trials=2, seed=0, algorithm="straight")
+    df["success"] = (df["family"].isin(["forest", "urban"]) & (df["trial"] == 0)).to_numpy()
+    fit = _fit(df)
+    assert not fit.fitted and fit.families == ("forest", "urban")
+    assert fit.note.startswith("not estimable: no variation between platforms")
+    assert fit.coefficient("twr_max") is None
+    assert reg.reading(fit, "twr_max") == fit.note   # said once, not "not fitted (not ...)"
+    assert reg.coefficient_table([fit])["p"].isna().all()
+    # one platform that differs once is variation: fitted
+    first = df.index[(df["family"] == "forest") & (df["trial"] == 1)][0]
+    df.loc[first, "success"] = True
+    assert _fit(df).fitted
+
+
 def test_separation_switches_to_firths_fit_with_finite_estimates():
     # success exactly when TWR_max > 3: maximum likelihood would run off to infinity
     fit = _fit(_table(lambda p, ind, fam: 60.0 if ind.twr_max > 3.0 else -60.0, trials=1,
