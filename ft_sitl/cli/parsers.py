@@ -15,6 +15,7 @@ from ft_sitl import __version__, numeric_env
 from ft_sitl.bridge import ARDUPILOT_DEFAULT_PORT
 from ft_sitl.cli.common import number
 from ft_sitl.navigation.base import LIMITS  # numpy and the setpoint type: cheap too
+from ft_sitl.physics.platform import CATEGORIES  # loaded by cli.common anyway
 from ft_sitl.scenarios.render import DEFAULT_DPI  # numpy only: cheap at start-up
 
 ACTUATORS_HELP = ("imperfect actuators as KEY=VALUE,... (efficiency, degraded_motor, "
@@ -61,7 +62,7 @@ def build_parser() -> argparse.ArgumentParser:
                           description="List, show, check and generate platforms.")
     psub = plat.add_subparsers(dest="platforms_command", metavar="ACTION", required=True)
     pl = psub.add_parser("list", parents=[pf], help="list platforms with their indicators")
-    pl.add_argument("--category", choices=("real", "virtual", "user"))
+    pl.add_argument("--category", choices=CATEGORIES)
     pl.add_argument("--json", action="store_true", help="machine-readable output")
     pl.set_defaults(handler="platforms:cmd_platforms_list")
     ps = psub.add_parser("show", parents=[pf], help="show one platform's physical parameters")
@@ -83,6 +84,24 @@ def build_parser() -> argparse.ArgumentParser:
     pg.add_argument("--force", action="store_true", help="overwrite --out if it exists")
     pg.add_argument("--json", action="store_true", help="print the generated indicators as JSON")
     pg.set_defaults(handler="platforms:cmd_platforms_generate")
+    pse = psub.add_parser(
+        "series", parents=[pf], help="one platform's body with one indicator changed",
+        description="A controlled series of BASE (a catalog or --platform-file platform): "
+        "the same body, mass and geometry with TWR_max changed by its motors (alpha held by "
+        "the inertia), or alpha_xy,max changed by its mass distribution (TWR_max held). "
+        "Prints a TOML platform file (physical form, category user); docs/platforms.md, "
+        "Controlled platform series.")
+    pse.add_argument("base", help="the platform whose body the series keeps")
+    pse.add_argument("--twr", type=number("--twr"), nargs="+", default=[], metavar="TWR",
+                     help="TWR_max of the TWR series' members")
+    pse.add_argument("--alpha-xy", type=number("--alpha-xy"), nargs="+", default=[],
+                     metavar="RAD_S2", help="alpha_xy,max (rad/s^2) of the alpha series' "
+                     "members")
+    pse.add_argument("--out", type=Path, help="write the TOML platform file here")
+    pse.add_argument("--force", action="store_true", help="overwrite --out if it exists")
+    pse.add_argument("--json", action="store_true", help="print the members' indicators "
+                     "as JSON")
+    pse.set_defaults(handler="platforms:cmd_platforms_series")
 
     sitl = sub.add_parser(
         "sitl", parents=[pf], help="serve vehicles over MAVLink like PX4 SITL",

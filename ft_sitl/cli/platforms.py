@@ -1,4 +1,4 @@
-"""``ft-sitl platforms``: the platform catalog (list, show, check, generate)."""
+"""``ft-sitl platforms``: the platform catalog (list, show, check, generate, series)."""
 
 from __future__ import annotations
 
@@ -6,8 +6,9 @@ import json
 import sys
 
 from ft_sitl.cli.common import CliError, platform_registry
-from ft_sitl.physics.catalog import catalog, load_platform_file, to_toml
+from ft_sitl.physics.catalog import as_file_entry, catalog, load_platform_file, to_toml
 from ft_sitl.physics.platform import SCHEMA
+from ft_sitl.physics.series import with_alpha_xy, with_twr
 from ft_sitl.physics.synthesis import generate_virtual
 
 
@@ -25,17 +26,18 @@ def _platform_row(p) -> dict:
 
 
 def cmd_platforms_list(args) -> int:
-    plats = platform_registry(args).all()
+    plats = platform_registry(args).all(with_series=True)
     if args.category:
         plats = [p for p in plats if p.category == args.category]
     rows = [_platform_row(p) for p in plats]
     if args.json:
         print(json.dumps(rows, indent=2))
         return 0
-    print(f"{'name':28s} {'category':8s} {'mass kg':>8s} {'TWR_max':>8s} "
+    w = max([28] + [len(r["name"]) for r in rows])
+    print(f"{'name':{w}s} {'category':8s} {'mass kg':>8s} {'TWR_max':>8s} "
           f"{'a_xy rad/s2':>12s} {'a_z rad/s2':>11s}")
     for r in rows:
-        print(f"{r['name']:28s} {r['category']:8s} {r['mass_kg']:8.3f} {r['twr_max']:8.2f} "
+        print(f"{r['name']:{w}s} {r['category']:8s} {r['mass_kg']:8.3f} {r['twr_max']:8.2f} "
               f"{r['alpha_xy_max_rad_s2']:12.1f} {r['alpha_z_max_rad_s2']:11.1f}")
     print(f"{len(rows)} platforms")
     return 0
@@ -81,7 +83,29 @@ def cmd_platforms_show(args) -> int:
 
 def cmd_platforms_generate(args) -> int:
     base = [p for p in catalog().values() if args.base in ("all", p.category)]
-    plats = generate_virtual(args.count, args.seed, base)
+    _write_platforms(args, generate_virtual(args.count, args.seed, base))
+    return 0
+
+
+def cmd_platforms_series(args) -> int:
+    if not args.twr and not args.alpha_xy:
+        raise CliError("series: give --twr and/or --alpha-xy values (docs/platforms.md, "
+                       "Controlled platform series)")
+    base = platform_registry(args).get(args.base)
+    plats = [with_twr(base, t, category="user") for t in args.twr]
+    plats += [with_alpha_xy(base, a, category="user") for a in args.alpha_xy]
+    names = [p.name for p in plats]
+    for name in names:
+        if names.count(name) > 1:
+            raise CliError(f"series: {name!r} is asked for twice")
+    # through the user-file path: the same checks a platform file gets
+    plats = [as_file_entry(p, "series") for p in plats]
+    _write_platforms(args, plats)
+    return 0
+
+
+def _write_platforms(args, plats) -> None:
+    """A TOML platform file of ``plats`` to --out or stdout (--json: their indicators)."""
     text = to_toml(plats)
     if args.out:
         if args.out.exists() and not args.force:
@@ -92,7 +116,6 @@ def cmd_platforms_generate(args) -> int:
         print(json.dumps([_platform_row(p) for p in plats], indent=2))
     elif not args.out:
         print(text, end="")
-    return 0
 
 
 def cmd_platforms_check(args) -> int:

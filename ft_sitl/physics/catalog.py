@@ -14,6 +14,11 @@ the collision body's dimensions (:data:`ft_sitl.physics.platform.BODY_SCHEMA`:
 ``body_size_m``, ``rotor_disk_thickness_m``, ``rotor_height_m``; omitted, they follow the
 rules of :mod:`ft_sitl.physics.body`). Anything else is rejected with a message naming
 the file, the entry and the key.
+
+Beside the catalog ship the controlled series (:mod:`ft_sitl.physics.series`, category
+``series``): built from catalog bodies, then loaded as file entries in physical form, so
+they pass exactly a user file's checks. A registry looks them up by name and lists them,
+but its :meth:`PlatformRegistry.all` (a campaign's ``"all"``) leaves them out.
 """
 
 from __future__ import annotations
@@ -34,6 +39,7 @@ from ft_sitl.physics.platform import (
     PlatformError,
     validate,
 )
+from ft_sitl.physics.series import build_series
 from ft_sitl.physics.synthesis import synthesise
 
 CATALOG_RESOURCE = "platforms.toml"
@@ -144,6 +150,24 @@ def catalog() -> dict[str, Platform]:
     return {p.name: p for p, _ in _catalog_with_paper()}
 
 
+def as_file_entry(p: Platform, where: str) -> Platform:
+    """``p`` passed through the user-file path (:func:`platform_from_mapping` of its
+    physical fields): the checks a platform file's entry gets, and the platform such a
+    file would give."""
+    return platform_from_mapping(p.physical_dict(), where)
+
+
+@functools.cache
+def _series() -> tuple[Platform, ...]:
+    return tuple(as_file_entry(p, "series platform") for p in build_series(catalog()))
+
+
+def series() -> dict[str, Platform]:
+    """The controlled series (ft_sitl.physics.series), each validated as a user file's
+    entry is: per base body, its TWR series then its alpha series."""
+    return {p.name: p for p in _series()}
+
+
 def largest_platform() -> Platform:
     """The catalog platform whose body reaches farthest (largest bounding radius): every
     scenario configuration must be solvable for its body (protocol 5), and scenario
@@ -157,10 +181,11 @@ def paper_values() -> dict[str, dict[str, float]]:
 
 
 class PlatformRegistry:
-    """The catalog plus user platforms; look-up by exact name with suggestions."""
+    """The catalog, the controlled series and user platforms; look-up by exact name with
+    suggestions."""
 
     def __init__(self, extra_files: Iterable[str | Path] = ()):
-        self._platforms: dict[str, Platform] = dict(catalog())
+        self._platforms: dict[str, Platform] = dict(catalog()) | series()
         for f in extra_files:
             for p in load_platform_file(f):
                 if p.name in self._platforms:
@@ -169,11 +194,22 @@ class PlatformRegistry:
                     )
                 self._platforms[p.name] = p
 
-    def names(self) -> list[str]:
-        return list(self._platforms)
+    def _listed(self, with_series: bool) -> list[Platform]:
+        shipped = series()
+        return [p for name, p in self._platforms.items()
+                if with_series or name not in shipped]
 
-    def all(self) -> list[Platform]:
-        return list(self._platforms.values())
+    def names(self, *, with_series: bool = False) -> list[str]:
+        return [p.name for p in self._listed(with_series)]
+
+    def all(self, *, with_series: bool = False) -> list[Platform]:
+        """The catalog (Table 1 order) and the user files' platforms: what a campaign's
+        ``"all"`` flies. ``with_series`` puts the controlled series after the catalog."""
+        return self._listed(with_series)
+
+    def category(self, name: str) -> list[Platform]:
+        """Every platform of one category (``series`` included), in listing order."""
+        return [p for p in self._listed(True) if p.category == name]
 
     def get(self, name: str) -> Platform:
         try:

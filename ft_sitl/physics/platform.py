@@ -18,7 +18,9 @@ from ft_sitl import G
 from ft_sitl.physics.body import BODY_FIELDS, VehicleBody, build_body
 from ft_sitl.physics.layouts import LAYOUTS, allocation_matrix, get_layout, max_axis_torques
 
-CATEGORIES = ("real", "virtual", "user")
+#: real and virtual: the paper's Table 1; user: from platform files; series: the controlled
+#: series (ft_sitl.physics.series), one catalog body with one indicator changed
+CATEGORIES = ("real", "virtual", "user", "series")
 
 
 class PlatformError(ValueError):
