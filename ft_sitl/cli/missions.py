@@ -67,7 +67,9 @@ def cmd_campaign_check(args) -> int:
             "estimator": [e or {} for e in c.estimators],
             "failures": [f or {} for f in c.failure_sets],
             "movers": [m or {} for m in c.mover_sets],
-            "fence": [f or {} for f in c.fences], "notes": list(c.notes)}
+            "fence": [f or {} for f in c.fences],
+            "aggressiveness": [lv.as_dict() for lv in c.levels if lv is not None],
+            "notes": list(c.notes)}
     if args.json:
         print(json.dumps(info, indent=2))
         return 0
@@ -76,7 +78,7 @@ def cmd_campaign_check(args) -> int:
         (len(c.param_sets), "parameter sets"), (len(c.actuator_sets), "actuator settings"),
         (len(c.perceptions), "perception settings"), (len(c.estimators), "estimators"),
         (len(c.failure_sets), "failure settings"), (len(c.mover_sets), "mover settings"),
-        (len(c.fences), "fences")) if n > 1)
+        (len(c.fences), "fences"), (len(c.levels), "aggressiveness levels")) if n > 1)
     print(f"campaign {c.name!r}: {len(specs)} trials = {len(c.algorithms)} algorithms x "
           f"{len(c.platforms)} platforms x {len(c.scenarios)} scenario families x "
           f"{c.trials} trials{axes}")
@@ -101,8 +103,11 @@ def cmd_campaign_check(args) -> int:
                           for k, v in p.items()) if p else none for p in values))
     if c.fences != [None]:
         print("  fence:      " + "; ".join(_fence_summary(f) for f in c.fences))
+    if c.levels != [None]:
+        print("  aggressiveness: " + "; ".join(lv.summary() for lv in c.levels))
     lim = c.limits
-    print(f"  limits: {lim.max_speed_m_s:g} m/s, {lim.timeout_s:g} s, goal sphere "
+    speed = "speed per level" if c.levels != [None] else f"{lim.max_speed_m_s:g} m/s"
+    print(f"  limits: {speed}, {lim.timeout_s:g} s, goal sphere "
           f"{lim.goal_radius_m:g} m held {lim.hold_s:g} s")
     for note in c.notes:
         print(f"  note: {note}")

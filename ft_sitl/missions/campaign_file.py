@@ -21,6 +21,9 @@ A campaign file (TOML or YAML) names what to run; every key is optional except
                                      # default) or "px4" (1: PX4's normalised rate gains)
     # axes, each one table or a list of them crossed with the matrix ({}: the default):
     # wind, params, actuators, perception, estimator, failures, fence (docs/missions.md)
+    aggressiveness = ["gentle", "paper", {name = "fast", max_speed_m_s = 6.0,
+                      max_acc_m_s2 = 3.0}]  # an axis of levels (names or tables): each
+                                     # sets limits.max_speed_m_s and max_acc_m_s2
 
     [[algorithms]]                   # or: algorithms = "all" / ["straight", ...]
     name = "straight"                # a registered navigator
@@ -60,6 +63,7 @@ from pathlib import Path
 from ft_sitl.autopilot.params import DEFAULT_GAINS, GAIN_MODES
 from ft_sitl.config import Table, integer, read_document
 from ft_sitl.missions import scoring
+from ft_sitl.missions.aggressiveness import LEVEL_LIMITS, Level, level_of
 from ft_sitl.missions.spec import (
     PROTOCOL_VERSION,
     PROTOCOLS,
@@ -86,7 +90,7 @@ PRESETS = ("quick", "paper", "gains")
 TOP_KEYS = ("name", "trials", "seed", "scenario_seed", "platforms", "platform_files",
             "scenarios", "indices", "physics_hz", "protocol", "gains", "algorithms", "limits",
             "weights", "description", "wind", "params", "actuators", "perception",
-            "estimator", "failures", "movers", "fence")
+            "estimator", "failures", "movers", "fence", "aggressiveness")
 LIMIT_KEYS = tuple(LIMITS.names())
 WEIGHT_KEYS = ("scenarios", "platforms", "beta")
 
@@ -152,6 +156,9 @@ class Campaign:
     mover_sets: list = field(default_factory=lambda: [None])
     #: the geofence axis: every trial flies with each (None: no fence)
     fences: list = field(default_factory=lambda: [None])
+    #: the aggressiveness axis: every trial flies at each Level, which sets its speed cap
+    #: and acceleration limit (None: the campaign's limits)
+    levels: list = field(default_factory=lambda: [None])
 
     def spec_dict(self) -> dict:
         """The campaign as data: what resuming compares, what reports print."""
@@ -186,6 +193,8 @@ class Campaign:
             **({"movers": [m or {} for m in self.mover_sets]}
                if self.mover_sets != [None] else {}),
             **({"fence": [f or {} for f in self.fences]} if self.fences != [None] else {}),
+            **({"aggressiveness": [lv.as_dict() for lv in self.levels]}
+               if self.levels != [None] else {}),
         }
 
     def modes(self) -> list[str]:
@@ -209,11 +218,14 @@ class Campaign:
                             platform_def=p.physical_dict() if p.category == "user" else None,
                             family=sc.family, scenario_index=index,
                             scenario_seed=self.scenario_seed, scenario_file=sc.file,
-                            trial=t, seed=seed, limits=self.limits, campaign=self.name,
+                            trial=t, seed=seed,
+                            limits=lv.limits(self.limits) if lv else self.limits,
+                            aggressiveness=lv.name if lv else None, campaign=self.name,
                             physics_hz=self.physics_hz, protocol=self.protocol,
                             gains=g, scenario_version=sc.version, wind=w, params=ps,
                             actuators=ac, perception=pe, estimator=es,
                             failures=[fa] if fa else None, movers=mo, fence=fe)
+                            for lv in self.levels
                             for g in self.modes() for ps in self.param_sets
                             for ac in self.actuator_sets for pe in self.perceptions
                             for es in self.estimators for fa in self.failure_sets
@@ -283,11 +295,12 @@ def parse_campaign(doc: dict, path: Path | None = None) -> Campaign:
     _check_motors(t, failure_sets, platforms, "failures", ("instance",))
     mover_sets = _table_axis(t, "movers", "mover settings", mover_settings)
     fences = _table_axis(t, "fence", "fence settings", fence_setting)
+    levels = _levels(t, limits_t, protocol)
     notes: list[str] = []
     return Campaign(winds=winds, gain_modes=gain_modes, param_sets=param_sets,
                     actuator_sets=actuator_sets, perceptions=perceptions,
                     estimators=estimators, failure_sets=failure_sets, mover_sets=mover_sets,
-                    fences=fences,
+                    fences=fences, levels=levels,
         name=name, algorithms=parse_algorithms(where, doc["algorithms"], notes),
         platforms=platforms, scenarios=scenarios, trials=trials, seed=seed,
         scenario_seed=scenario_seed, limits=limits, weights=weights, physics_hz=physics_hz,
@@ -318,6 +331,45 @@ def _table_axis(t: Table, key: str, what: str, check) -> list:
             raise t.fail(owner, f"the same {what} twice ({item!r})")
         seen.add(canonical)
         out.append(value)
+    return out
+
+
+def _levels(t: Table, limits_t: Table, protocol: int) -> list:
+    """The ``aggressiveness`` axis: one level (a declared level's name or a table) or a
+    non-empty list of different ones (missions.aggressiveness), each flown by every trial
+    of the matrix; absent: [None], the campaign's limits. A level sets the speed cap and
+    the acceleration limit, so ``[limits]`` may not set them too."""
+    raw = t.get("aggressiveness", None)
+    if raw is None:
+        return [None]
+    items = raw if isinstance(raw, list) else [raw]
+    if not items:
+        raise t.fail("aggressiveness", "must be a level (a name or a table) or a non-empty "
+                                       "list of them, got []")
+    both = [k for k in LEVEL_LIMITS if k in limits_t]
+    if both:
+        raise limits_t.fail(both[0], "the aggressiveness axis sets it for each level; leave "
+                                     "it out of [limits] (or drop the axis)")
+    if PROTOCOLS[protocol].max_acc_m_s2 is None:
+        raise t.fail("aggressiveness", f"protocol version {protocol} has no acceleration "
+                                       f"limit (each planner used its own; it came with "
+                                       f"version 3), so its trials cannot fly a level")
+    out: list[Level] = []
+    for k, item in enumerate(items):
+        owner = "aggressiveness" if not isinstance(raw, list) else f"aggressiveness[{k}]"
+        try:
+            level = level_of(item, f"{t.where}: {owner}")
+        except TrialSpecError as exc:
+            raise CampaignError(str(exc)) from None
+        for j, other in enumerate(out):
+            if other.name == level.name:
+                raise t.fail(owner, f"the level name {level.name!r} twice (also "
+                                    f"aggressiveness[{j}])")
+            if (other.max_speed_m_s, other.max_acc_m_s2) == (level.max_speed_m_s,
+                                                             level.max_acc_m_s2):
+                raise t.fail(owner, f"{level.summary()} flies the same limits as "
+                                    f"aggressiveness[{j}], {other.summary()}")
+        out.append(level)
     return out
 
 

@@ -118,7 +118,17 @@ def identity_row(spec, platform, scenario) -> dict:
         "fence": json.dumps(spec.fence, sort_keys=True, separators=(",", ":"))
         if spec.fence else "",
         **mover_columns(spec.movers, scenario.movers),
+        **limit_columns(spec.aggressiveness, spec.limits),
     }
+
+
+def limit_columns(level: str | None, limits) -> dict:
+    """The aggressiveness columns of a row (results.AXES): the level's name ("" without
+    the axis), the speed cap and the acceleration limit the trial flew under (NaN: none,
+    before protocol 3)."""
+    return {"aggressiveness": level or "", "speed_limit_m_s": limits.max_speed_m_s,
+            "acc_limit_m_s2": limits.max_acc_m_s2 if limits.max_acc_m_s2 is not None
+            else math.nan}
 
 
 def mover_columns(settings: dict | None, movers) -> dict:

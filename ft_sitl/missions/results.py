@@ -25,7 +25,11 @@ default parameters for rows written before they existed)
     JSON; "" none); ``mover_count`` (moving obstacles placed, scenarios.movers),
     ``mover_speed_m_s`` (their speed), ``movers`` (their non-default settings as JSON; 0,
     0 and "" in a static world); ``fence`` (the geofence the flight controller kept,
-    spec.fence_setting, as JSON; "" none).
+    spec.fence_setting, as JSON; "" none); ``aggressiveness`` (the level's name,
+    missions.aggressiveness; "" when the campaign has no aggressiveness axis),
+    ``speed_limit_m_s`` and ``acc_limit_m_s2`` (the speed cap and the acceleration limit
+    the trial flew under, its spec's limits: filled in from the spec for rows written
+    before the columns existed; NaN acceleration before protocol 3).
 outcome
     ``success`` (bool), ``reason`` (an :class:`Outcome` value; ``mover_collision`` is a
     collision with a moving obstacle), ``detail`` (what was hit,
@@ -57,6 +61,7 @@ run
 
 from __future__ import annotations
 
+import json
 import math
 from enum import StrEnum
 
@@ -109,7 +114,7 @@ IDENTITY = ("trial_id", "campaign", "algorithm", "algorithm_params", "platform",
             "trial", "seed")
 AXES = ("wind_speed_m_s", "turbulence", "gust_m_s", "wind", "params", "actuators",
         "perception", "estimator", "failures", "mover_count", "mover_speed_m_s", "movers",
-        "fence")
+        "fence", "aggressiveness", "speed_limit_m_s", "acc_limit_m_s2")
 OUTCOME = ("success", "reason", "detail")
 METRICS = ("time_to_goal_s", "nav_time_s", "path_length_m", "mean_speed_m_s",
            "max_speed_m_s", "min_clearance_m", "max_tilt_deg", "saturation_fraction",
@@ -120,12 +125,13 @@ RUN = ("sim_time_s", "wall_time_s", "code_version", "software", "protocol_versio
 COLUMNS = IDENTITY + AXES + OUTCOME + METRICS + RUN
 
 CATEGORICAL = ("campaign", "algorithm", "platform", "platform_category", "family",
-               "scenario_category", "scenario", "reason", "gains", "turbulence")
+               "scenario_category", "scenario", "reason", "gains", "turbulence",
+               "aggressiveness")
 INTEGER = ("scenario_index", "scenario_seed", "trial", "seed", "replans", "planner_calls",
            "fence_breaches", "protocol_version", "scenario_version", "mover_count")
 FLOAT = ("mass_kg", "twr_max", "alpha_xy_max", "alpha_z_max", "wind_speed_m_s",
-         "gust_m_s", "mover_speed_m_s") + tuple(m for m in METRICS if m not in INTEGER) + (
-             "sim_time_s", "wall_time_s")
+         "gust_m_s", "mover_speed_m_s", "speed_limit_m_s", "acc_limit_m_s2") + tuple(
+             m for m in METRICS if m not in INTEGER) + ("sim_time_s", "wall_time_s")
 
 
 def to_frame(rows):
@@ -162,6 +168,15 @@ def to_frame(rows):
     df["mover_count"] = df["mover_count"].fillna(0)
     df["mover_speed_m_s"] = df["mover_speed_m_s"].fillna(0.0)
     df["movers"] = df["movers"].astype(object).fillna("")
+    # ... and without an aggressiveness axis, under the limits their specs hold
+    df["aggressiveness"] = df["aggressiveness"].astype(object).fillna("")
+    for c in ("speed_limit_m_s", "acc_limit_m_s2"):
+        df[c] = pd.to_numeric(df[c], errors="coerce").astype("float64")
+    old = df["speed_limit_m_s"].isna()
+    if old.any():
+        limits = [spec_limits(s) for s in df.loc[old, "spec"]]
+        df.loc[old, "speed_limit_m_s"] = [sp for sp, _ in limits]
+        df.loc[old, "acc_limit_m_s2"] = [acc for _, acc in limits]
     for c in FLOAT:
         df[c] = pd.to_numeric(df[c], errors="coerce").astype("float64")
     df["success"] = df["success"].astype(bool)
@@ -171,6 +186,21 @@ def to_frame(rows):
         else:
             df[c] = df[c].astype("category")
     return df
+
+
+def spec_limits(spec) -> tuple[float, float]:
+    """(speed cap m/s, acceleration limit m/s^2) of a row's ``spec`` column (the spec's
+    JSON); NaN where the spec sets none (the acceleration before protocol 3) or the row
+    has no readable spec."""
+    try:
+        limits = json.loads(spec)["limits"]
+    except (TypeError, ValueError, KeyError):
+        return math.nan, math.nan
+    if not isinstance(limits, dict):
+        return math.nan, math.nan
+    return tuple(float(v) if isinstance(v, (int, float)) and not isinstance(v, bool)
+                 else math.nan
+                 for v in (limits.get("max_speed_m_s"), limits.get("max_acc_m_s2")))
 
 
 def rows_from_parquet(path) -> list[dict]:

@@ -211,6 +211,10 @@ class TrialSpec:
     #: max_hor_dist_m, max_ver_dist_m, polygons, circles; the scenario's ENU frame, m), every
     #: key kept; None: none
     fence: dict | None = None
+    #: the name of the aggressiveness level whose speed cap and acceleration limit are
+    #: ``limits``' (missions.aggressiveness; a label for the rows: the limits are what the
+    #: trial flies); None: the campaign has no aggressiveness axis
+    aggressiveness: str | None = None
 
     def __post_init__(self):
         for name in ("algorithm", "platform", "family"):
@@ -236,6 +240,10 @@ class TrialSpec:
         object.__setattr__(self, "failures", failure_schedule(self.failures))
         object.__setattr__(self, "movers", mover_settings(self.movers))
         object.__setattr__(self, "fence", fence_setting(self.fence))
+        if self.aggressiveness is not None and (not isinstance(self.aggressiveness, str)
+                                                or not self.aggressiveness.strip()):
+            raise TrialSpecError(f"aggressiveness: must be a level's name (a non-empty "
+                                 f"string) or None, got {self.aggressiveness!r}")
         if self.scenario_file is None:
             try:
                 fam = describe_family(self.family)
@@ -290,6 +298,8 @@ class TrialSpec:
             d["movers"] = self.movers
         if self.fence is not None:  # (likewise: no fence)
             d["fence"] = self.fence
+        if self.aggressiveness is not None:  # (likewise: no aggressiveness axis)
+            d["aggressiveness"] = self.aggressiveness
         return d
 
     @classmethod

@@ -513,7 +513,8 @@ FULL = TrialSpec(algorithm="straight", platform=PLATFORM, family="maze", scenari
                  failures=[{"at_s": 5.0, "unit": "gps", "type": "off", "instance": 0}],
                  movers={"count": 3, "speed_m_s": 2.0},
                  fence={"action": "land", "max_ver_dist_m": 3.5,
-                        "circles": [{"inclusion": True, "center": [0, 0], "radius_m": 50}]})
+                        "circles": [{"inclusion": True, "center": [0, 0], "radius_m": 50}]},
+                 aggressiveness="mine")
 
 
 def test_spec_round_trips_through_dict_and_json():
@@ -548,6 +549,7 @@ CHANGES = {
     "movers": {"count": 4},
     "fence": {"action": "hold", "max_ver_dist_m": 3.5,
               "circles": [{"inclusion": True, "center": [0, 0], "radius_m": 50}]},
+    "aggressiveness": "gentle",
 }
 # (protocol 2 here: FULL with protocol 3 would carry 3's acceleration limit, which 1 refuses)
 
