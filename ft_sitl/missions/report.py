@@ -18,9 +18,13 @@
                                 (rows, bottom to top) and TWR_max (left to right in a row)
   ``heatmap_<algorithm>``       per algorithm: platforms (y, by TWR_max) x scenarios (x);
                                 each cell: successes / trials and the Wilson interval
-  ``composite_score``           Score and FinalScore per algorithm
+  ``composite_score``           Score and FinalScore per algorithm, each bar with its value
   ``failures_by_algorithm``     exit reasons, stacked fractions per algorithm
   ``failures_by_family``        exit reasons per scenario family, one panel per algorithm
+                                (the legend in the grid's empty slot when it has one)
+
+Exit-reason figures and the exit-reason table show the reasons that occur
+(:func:`occurring_reasons`); no text is set below :data:`MIN_FONT_PT`.
 
 Figures are drawn on :class:`matplotlib.figure.Figure` objects rendered by the Agg / SVG
 backends: no pyplot, no global state (style settings are applied inside
@@ -77,6 +81,13 @@ _RC = {"svg.hashsalt": "ft-sitl-report", "svg.fonttype": "none", "font.size": 9,
        "axes.titlesize": 9, "axes.labelsize": 9, "legend.fontsize": 8,
        "xtick.labelsize": 8, "ytick.labelsize": 8, "figure.dpi": 100}
 _DPI = 120
+#: no text in a figure is set smaller than this (pt; sub- and superscripts are 0.7 of
+#: their text): an SVG viewed at 100 % shows it at 9.3 px, the report page at 9 px or
+#: more (the report's browser test measures both)
+MIN_FONT_PT = 7.0
+#: no figure is drawn wider than this (in): the page's column (1,250 px less its padding)
+#: then scales a PNG by 0.78 at least, which keeps MIN_FONT_PT at 9 px
+MAX_WIDTH_IN = 13.0
 _REQUIRED = ("algorithm", "platform", "platform_category", "twr_max", "alpha_xy_max",
              "alpha_z_max", "family", "scenario_category", "success", "reason")
 
@@ -173,7 +184,7 @@ def _new_figure(w: float, h: float):
     # matplotlib: heavy, loaded only when plotting
     from matplotlib.figure import Figure
 
-    return Figure(figsize=(w, h), layout="constrained")
+    return Figure(figsize=(min(w, MAX_WIDTH_IN), h), layout="constrained")
 
 
 def _fig_success_by_family(t: _Tables):
@@ -204,7 +215,8 @@ def _fig_success_by_family(t: _Tables):
             ax.bar(none, np.ones(len(none)), width=width * 0.95, facecolor="none",
                    edgecolor="#aaaaaa", hatch="////", linewidth=0.6)
             for x in none:
-                ax.text(x, 0.5, "n/a", rotation=90, ha="center", va="center", fontsize=6,
+                ax.text(x, 0.5, "n/a", rotation=90, ha="center", va="center",
+                        fontsize=MIN_FONT_PT,
                         color="#555555", bbox={"facecolor": "white", "edgecolor": "none",
                                                "pad": 0.5})
         if not xs:
@@ -218,7 +230,7 @@ def _fig_success_by_family(t: _Tables):
             ax.plot(at_zero, np.zeros(at_zero.size), ls="none", marker="^", ms=4,
                     color=t.colour(algo), clip_on=False, zorder=3)
             for x in at_zero:
-                ax.text(x, 0.035, "0", ha="center", va="bottom", fontsize=6,
+                ax.text(x, 0.035, "0", ha="center", va="bottom", fontsize=MIN_FONT_PT,
                         color=t.colour(algo))
     ax.set_xticks(x0, [t.family_label[f] for f in t.families], rotation=20, ha="right")
     ax.set_ylim(0, 1.05)
@@ -315,7 +327,7 @@ def _fig_success_vs_axis(t: _Tables, axis: str):
     ax.grid(alpha=0.3)
     handles, labels = ax.get_legend_handles_labels()
     fig.legend(handles, labels, loc="outside upper center",
-               ncols=min(len(labels), 5 if len(kinds) == 1 else 3), frameon=False, fontsize=7)
+               ncols=min(len(labels), 5 if len(kinds) == 1 else 3), frameon=False)
     return fig
 
 
@@ -392,14 +404,27 @@ def _fig_partial_dependence(t: _Tables):
     if handles:
         fig.legend(handles, names, loc="outside upper center", ncols=min(len(names), 6),
                    frameon=False)
+    absent = [f for f in t.fits if not f.fitted]
+    if absent:   # an algorithm without a line is said, with why, not left to be guessed
+        fig.supxlabel("no line: " + "; ".join(f"{f.algorithm} ({_why_not_fitted(f)})"
+                                              for f in absent), fontsize=8, color="#444444")
     return fig
+
+
+def _why_not_fitted(fit) -> str:
+    """The short reason a fit was not made: its note's last clause, without the
+    parenthesis ("not estimable: no variation between platforms")."""
+    last = (fit.note or "not fitted").split("; ")[-1]
+    return last.split(" (")[0]
 
 
 def _fig_platform_grid(t: _Tables):
     nrows, ncols, where = platform_grid_layout(t.indicators)
-    fig = _new_figure(max(4.0, 1.75 * ncols), max(2.6, 1.45 * nrows + 0.9))
-    axes = fig.subplots(nrows, ncols, squeeze=False, sharey=True)
     n_alg = len(t.algorithms)
+    rotation = 45 if n_alg <= 6 else 90
+    names_in = max(len(a) for a in t.algorithms) * 0.075 * (0.71 if rotation == 45 else 1)
+    fig = _new_figure(max(4.0, 2.0 * ncols), max(2.6, 1.6 * nrows + 0.9 + names_in))
+    axes = fig.subplots(nrows, ncols, squeeze=False, sharey=True)
     used = set()
     for name, (r, c) in where.items():
         ax = axes[nrows - 1 - r][c]
@@ -415,11 +440,19 @@ def _fig_platform_grid(t: _Tables):
                    capsize=1.5, error_kw={"elinewidth": 0.6})
         ind = t.indicators.loc[name]
         ax.set_title(f"{name}\nTWR {ind['twr_max']:.2f}  "
-                     rf"$\alpha_{{xy}}$ {ind['alpha_xy_max']:.0f}", fontsize=6, pad=2)
+                     rf"$\alpha_{{xy}}$ {ind['alpha_xy_max']:.0f}", fontsize=8, pad=2,
+                     linespacing=1.1)
         ax.set_xlim(-0.6, n_alg - 0.4)
         ax.set_ylim(0, 1.05)
-        ax.set_xticks([])
-        ax.tick_params(labelsize=6)
+        # the algorithms under the bottom row (it is always full), the bars above alone
+        if r == 0:
+            ax.set_xticks(np.arange(n_alg), t.algorithms, rotation=rotation,
+                          ha="right" if rotation == 45 else "center",
+                          rotation_mode="anchor" if rotation == 45 else "default")
+        else:
+            ax.set_xticks(np.arange(n_alg), [])
+        ax.tick_params(axis="x", length=0)
+        ax.tick_params(axis="y", labelsize=7.5)
         ax.grid(axis="y", alpha=0.3)
     for r in range(nrows):
         for c in range(ncols):
@@ -430,8 +463,8 @@ def _fig_platform_grid(t: _Tables):
 
     fig.legend([Patch(color=t.colour(a)) for a in t.algorithms], t.algorithms,
                loc="outside upper center", ncols=min(n_alg, 6), frameon=False)
-    fig.supxlabel(r"$\mathrm{TWR}_{\max}$ increases left to right within each row", fontsize=8)
-    fig.supylabel(r"$\alpha_{xy,\max}$ increases bottom to top (rows)", fontsize=8)
+    fig.supxlabel(r"$\mathrm{TWR}_{\max}$ increases left to right within each row")
+    fig.supylabel(r"$\alpha_{xy,\max}$ increases bottom to top (rows)")
     return fig
 
 
@@ -460,7 +493,7 @@ def _fig_heatmap(t: _Tables, algo: str):
                   ha="right")
     twr = t.indicators["twr_max"]
     ax.set_yticks(np.arange(n_p), [f"{p} ({twr[p]:.2f})" for p in plats],
-                  fontsize=6 if n_p > 12 else 8)
+                  fontsize=MIN_FONT_PT if n_p > 12 else 8)
     # short: a label longer than the axes is cut off by the figure's edge
     ax.set_ylabel(r"platform ($\mathrm{TWR}_{\max}$)")
     ax.set_title(f"{algo}: success per platform and scenario family\n"
@@ -468,7 +501,7 @@ def _fig_heatmap(t: _Tables, algo: str):
     if annotate:
         k, n = grid("successes"), grid("n")
         lo, hi = grid("wilson_lo"), grid("wilson_hi")
-        size = 5.5 if n_p > 12 else 7
+        size = MIN_FONT_PT
         for (i, j), v in np.ndenumerate(values):
             if not np.isfinite(v):
                 text = "n/a"
@@ -491,20 +524,29 @@ def _fig_composite(t: _Tables):
     labels = [a if comp else f"{a} †" for a, comp in zip(s["algorithm"], s["comparable"],
                                                          strict=True)]
     ax.set_xticks(x, labels, rotation=15, ha="right")
-    for xi, v in zip(x, s["FinalScore"], strict=True):
-        ax.text(xi + 0.2, v + 1.0, f"{v:.2f}", ha="center", va="bottom", fontsize=7)
+    for dx, column in ((-0.2, "Score"), (0.2, "FinalScore")):
+        for xi, v in zip(x, s[column], strict=True):
+            ax.text(xi + dx, v + 1.0, f"{v:.2f}", ha="center", va="bottom", fontsize=8)
     ax.set_ylim(0, 105)
     ax.set_ylabel("score (%)")
-    ax.set_title(f"Composite score (beta = {t.scores.attrs['beta']:g}; "
-                 "† = not directly comparable)")
+    dagger = "" if s["comparable"].all() else "; † = not directly comparable"
+    ax.set_title(f"Composite score (beta = {t.scores.attrs['beta']:g}{dagger})")
     ax.legend(frameon=False, loc="upper right")
     ax.grid(axis="y", alpha=0.3)
     return fig
 
 
-def _stack(ax, xs, fractions: dict[str, np.ndarray], width: float):
+def occurring_reasons(table: pd.DataFrame) -> list[str]:
+    """The exit reasons (in :data:`REASONS` order) with at least one trial in a
+    :func:`~ft_sitl.missions.scoring.failure_breakdown` table: the figures and the table
+    show these only."""
+    counts = table.groupby(table["reason"].astype(str))["count"].sum()
+    return [r for r in REASONS if counts.get(r, 0) > 0]
+
+
+def _stack(ax, xs, fractions: dict[str, np.ndarray], width: float, reasons: Sequence[str]):
     bottom = np.zeros(len(xs))
-    for reason in REASONS:
+    for reason in reasons:
         f = fractions[reason]
         ax.bar(xs, f, width=width, bottom=bottom, color=REASON_COLOURS[reason], label=reason)
         bottom = bottom + f
@@ -522,47 +564,67 @@ def _fractions(table: pd.DataFrame, keys: Sequence[str], groups: Sequence[tuple]
     return out
 
 
-def _reason_legend(fig):
+def _reason_handles(reasons: Sequence[str]):
     # matplotlib: heavy, loaded only when plotting
     from matplotlib.patches import Patch
 
-    fig.legend([Patch(color=REASON_COLOURS[r]) for r in REASONS], list(REASONS),
-               loc="outside right center", frameon=False)
+    return [Patch(color=REASON_COLOURS[r]) for r in reasons], list(reasons)
 
 
 def _fig_failures_by_algorithm(t: _Tables):
+    reasons = occurring_reasons(t.fail_algo)
     fig = _new_figure(max(4.5, 0.9 * len(t.algorithms) + 3.0), 3.6)
     ax = fig.add_subplot()
     groups = [(a,) for a in t.algorithms]
-    _stack(ax, np.arange(len(groups)), _fractions(t.fail_algo, ("algorithm",), groups), 0.7)
+    _stack(ax, np.arange(len(groups)), _fractions(t.fail_algo, ("algorithm",), groups), 0.7,
+           reasons)
     ax.set_xticks(np.arange(len(groups)), t.algorithms, rotation=15, ha="right")
     ax.set_ylim(0, 1.0)
     ax.set_ylabel("fraction of trials")
     ax.set_title("Exit reasons per algorithm")
-    _reason_legend(fig)
+    fig.legend(*_reason_handles(reasons), loc="outside right center", frameon=False)
     return fig
 
 
+def panel_columns(n: int) -> int:
+    """Columns of a grid of ``n`` panels: all in one row up to 3, else 3, 2 or 4 columns,
+    the first that leaves at most one slot empty (that slot holds the legend)."""
+    if n <= 3:
+        return max(n, 1)
+    return next((c for c in (3, 2, 4) if -n % c <= 1), 3)
+
+
 def _fig_failures_by_family(t: _Tables):
+    reasons = occurring_reasons(t.fail_family)
     n = len(t.algorithms)
-    ncols = min(n, 3)
+    ncols = panel_columns(n)
     nrows = math.ceil(n / ncols)
-    fig = _new_figure(max(5.0, (0.55 * len(t.families) + 1.2) * ncols + 1.8), 3.2 * nrows)
+    spare = nrows * ncols - n
+    # a panel 0.42 in per family, so five or more fit the page at their size
+    fig = _new_figure(max(5.0, (0.42 * len(t.families) + 1.0) * ncols + 0.6),
+                      2.9 * nrows + (0.0 if spare else 0.5))
     axes = fig.subplots(nrows, ncols, squeeze=False, sharey=True)
     x = np.arange(len(t.families))
     for k, algo in enumerate(t.algorithms):
         ax = axes[k // ncols][k % ncols]
         groups = [(algo, f) for f in t.families]
         fr = _fractions(t.fail_family, ("algorithm", "family"), groups)
-        _stack(ax, x, fr, 0.7)
-        ax.set_xticks(x, [t.family_label[f] for f in t.families], rotation=30, ha="right",
-                      fontsize=7)
+        _stack(ax, x, fr, 0.7, reasons)
+        ax.set_xticks(x, [t.family_label[f] for f in t.families], rotation=40, ha="right",
+                      rotation_mode="anchor")
         ax.set_title(algo)
         ax.set_ylim(0, 1.0)
     for k in range(n, nrows * ncols):
         axes[k // ncols][k % ncols].set_axis_off()
-    axes[0][0].set_ylabel("fraction of trials")
-    _reason_legend(fig)
+    for row in axes:
+        row[0].set_ylabel("fraction of trials")
+    handles, labels = _reason_handles(reasons)
+    if spare:   # the legend in the empty slot, beside the panels it explains
+        axes[n // ncols][n % ncols].legend(handles, labels, loc="center", frameon=False,
+                                           title="exit reason")
+    else:
+        fig.legend(handles, labels, loc="outside upper center",
+                   ncols=min(len(labels), 5), frameon=False)
     return fig
 
 
@@ -583,10 +645,12 @@ def _figures(t: _Tables) -> list[tuple[str, str, object]]:
          "each indicator, the other indicators at their means and averaged over the scenario "
          "families fitted; bands: 95 % of the curves under the fit's coefficient "
          "uncertainty; ticks on the x axis: the platforms. One line per algorithm fitted "
-         "(none where the indicator or the algorithm is not in the fit: see the regression "
-         "tables).", _fig_partial_dependence),
+         "(none where the indicator or the algorithm is not in the fit: the figure names "
+         "the algorithms without a line and why, the regression tables say more).",
+         _fig_partial_dependence),
         ("platform_grid", "One panel per platform: success per algorithm pooled over "
-         "scenario families, 95 % CI. Rows are bands of alpha_xy,max (bottom: lowest); "
+         "scenario families, 95 % CI; the algorithms are named under the bottom row, in the "
+         "same order in every panel. Rows are bands of alpha_xy,max (bottom: lowest); "
          "within a row, TWR_max increases to the right.", _fig_platform_grid),
     ]
     for axis in axis_values(t.df):
@@ -610,11 +674,12 @@ def _figures(t: _Tables) -> list[tuple[str, str, object]]:
                      lambda t, a=algo: _fig_heatmap(t, a)))
     figs += [
         ("composite_score", "Composite score per algorithm (eqs. 12-19): Score without "
-         "penalty and the variance-penalised FinalScore.", _fig_composite),
-        ("failures_by_algorithm", "Exit reasons as fractions of each algorithm's trials.",
-         _fig_failures_by_algorithm),
-        ("failures_by_family", "Exit reasons per scenario family, one panel per algorithm.",
-         _fig_failures_by_family),
+         "penalty (light) and the variance-penalised FinalScore (dark), each with its "
+         "value.", _fig_composite),
+        ("failures_by_algorithm", "Exit reasons as fractions of each algorithm's trials "
+         "(the reasons that occur).", _fig_failures_by_algorithm),
+        ("failures_by_family", "Exit reasons per scenario family, one panel per algorithm "
+         "(the reasons that occur).", _fig_failures_by_family),
     ]
     return figs
 
@@ -666,14 +731,21 @@ def _family_rows(t: _Tables) -> tuple[list[str], list[list[str]]]:
 
 
 def _failure_rows(t: _Tables) -> tuple[list[str], list[list[str]]]:
-    head = ["Algorithm", "Trials", *REASONS]
+    reasons = occurring_reasons(t.fail_algo)
+    head = ["Algorithm", "Trials", *reasons]
     rows = []
     for algo in t.algorithms:
         sub = t.fail_algo[t.fail_algo["algorithm"].astype(str) == algo]
         counts = dict(zip(sub["reason"].astype(str), sub["count"], strict=True))
         n = int(sub["n"].iloc[0])
-        rows.append([algo, str(n), *[f"{counts[r]} ({counts[r] / n:.0%})" for r in REASONS]])
+        rows.append([algo, str(n), *[f"{counts[r]} ({counts[r] / n:.0%})" for r in reasons]])
     return head, rows
+
+
+def _absent_reasons_note(t: _Tables) -> str:
+    """The exit reasons no trial ended with ("" when every one occurs)."""
+    absent = [r for r in REASONS if r not in occurring_reasons(t.fail_algo)]
+    return f"No trial ended with: {', '.join(absent)}." if absent else ""
 
 
 def _metric_text(v: float) -> str:
@@ -709,7 +781,8 @@ def _fit_rows(t: _Tables) -> tuple[list[str], list[list[str]]]:
             ", ".join(t.family_label.get(x, x) for x in f.families) or "–",
             "; ".join(f"{t.family_label.get(x, x)} ({why})" for x, why in f.left_out) or "–",
             "; ".join(f"{x} ({why})" for x, why in f.dropped_indicators) or "–",
-            method[f.method], f.note or "–"])
+            "not estimable" if "not estimable:" in f.note else method[f.method],
+            f.note or "–"])
     return head, rows
 
 
@@ -863,8 +936,9 @@ def _method_notes(t: _Tables) -> list[str]:
         "take the trials of all platforms / scenarios together.",
         f"Composite score (eqs. 12-19): scenario weights {sw}; platform weights {pw}; "
         f"beta = {a['beta']:g}. A scenario family without any trial of an algorithm is "
-        "dropped for it and its scenario weights renormalised (eq. 19); † marks scores not "
-        "computed over the full (family x platform) grid.",
+        "dropped for it and its scenario weights renormalised (eq. 19)"
+        + ("." if t.scores["comparable"].all() else
+           "; † marks scores not computed over the full (family x platform) grid."),
         "Definitions: docs/scoring.md.",
     ]
 
@@ -928,6 +1002,8 @@ def _html(t: _Tables, facts, figures, spec_text: str, generated: str) -> str:
               "inflation factors.</p>",
               _html_table(*_collinearity_rows(t), "collinearity"),
               "<h2>Exit reasons</h2>", _html_table(*_failure_rows(t), "failures"),
+              *([f'<p class="note">{e(note)}</p>'] if (note := _absent_reasons_note(t))
+                else []),
               "<h2>Metrics of successful trials (median)</h2>",
               _html_table(*_metric_rows(t), "metrics"),
               "<h2>Campaign spec</h2>", f"<pre>{e(spec_text)}</pre>",
@@ -957,7 +1033,9 @@ def _markdown(t: _Tables, facts, figures, spec_text: str, generated: str) -> str
               "Pearson correlations (one point per platform) and variance inflation factors.",
               "", _md_table(*_collinearity_rows(t)), "",
               "## Exit reasons", "",
-              _md_table(*_failure_rows(t)), "", "## Metrics of successful trials (median)", "",
+              _md_table(*_failure_rows(t)), "",
+              *([_absent_reasons_note(t), ""] if _absent_reasons_note(t) else []),
+              "## Metrics of successful trials (median)", "",
               _md_table(*_metric_rows(t)), "", "## Figures", ""]
     for name, caption, _ in figures:
         lines += [f"![{name}]({name}.png)", "", f"*{name}*: {caption} "

@@ -403,3 +403,13 @@ def test_a_resumed_campaigns_rate_counts_only_the_recorded_runs_trials(tmp_path)
     facts = dict(_run_facts(df, meta))
     assert "trials_run" not in meta and "trials flown by the recorded runs" not in facts
     assert facts["trials per second"] == f"{len(df) / 20.0:.3g}"
+
+
+# --------------------------------------------------------------------------- issue 44
+def test_a_mark_no_score_carries_is_not_explained(campaign):
+    """Every algorithm flew the full grid: no dagger in the composite figure, its title or
+    the notes (the dagger's explanation used to be printed beside no dagger)."""
+    _, _, paths, _ = campaign
+    assert "†" not in paths["composite_score.svg"].read_text(encoding="utf-8")
+    assert "† marks" not in paths["report.html"].read_text(encoding="utf-8")
+    assert "† marks" not in paths["summary.md"].read_text(encoding="utf-8")
