@@ -59,7 +59,8 @@ def build_parser() -> argparse.ArgumentParser:
     demo.set_defaults(handler="demo:cmd_demo")
 
     plat = sub.add_parser("platforms", help="the platform catalog",
-                          description="List, show, check and generate platforms.")
+                          description="List, show, check and generate platforms, and make "
+                          "controlled series.")
     psub = plat.add_subparsers(dest="platforms_command", metavar="ACTION", required=True)
     pl = psub.add_parser("list", parents=[pf], help="list platforms with their indicators")
     pl.add_argument("--category", choices=CATEGORIES)

@@ -120,6 +120,7 @@ def test_alpha_members_have_the_requested_alpha_and_their_base_twr():
         b_twr, b_axy, b_az = ind(base)
         assert axy == pytest.approx(value, rel=REL), p.name
         assert twr == pytest.approx(b_twr, rel=REL), p.name
+        assert (axy, twr) == pytest.approx((value, b_twr), rel=1e-12)  # exactly, in fact
         # alpha_z moves with alpha_xy: J_zz / J_xx is held (docs/platforms.md)
         assert az / axy == pytest.approx(b_az / b_axy, rel=REL), p.name
         assert p.rotor_speed_max_rad_s == base.rotor_speed_max_rad_s
