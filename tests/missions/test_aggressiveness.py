@@ -8,8 +8,10 @@ import json
 import math
 from pathlib import Path
 
+import numpy as np
 import pytest
 
+from ft_sitl.autopilot.cascade import SP_VEL
 from ft_sitl.missions.aggressiveness import LEVELS, level_of
 from ft_sitl.missions.campaign import run_campaign
 from ft_sitl.missions.campaign_file import CampaignError, load_campaign
@@ -17,7 +19,8 @@ from ft_sitl.missions.plan import plan_trial
 from ft_sitl.missions.results import COLUMNS, rows_from_parquet, to_frame
 from ft_sitl.missions.spec import PROTOCOL_VERSION, PROTOCOLS, TrialSpec, TrialSpecError
 from ft_sitl.missions.trial import run_trial
-from ft_sitl.navigation.base import LIMITS, Limits
+from ft_sitl.navigation.base import LIMITS, Limits, Observation, Task
+from ft_sitl.navigation.learned.navrl import NavRL
 from ft_sitl.navigation.registry import create
 from tests.missions.conftest import PLATFORM, campaign_file, read_jsonl, run_exe
 
@@ -153,6 +156,26 @@ def test_a_paper_level_trial_flies_what_the_trial_without_the_axis_flies(yard):
     assert (a["aggressiveness"], b["aggressiveness"]) == ("paper", "")
     differ = [k for k in COLUMNS if k not in WALL_CLOCK and not same(a[k], b[k])]
     assert differ == ["trial_id", "aggressiveness", "spec"]
+
+
+def test_navrl_flies_its_deployments_speed_at_every_level(navrl_checkpoint):
+    # the released policy's action range is the deployment's 1 m/s whatever the level
+    def commands(level):
+        nav = NavRL(checkpoint=str(navrl_checkpoint), latency_s=0.0)
+        nav.reset(Task(start=np.array([0.0, 0.0, 1.5]), start_yaw=0.0,
+                       goal=np.array([30.0, 0.0, 1.5]), limits=level.limits(Limits()),
+                       bounds_min=np.array([-5.0, -10.0, 0.0]),
+                       bounds_max=np.array([35.0, 10.0, 4.0]), collision_radius_m=0.3,
+                       twr_max=3.0, alpha_xy_max=100.0, alpha_z_max=10.0))
+        return np.array([nav.step(Observation(
+            time_s=0.05 * k, position=np.array([0.0, 0.0, 1.5]), velocity=np.zeros(3),
+            yaw=0.0, attitude=np.array([1.0, 0, 0, 0]), angular_velocity=np.zeros(3))).row
+            for k in range(15)])
+    rows = {name: commands(level) for name, level in LEVELS.items()}
+    for name in ("gentle", "brisk", "aggressive"):
+        np.testing.assert_array_equal(rows[name], rows["paper"])
+    np.testing.assert_allclose(rows["aggressive"][-1, SP_VEL:SP_VEL + 2], [1.0, 0.0],
+                               atol=1e-9)
 
 
 def test_rows_written_before_the_columns_get_them_from_their_spec():
