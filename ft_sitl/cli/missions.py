@@ -37,7 +37,7 @@ from ft_sitl.missions.trial import run_trial
 from ft_sitl.navigation.registry import NavigatorError
 from ft_sitl.physics.platform import PlatformError
 from ft_sitl.scenarios.families import describe_family
-from ft_sitl.scenarios.render import render_scenario
+from ft_sitl.scenarios.render import render_scenario, scenario_title
 from ft_sitl.scenarios.scenario import ScenarioError
 from ft_sitl.transport import transport as mavlink_transport
 from ft_sitl.wire.navigate import NavigateError, require_mavsdk
@@ -514,6 +514,7 @@ def cmd_trial_rerun(args) -> int:
         render_scenario(outcome.scenario, args.render,
                         trajectory=outcome.trajectory[:, 1:4] if len(outcome.trajectory)
                         else None,
-                        title=f"{row['algorithm']} on {row['platform']}: {row['reason']}")
+                        title=f"{scenario_title(outcome.scenario)} - {row['algorithm']} on "
+                              f"{row['platform']}: {row['reason']}")
         print(f"  render: {args.render}")
     return status

@@ -11,9 +11,12 @@
 * a red arrow ending at the goal, pointing along the start -> goal direction, and (top
   view) the circle of ``goal_radius_m`` around the goal;
 * the straight start -> goal reference line in blue;
-* optionally a flown trajectory, an ``(N, 3)`` array of ENU positions, as a red curve
-  (or any path: ``trajectory_label`` names it in the legend), and marked points, each a
-  magenta ring with its label in the legend.
+* optionally a flown trajectory, an ``(N, 3)`` array of ENU positions, as an orange curve
+  drawn over the blue line (or any path: ``trajectory_label`` names it in the legend),
+  and marked points, each a magenta ring with its label in the legend.
+
+Every colour means one thing (the legend under the views names each); the title names the
+scenario (:func:`scenario_title`), and the perspective view's z label reads upright.
 
 Drawing uses matplotlib's Agg canvas directly (no ``pyplot``, no window, no global figure
 registry), so it works headless and from worker processes. Most scenarios render in under
@@ -45,7 +48,8 @@ of the larger horizontal extent (flat scenes would otherwise be a sliver)."""
 START_COLOR = "#00b400"
 GOAL_COLOR = "#e00000"
 LINE_COLOR = "#0046ff"
-TRAJECTORY_COLOR = GOAL_COLOR
+#: orange: not the goal's red nor the straight line's blue it is drawn over
+TRAJECTORY_COLOR = "#ff8c00"
 MARK_COLOR = "#d000d0"
 BOUNDS_COLOR = "#202020"
 
@@ -53,6 +57,12 @@ _LIGHT = np.array([0.35, -0.75, 0.56])
 _LIGHT = _LIGHT / np.linalg.norm(_LIGHT)
 _VIEW_SIZE_IN = 6.4
 """Height of the figure (inches); each view gets a panel about this wide."""
+
+
+def scenario_title(scenario) -> str:
+    """The default title of a picture: ``"<name>: <paper family name>, <category>"``
+    (e.g. ``"forest-01-s0: Forest, classic"``); a caller's own title should contain it."""
+    return f"{scenario.name}: {_family_label(scenario)}"
 
 
 def _family_label(scenario) -> str:
@@ -332,7 +342,10 @@ def _draw_perspective(ax, scenario, traj, marks, max_faces: int) -> None:
     ax.zaxis.set_major_locator(MaxNLocator(nbins=4))
     ax.set_xlabel("x (east) [m]")
     ax.set_ylabel("y (north) [m]")
-    ax.set_zlabel("z (up) [m]")
+    # upright, read bottom to top: mplot3d would turn it along the z axis's screen
+    # direction, which from this view point reads upside down
+    ax.zaxis.set_rotate_label(False)
+    ax.set_zlabel("z (up) [m]", rotation=90)
     title = "perspective" if stretch == 1.0 else f"perspective (height x{stretch:.1f})"
     ax.set_title(title, fontsize=10)
 
@@ -365,13 +378,15 @@ def render_scenario(scenario, path=None, *, trajectory=None,
                     marks: Sequence[tuple[Sequence[float], str]] = ()):
     """Draw ``scenario`` (top and/or perspective view); save a PNG at ``path`` if given.
 
-    ``trajectory`` is an optional ``(N, 3)`` array of ENU positions (m), drawn in red and
-    called ``trajectory_label`` in the legend. ``marks`` are ``(point, label)`` pairs: an
-    ENU point (m) ringed in magenta, its label in the legend.
+    ``trajectory`` is an optional ``(N, 3)`` array of ENU positions (m), drawn in
+    :data:`TRAJECTORY_COLOR` and called ``trajectory_label`` in the legend. ``marks`` are
+    ``(point, label)`` pairs: an ENU point (m) ringed in magenta, its label in the legend.
     ``views`` is a non-empty subset of :data:`VIEWS`, drawn left to right in that order.
-    ``title`` replaces the default ``"<name>: <paper family name>, <category>"``.
+    ``title`` replaces the default, :func:`scenario_title` (keep the scenario's name in
+    it: ``f"{scenario_title(sc)} - ..."``).
     Returns the :class:`matplotlib.figure.Figure` (on an Agg canvas); the PNG is saved
-    at ``dpi`` without tight cropping, so figure pixels and saved pixels coincide.
+    at ``dpi`` without tight cropping, so figure pixels and saved pixels coincide, with the
+    title as its ``Title`` text.
     Raises ``ValueError`` for a bad trajectory, view or dpi.
     """
     # matplotlib: heavy, loaded only when plotting
@@ -398,9 +413,9 @@ def render_scenario(scenario, path=None, *, trajectory=None,
             _draw_perspective(ax, scenario, traj, marks, MAX_FACES_3D)
         ax.set_label(view)
     _legend(fig, traj, trajectory_label, marks)
-    fig.suptitle(title if title is not None else
-                 f"{scenario.name}: {_family_label(scenario)}", fontsize=12)
+    title = title if title is not None else scenario_title(scenario)
+    fig.suptitle(title, fontsize=12)
     fig.subplots_adjust(left=0.06, right=0.97, bottom=0.12, top=0.9, wspace=0.15)
-    if path is not None:
-        fig.savefig(Path(path), dpi=dpi, format="png")
+    if path is not None:   # the title in the PNG's Title text too, for a file browser
+        fig.savefig(Path(path), dpi=dpi, format="png", metadata={"Title": title})
     return fig

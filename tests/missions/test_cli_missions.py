@@ -14,6 +14,7 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 import pytest
+from PIL import Image
 
 from ft_sitl.cli import main
 from ft_sitl.missions.campaign import run_campaign
@@ -191,6 +192,10 @@ def test_rerun_by_id_prefix_is_identical_and_saves_trajectory_and_render(capsys,
     assert np.linalg.norm(samples[0, 1:] - YARD_START) < 0.3  # from the start waypoint
     assert samples[-1, 2] < 10.0  # stopped at the wall (y = 9.8 m)
     assert f"  render: {png}" in lines and png.read_bytes()[:8] == PNG_MAGIC
+    with Image.open(png) as im:   # the picture's title names the scenario, then the flight
+        title = im.info["Title"]
+    assert title.startswith(f"{row['scenario']}: ") and title.endswith(
+        f" - slow on {PLATFORM}: {row['reason']}")
 
 
 def test_rerun_reports_a_stored_result_that_differs(capsys, done, tmp_path):

@@ -14,8 +14,10 @@ from ft_sitl.scenarios.render import (
     LINE_COLOR,
     MARK_COLOR,
     START_COLOR,
+    TRAJECTORY_COLOR,
     load_trajectory,
     render_scenario,
+    scenario_title,
 )
 
 PNG_MAGIC = b"\x89PNG\r\n\x1a\n"
@@ -79,11 +81,16 @@ def test_forest_with_trajectory_shows_start_goal_line_and_path(forest, tmp_path)
 
     top, persp = fig.axes[:2]
     assert (top.get_label(), persp.get_label()) == ("top", "perspective")
-    assert forest.name in fig._suptitle.get_text() and "Forest" in fig._suptitle.get_text()
+    assert fig._suptitle.get_text() == scenario_title(forest) == "forest-02-s0: Forest, classic"
+    with Image.open(path) as im:   # the title in the file too
+        assert im.info["Title"] == scenario_title(forest)
     assert top.get_xlabel().endswith("[m]") and top.get_ylabel().endswith("[m]")
+    # the z label reads upright, bottom to top (mplot3d turned it to 274 deg: upside down)
+    assert persp.zaxis.label.get_text() == "z (up) [m]"
+    assert persp.zaxis.label.get_rotation() == 90
 
     # top view: green arrow just ahead of the start along start_yaw, red arrow just before
-    # the goal, blue line half way, red trajectory at its widest detour
+    # the goal, blue line half way, orange trajectory at its widest detour
     yaw = np.array([math.cos(forest.start_yaw), math.sin(forest.start_yaw)])
     p = forest.start[:2] + 1.0 * yaw
     assert _near(_window(img, _pixel(fig, top, *p)), START_COLOR).any()
@@ -93,15 +100,31 @@ def test_forest_with_trajectory_shows_start_goal_line_and_path(forest, tmp_path)
     assert _near(_window(img, _pixel(fig, top, *p)), GOAL_COLOR).any()
     mid = (forest.start + forest.goal)[:2] / 2
     assert _near(_window(img, _pixel(fig, top, *mid)), LINE_COLOR).any()
-    assert _near(_window(img, _pixel(fig, top, *traj[40, :2])), GOAL_COLOR).any()
+    at_detour = _window(img, _pixel(fig, top, *traj[40, :2]))
+    assert _near(at_detour, TRAJECTORY_COLOR).any() and not _near(at_detour, GOAL_COLOR).any()
     # ... and none of those colours where nothing is drawn (the area's empty corner)
     corner = _window(img, _pixel(fig, top, forest.bounds_max[0] - 0.3, 0.3), half=1)
     assert not (_near(corner, START_COLOR) | _near(corner, GOAL_COLOR)).any()
 
-    # perspective view: all three markers appear inside its axes
+    # perspective view: all three markers and the trajectory appear inside its axes
     region = _axes_region(fig, persp, img)
-    for color in (START_COLOR, GOAL_COLOR, LINE_COLOR):
+    for color in (START_COLOR, GOAL_COLOR, LINE_COLOR, TRAJECTORY_COLOR):
         assert _near(region, color).sum() > 20, color
+    # the legend names each colour once
+    legend = {t.get_text(): h.get_color() for t, h in
+              zip(fig.legends[0].get_texts(), fig.legends[0].legend_handles, strict=True)
+              if hasattr(h, "get_color")}
+    assert legend["trajectory"] == TRAJECTORY_COLOR
+    assert legend["straight start-goal line"] == LINE_COLOR
+
+
+def test_every_marker_has_a_colour_of_its_own():
+    """The trajectory was drawn in the goal's red: each colour must be told from every
+    other at the pixel tests' tolerance."""
+    colours = [START_COLOR, GOAL_COLOR, LINE_COLOR, TRAJECTORY_COLOR, MARK_COLOR]
+    for i, a in enumerate(colours):
+        for b in colours[i + 1:]:
+            assert np.linalg.norm(_rgb(a) - _rgb(b)) > 120, (a, b)
 
 
 def test_marks_and_the_path_label(forest, tmp_path):
