@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import collections
+import dataclasses
 import json
 import math
 import random
@@ -51,14 +53,61 @@ def _campaign(source: str):
 
 
 # --- campaign ------------------------------------------------------------------------------
+def configurations_flown(campaign) -> list[tuple[dict[int, int], list[int]]]:
+    """Per scenario entry of ``campaign``: ``({configuration: its trials per algorithm x
+    platform x axes combination}, [listed configurations no trial flies])``, in the order
+    listed. Trials cycle over the listed indices (docs/missions.md, "The trial matrix"): with
+    ``trials = 1`` and ``indices = [1, 2]`` only configuration 1 flies. Read off the entry's
+    own trial specs, so it is the rule ``trial_specs`` applies, not a copy of it."""
+    out = []
+    for entry in campaign.scenarios:
+        specs = dataclasses.replace(campaign, scenarios=[entry]).trial_specs()
+        combinations = len(specs) // campaign.trials
+        counts = collections.Counter(s.scenario_index for s in specs)
+        listed = list(dict.fromkeys(entry.indices))
+        out.append(({i: counts[i] // combinations for i in listed if counts[i]},
+                    [i for i in listed if not counts[i]]))
+    return out
+
+
+def _flown_text(entry, flies: dict[int, int], never: list[int]) -> str:
+    """``forest [1, 2]``; ``forest [1, 2] x3 each``; ``forest [1 x2, 2 x1]``;
+    ``forest [1] (listed [1, 2]: 2 never flies)``."""
+    times = set(flies.values())
+    if len(times) == 1:
+        text = f"{list(flies)}" + (f" x{times.pop()} each" if times != {1} else "")
+    else:
+        text = "[" + ", ".join(f"{i} x{n}" for i, n in flies.items()) + "]"
+    if never:
+        text += (f" (listed {list(entry.indices)}: {', '.join(map(str, never))} never "
+                 f"fl{'ies' if len(never) == 1 else 'y'})")
+    return f"{entry.family} {text}"
+
+
+def _warn_unflown(c, source: str, flown) -> None:
+    """A warning for each scenario entry that lists configurations no trial flies."""
+    for k, (entry, (_, never)) in enumerate(zip(c.scenarios, flown, strict=True)):
+        if never:
+            n = len(entry.indices)
+            _warn(f"{c.source or source}: scenarios[{k}] ({entry.family}): "
+                  f"configuration{'s' if len(never) > 1 else ''} "
+                  f"{', '.join(map(str, never))} listed but never flown: trials = {c.trials} "
+                  f"cycles over indices {list(entry.indices)} (trial t flies indices[t % "
+                  f"{n}]); set trials = {n} to fly each once, or list only those that fly")
+
+
 def cmd_campaign_check(args) -> int:
     c = _campaign(args.campaign)
     specs = c.trial_specs()
+    flown = configurations_flown(c)
+    _warn_unflown(c, args.campaign, flown)
     info = {"name": c.name, "trials": len(specs),
             "algorithms": [a.label for a in c.algorithms],
             "platforms": [p.name for p in c.platforms],
-            "scenarios": [{"family": s.family, "indices": list(s.indices)}
-                          for s in c.scenarios],
+            "scenarios": [{"family": s.family, "indices": list(s.indices),
+                           "flies": [{"index": i, "times": n} for i, n in flies.items()],
+                           "never_flies": never}
+                          for s, (flies, never) in zip(c.scenarios, flown, strict=True)],
             "trials_per_combination": c.trials, "limits": c.limits.as_dict(),
             "wind": [w or {} for w in c.winds], "gains": c.modes(),
             "params": [p or {} for p in c.param_sets],
@@ -85,7 +134,7 @@ def cmd_campaign_check(args) -> int:
     print(f"  algorithms: {', '.join(info['algorithms'])}")
     print(f"  platforms:  {', '.join(info['platforms'])}")
     print("  scenarios:  " + ", ".join(
-        f"{s.family} {list(s.indices)}" for s in c.scenarios))
+        _flown_text(s, *f) for s, f in zip(c.scenarios, flown, strict=True)))
     if c.winds != [None]:
         print("  wind:       " + "; ".join(
             ", ".join(f"{k} {v}" for k, v in w.items()) if w else "calm" for w in c.winds))
@@ -138,6 +187,7 @@ def _interrupt(signum, frame):
 
 def cmd_campaign_run(args) -> int:
     c = _campaign(args.campaign)
+    _warn_unflown(c, args.campaign, configurations_flown(c))
     if args.workers < 1:
         raise CliError(f"--workers: {args.workers} must be at least 1")
     if args.limit is not None and args.limit < 1:

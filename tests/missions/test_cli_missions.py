@@ -68,19 +68,56 @@ def test_check_prints_the_matrix(capsys, campaign, yard):
         "campaign 'cli': 4 trials = 2 algorithms x 1 platforms x 1 scenario families x 2 trials",
         "  algorithms: straight, slow",
         f"  platforms:  {PLATFORM}",
-        "  scenarios:  yard [1]",
+        "  scenarios:  yard [1] x2 each",   # (two trials, one configuration)
         "  limits: 4 m/s, 90 s, goal sphere 2 m held 3 s",
     ]
     rc, out, _ = cli(capsys, "campaign", "check", campaign, "--json")
     assert rc == 0
     assert json.loads(out) == {
         "name": "cli", "trials": 4, "algorithms": ["straight", "slow"],
-        "platforms": [PLATFORM], "scenarios": [{"family": "yard", "indices": [1]}],
+        "platforms": [PLATFORM],
+        "scenarios": [{"family": "yard", "indices": [1], "flies": [{"index": 1, "times": 2}],
+                       "never_flies": []}],
         "trials_per_combination": 2,
         "limits": {"max_speed_m_s": 4.0, "timeout_s": 90.0, "goal_radius_m": 2.0,
                    "hold_s": 3.0}, "wind": [{}], "gains": ["bandwidth"], "params": [{}],
         "actuators": [{}], "perception": [{}], "estimator": [{}], "failures": [{}],
         "movers": [{}], "fence": [{}], "aggressiveness": [], "notes": []}
+
+
+def test_check_says_which_listed_configurations_fly_and_warns_of_the_others(capsys,
+                                                                            tmp_path):
+    # trials cycle over the indices: one trial flies configuration 1 only
+    body = (f'algorithms = ["straight"]\nplatforms = ["{PLATFORM}"]\ntrials = 1\n'
+            'scenarios = [{family = "forest", indices = [1, 2]},\n'
+            '             {family = "maze", indices = [3, 4, 5]}]\n')
+    path = campaign_file(tmp_path, "cycle.toml", body)
+    rc, out, err = cli(capsys, "campaign", "check", path)
+    assert rc == 0
+    assert ("  scenarios:  forest [1] (listed [1, 2]: 2 never flies), maze [3] (listed "
+            "[3, 4, 5]: 4, 5 never fly)") in out.splitlines()
+    assert err.splitlines() == [
+        f"warning: {path}: scenarios[0] (forest): configuration 2 listed but never flown: "
+        "trials = 1 cycles over indices [1, 2] (trial t flies indices[t % 2]); set trials = "
+        "2 to fly each once, or list only those that fly",
+        f"warning: {path}: scenarios[1] (maze): configurations 4, 5 listed but never flown: "
+        "trials = 1 cycles over indices [3, 4, 5] (trial t flies indices[t % 3]); set "
+        "trials = 3 to fly each once, or list only those that fly"]
+    rc, out, _ = cli(capsys, "campaign", "check", path, "--json")
+    forest, maze = json.loads(out)["scenarios"]
+    assert forest["flies"] == [{"index": 1, "times": 1}] and forest["never_flies"] == [2]
+    assert maze["never_flies"] == [4, 5]
+    # five trials over two configurations: 3 and 2 of each
+    path.write_text(body.replace("trials = 1", "trials = 5"))
+    rc, out, err = cli(capsys, "campaign", "check", path)
+    assert (rc, err) == (0, "")
+    assert "  scenarios:  forest [1 x3, 2 x2], maze [3 x2, 4 x2, 5 x1]" in out.splitlines()
+    # a run says it too, before anything else
+    path.write_text(body)
+    rc, _, err = cli(capsys, "campaign", "run", path, "--out", tmp_path / "out",
+                     "--limit", 0)
+    assert rc == 2 and err.splitlines()[0].startswith(
+        f"warning: {path}: scenarios[0] (forest): configuration 2 listed but never flown")
 
 
 def test_check_shows_every_axis(capsys, tmp_path, yard):
