@@ -49,7 +49,7 @@ import numpy as np
 
 from ft_sitl import __version__
 from ft_sitl.autopilot import failures
-from ft_sitl.autopilot.cascade import C_SAT_STEPS
+from ft_sitl.autopilot.cascade import C_SAT_STEPS, SP_POS
 from ft_sitl.autopilot.geofence import TAKEOVER_ACTIONS
 from ft_sitl.missions.resources import RESOURCES, TrialResources
 from ft_sitl.missions.results import Outcome
@@ -288,9 +288,20 @@ class Metrics:
         self.planner_s = 0.0
         self.planner_calls = 0
         self.time_to_goal_s = math.nan
+        self.track_sq = 0.0  # time-weighted squared position error over commanded axes
+        self.track_s = 0.0   # the time with a commanded position
 
-    def sample(self, guard, prev, s, dt_s: float) -> None:
+    def sample(self, guard, prev, s, dt_s: float, commanded=None) -> None:
+        """One sample after an advance of ``dt_s``: the state ``s``, the position before
+        (``prev``) and the flight controller's position setpoint now (``commanded``: a
+        3-vector, NaN on the axes it does not command; None: none)."""
         self.path += norm(s.position - prev)
+        if commanded is not None:
+            axes = np.isfinite(commanded)
+            if axes.any():
+                err = s.position[axes] - commanded[axes]
+                self.track_sq += float(err @ err) * dt_s
+                self.track_s += dt_s
         v = norm(s.velocity)
         self.speed_sum += v * dt_s  # time-weighted: samples are not evenly spaced
         self.time_s += dt_s
@@ -310,6 +321,8 @@ class Metrics:
             "max_speed_m_s": self.max_speed if self.n else math.nan,
             "min_clearance_m": self.min_clear if math.isfinite(self.min_clear) else math.nan,
             "max_tilt_deg": math.degrees(self.max_tilt) if self.n else math.nan,
+            "tracking_rms_m": (math.sqrt(self.track_sq / self.track_s) if self.track_s > 0
+                               else math.nan),
             "planner_time_s": self.planner_s,
             "planner_calls": self.planner_calls,
         }
@@ -404,7 +417,9 @@ class NavigationJudge:
         fleet, m = self.fleet, self.m
         s = fleet.true_state(0)
         self._state, self._state_us = s, fleet.time_us
-        m.sample(self.guard, self.prev, s, (fleet.time_us - self.t_sample_us) * 1e-6)
+        sp = fleet.commanders[0].last_setpoint.row
+        m.sample(self.guard, self.prev, s, (fleet.time_us - self.t_sample_us) * 1e-6,
+                 sp[SP_POS:SP_POS + 3])
         self.t_sample_us = fleet.time_us
         self.prev = s.position.copy()
         t_nav_us = fleet.time_us - self.t_nav0_us

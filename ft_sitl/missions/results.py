@@ -38,7 +38,10 @@ metrics (navigation phase)
     ``time_to_goal_s`` (first entry into the goal sphere, from navigation start),
     ``nav_time_s``, ``path_length_m``, ``mean_speed_m_s``, ``max_speed_m_s``,
     ``min_clearance_m`` (obstacle clearance of the collision sphere, sampled),
-    ``max_tilt_deg``, ``saturation_fraction`` (physics steps with any rotor at a limit),
+    ``max_tilt_deg``, ``tracking_rms_m`` (the time-weighted RMS distance between the
+    flown position and the flight controller's position setpoint, over the axes it
+    commands; empty for rows written before it was recorded), ``saturation_fraction``
+    (physics steps with any rotor at a limit),
     ``energy_j`` (motor mechanical energy), ``replans``, ``planner_time_s`` (navigator
     compute, wall clock), ``planner_calls``, ``fence_breaches`` (how often the vehicle
     left the inside of its geofence, as the flight controller counts breaches; empty for
@@ -117,9 +120,9 @@ AXES = ("wind_speed_m_s", "turbulence", "gust_m_s", "wind", "params", "actuators
         "fence", "aggressiveness", "speed_limit_m_s", "acc_limit_m_s2")
 OUTCOME = ("success", "reason", "detail")
 METRICS = ("time_to_goal_s", "nav_time_s", "path_length_m", "mean_speed_m_s",
-           "max_speed_m_s", "min_clearance_m", "max_tilt_deg", "saturation_fraction",
-           "energy_j", "replans", "planner_time_s", "planner_calls", "fence_breaches",
-           "fence_breach_s")
+           "max_speed_m_s", "min_clearance_m", "max_tilt_deg", "tracking_rms_m",
+           "saturation_fraction", "energy_j", "replans", "planner_time_s", "planner_calls",
+           "fence_breaches", "fence_breach_s")
 RUN = ("sim_time_s", "wall_time_s", "code_version", "software", "protocol_version", "gains",
        "scenario_version", "finished_utc", "spec")
 COLUMNS = IDENTITY + AXES + OUTCOME + METRICS + RUN

@@ -293,6 +293,34 @@ def test_hovering_times_out(yard):
     assert math.isnan(row["time_to_goal_s"]) and row["path_length_m"] < 0.5
 
 
+class Offset(Navigator):
+    """Holds a point ``dz`` above the start: a step the vehicle must fly to."""
+
+    name = "offset"
+
+    def __init__(self, dz):
+        super().__init__()
+        self.dz = dz
+
+    def step(self, obs):
+        return Setpoint.position(np.add(self.task.start, [0.0, 0.0, self.dz]),
+                                 yaw=self.task.start_yaw)
+
+
+def test_tracking_error_is_the_rms_distance_to_the_commanded_position(yard):
+    spec = yard_spec(yard, limits=Limits(timeout_s=4.0))
+    held = run_trial(spec, navigator=Hover()).row
+    assert held["reason"] == "timeout"
+    assert 0.0 <= held["tracking_rms_m"] < 0.05  # holding the start it hovers at
+    # a 2 m step: the error starts at 2 m and falls as the vehicle climbs to it, so the
+    # RMS over 4 s lies between those
+    stepped = run_trial(spec, navigator=Offset(2.0)).row
+    assert 0.3 < stepped["tracking_rms_m"] < 2.0
+    # nothing commands a position: no tracking error
+    moving = run_trial(spec, navigator=Velocity([1.0, 0.0, 0.0])).row
+    assert math.isnan(moving["tracking_rms_m"])
+
+
 def test_a_protocol_with_a_stall_timeout_ends_a_hover_early_and_no_flight(yard, yard_path,
                                                                           monkeypatch):
     from ft_sitl.missions import spec as spec_module
