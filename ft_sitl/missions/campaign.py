@@ -22,7 +22,7 @@ import sys
 import threading
 import time
 import traceback
-from collections import defaultdict
+from collections import Counter, defaultdict
 from collections.abc import Callable
 from contextlib import contextmanager
 from dataclasses import dataclass
@@ -43,6 +43,7 @@ from ft_sitl.missions.executors import (
     throughput,
 )
 from ft_sitl.missions.plan import PERCEPTION_WIRE
+from ft_sitl.missions.progress import RemainingTime, reference_cost_s
 from ft_sitl.missions.protocol import failed_row
 from ft_sitl.missions.resources import RESOURCES
 from ft_sitl.missions.results import Outcome
@@ -260,14 +261,29 @@ def run_campaign(campaign: Campaign, out_dir: str | Path, *, workers: int = 1,
         if dashboard and progress:
             print(f"Dask dashboard: {dashboard}", file=sys.stderr)
         if progress:
+            # the time left from the campaign's mix, not tqdm's rate of the first trials
+            # (compilation warm-up, one navigator in one family): missions/progress.py
+            keys = {s.trial_id: (s.label or s.algorithm, s.family) for s in todo}
+            pending = Counter(keys.values())
+            eta = RemainingTime({key: reference_cost_s(s.algorithm, s.family)
+                                 for s in todo if (key := keys[s.trial_id])},
+                                _describe(ex).get("workers"))
             bar = tqdm(total=len(specs), initial=skipped, unit="trial", dynamic_ncols=True,
-                       desc=campaign.name, smoothing=0.05)
+                       desc=campaign.name, smoothing=0.05, postfix=_left(eta.seconds(pending)),
+                       bar_format="{l_bar}{bar}| {n_fmt}/{total_fmt} "
+                                  "[{elapsed}, {rate_fmt}{postfix}]")
         fn = functools.partial(run_chunk, transport=transport,
                                wall_budget_s=budget)
         for worker, results in ex.imap(fn, _chunks(todo, ex.chunk_max)):
             for tid, row, err in results:
-                if row is not None and row.get("__died__"):
+                died = row is not None and row.get("__died__")
+                if died:
                     row = died_row(row["spec"], row.get("detail", DIED_DETAIL))
+                if bar is not None and (key := keys.pop(tid, None)) is not None:
+                    pending[key] -= 1
+                    if row is not None and not died:   # (a death's time is not a cost)
+                        eta.observe(*key, worker, float(row.get("wall_time_s") or 0.0))
+                    bar.set_postfix_str(_left(eta.seconds(pending)), refresh=False)
                 if row is not None:
                     if tid not in store.done:  # (a chunk Dask ran twice: written once)
                         per_worker[worker].append(float(row.get("wall_time_s") or 0.0))
@@ -301,6 +317,10 @@ def run_campaign(campaign: Campaign, out_dir: str | Path, *, workers: int = 1,
     if store.done:
         store.write_tables()
     return RunSummary(len(specs), skipped, ran, errors, wall)
+
+
+def _left(seconds: float) -> str:
+    return f"about {tqdm.format_interval(seconds)} left"
 
 
 def _describe(ex: Executor) -> dict:

@@ -149,6 +149,18 @@ def test_check_a_preset(capsys):
 
 
 # --- campaign run and report -----------------------------------------------------------------
+@pytest.mark.slow  # two trials flown
+def test_the_progress_bar_shows_the_time_left_from_the_mix(capsys, campaign, tmp_path):
+    rc, _, err = cli(capsys, "campaign", "run", campaign, "--out", tmp_path / "out",
+                     "--limit", "2", "--no-report")
+    assert rc == 0
+    bars = [b for b in err.replace("\r", "\n").splitlines() if b.startswith("cli:")]
+    # tqdm's own "<remaining" is replaced by missions/progress.py's estimate, from the
+    # reference costs before the first trial (two straight trials: 0.16 s) on
+    assert bars and all("<" not in b and b.endswith(" left]") for b in bars), bars
+    assert "about 00:00 left]" in bars[0]
+
+
 @pytest.mark.slow  # a campaign and its report
 def test_run_with_limit_then_resume_with_report_and_csv(capsys, campaign, tmp_path):
     out = tmp_path / "out"
