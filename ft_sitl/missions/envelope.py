@@ -32,6 +32,7 @@ Degenerate inputs never raise: a fit that cannot be made says why in ``note``.
 
 from __future__ import annotations
 
+import json
 import math
 import re
 from collections.abc import Callable
@@ -41,8 +42,16 @@ import pandas as pd
 
 from ft_sitl.missions.aggressiveness import LEVELS
 from ft_sitl.missions.regression import footprints, separated
+from ft_sitl.missions.resources import RESOURCES
 from ft_sitl.missions.scoring import wilson_interval
+from ft_sitl.missions.spec import TrialSpec, flight_budget, platform_for
 from ft_sitl.physics.series import SERIES_CATEGORY
+from ft_sitl.scenarios.difficulty import (
+    FlightBudget,
+    cached_difficulty,
+    flight_time_s,
+    simplify,
+)
 
 #: the row column that names a trial's aggressiveness level ("" without the axis)
 LEVEL_COLUMN = "aggressiveness"
@@ -307,6 +316,36 @@ def time_bound_s(path_time: Callable[[float, float], float], speed_m_s: float,
     if not acc > 0:
         return math.inf
     return float(path_time(float(speed_m_s), acc))
+
+
+def time_bounds(df: pd.DataFrame, cache_dir=None) -> pd.Series:
+    """Each row's time-optimal bound (s; :func:`time_bound_s`): the shortest path of its
+    scenario for its platform's body (the difficulty measure's, computed once per scenario
+    configuration and body, kept in ``cache_dir`` when given: 0.1-5 s each), re-timed
+    under the row's speed cap and acceleration (its level's, the lesser of it and the
+    platform's). NaN where the spec cannot be read or no path was found."""
+    paths: dict = {}
+    out = np.full(len(df), math.nan)
+    budget = flight_budget()
+    for i, (spec_text, speed, acc, twr) in enumerate(zip(
+            df["spec"], df["speed_limit_m_s"], df["acc_limit_m_s2"], df["twr_max"],
+            strict=True)):
+        try:
+            spec = TrialSpec.from_dict(json.loads(spec_text))
+            platform = platform_for(spec)
+        except (TypeError, ValueError, KeyError):
+            continue
+        key = (spec.family, spec.scenario_index, spec.scenario_seed, spec.scenario_version,
+               spec.scenario_file, repr(platform.body()))
+        if key not in paths:
+            found = cached_difficulty(RESOURCES.scenario(spec), platform, budget, cache_dir)
+            paths[key] = simplify(np.asarray(found.path)) if found.path else None
+        path = paths[key]
+        if path is None or not (math.isfinite(speed) and math.isfinite(acc)):
+            continue
+        out[i] = time_bound_s(lambda v, a, p=path: flight_time_s(
+            p, FlightBudget(v, a, budget.time_s)), speed, acc, twr)
+    return pd.Series(out, index=df.index, name="time_bound_s")
 
 
 def row_metrics(df: pd.DataFrame, bounds: pd.Series | None = None) -> pd.DataFrame:

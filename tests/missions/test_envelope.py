@@ -190,3 +190,26 @@ def test_the_envelope_figures_draw_every_panel_with_readable_text():
     assert titles == {"ego"}
     labels = [t.get_text() for t in fig.legends[0].get_texts()]
     assert "forest" in labels and "body 0.55kg-UAV1" in labels
+
+
+def test_time_bounds_re_time_the_body_path_under_each_rows_level(tmp_path):
+    import json
+
+    from ft_sitl.missions.spec import TrialSpec
+
+    def row(platform, speed, acc, twr):
+        spec = TrialSpec("ego", platform, "forest", scenario_index=1)
+        return {"spec": json.dumps(spec.to_dict()), "speed_limit_m_s": speed,
+                "acc_limit_m_s2": acc, "twr_max": twr}
+
+    df = pd.DataFrame([row("0.55kg-UAV 1", 2.0, 2.0, 3.6), row("0.55kg-UAV 1", 8.0, 10.0, 3.6),
+                       row("series-0.55kg-UAV1-twr1.2", 8.0, 10.0, 1.2),
+                       {"spec": "not json", "speed_limit_m_s": 4.0, "acc_limit_m_s2": 3.0,
+                        "twr_max": 2.0}])
+    b = envelope.time_bounds(df, cache_dir=tmp_path)
+    assert math.isnan(b.iloc[3])
+    gentle, fast, weak = b.iloc[0], b.iloc[1], b.iloc[2]
+    # forest 1 is ~40 m: at 2 m/s it takes over 20 s, at 8 m/s a fraction of that; the
+    # weak member of the same body cannot accelerate at 10 m/s^2, so it takes longer
+    assert gentle > 20.0 and fast < gentle / 2.5 and fast < weak < gentle
+    assert list(tmp_path.glob("*.json")), "the path is cached"
