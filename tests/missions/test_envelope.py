@@ -213,3 +213,29 @@ def test_time_bounds_re_time_the_body_path_under_each_rows_level(tmp_path):
     # weak member of the same body cannot accelerate at 10 m/s^2, so it takes longer
     assert gentle > 20.0 and fast < gentle / 2.5 and fast < weak < gentle
     assert list(tmp_path.glob("*.json")), "the path is cached"
+
+
+def test_the_report_section_is_there_for_levels_or_series_and_lists_its_tables():
+    from ft_sitl.missions import envelope_report as er
+
+    members = _twr_series()
+    rows = _rows(members, lambda p, f, lv: min(1.0, p.indicators().twr_max / 3.0), trials=6)
+    rows["tracking_rms_m"] = 0.2
+    cat = _rows(list(catalog().values())[:6], lambda p, f, lv: 0.7, trials=6, seed=1)
+    cat["tracking_rms_m"] = 0.1
+    both = pd.concat([rows, cat], ignore_index=True)
+    assert er.has_envelope(both)
+    one_level = cat[cat["aggressiveness"] == "paper"]
+    assert not er.has_envelope(one_level)
+    t = er.envelope_tables(both, n_boot=20)
+    names = [name for name, _, _ in er.envelope_figures(t)]
+    assert names == ["envelope", "envelope_dose_twr", "envelope_tolerance"]
+    md = er.markdown(t)
+    for title in ("Q2 with size held fixed", "Envelope thresholds",
+                  "What each catalog platform tolerates", "Per-row metrics"):
+        assert f"### {title}" in md
+    # the metrics table: per algorithm, level and sample, the medians given
+    assert set(t.rows["sample"]) == {"series", "catalog"}
+    got = t.rows.set_index(["level", "sample"])["tracking_rms_m"]
+    assert got[("paper", "series")] == pytest.approx(0.2)
+    assert got[("paper", "catalog")] == pytest.approx(0.1)

@@ -1,0 +1,59 @@
+"""Issue 44: the capability-envelope analysis of the envelope campaigns' result
+directories (docs/results/envelope/*.toml, flown into e.g. /work/runs/envelope-series):
+their rows together, the tables of missions/envelope_report.py as CSV and Markdown, its
+figures as PNG and SVG, and each row's time-optimal bound (the scenario's shortest path
+for the platform's body, cached in ``--cache``)::
+
+    .venv/bin/python scripts/envelope_analysis.py DIR [DIR ...] --out docs/results/envelope/analysis
+"""
+
+# isort: off
+import ft_sitl  # noqa: F401  (first: its numeric pins before numpy loads)
+# isort: on
+
+import argparse  # noqa: E402
+import io  # noqa: E402
+from pathlib import Path  # noqa: E402
+
+import pandas as pd  # noqa: E402
+from matplotlib import rc_context  # noqa: E402
+
+from ft_sitl.missions import envelope  # noqa: E402
+from ft_sitl.missions import envelope_report as er  # noqa: E402
+from ft_sitl.missions.report import _RC  # noqa: E402
+from ft_sitl.missions.results import to_frame  # noqa: E402
+from ft_sitl.missions.store import load_rows  # noqa: E402
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("dirs", nargs="+", type=Path, help="campaign result directories")
+    ap.add_argument("--out", type=Path, required=True)
+    ap.add_argument("--cache", type=Path, default=Path.home() / ".cache/ft-sitl/difficulty",
+                    help="where the body paths are kept")
+    ap.add_argument("--n-boot", type=int, default=envelope.N_BOOT)
+    args = ap.parse_args()
+    df = to_frame([r for d in args.dirs for r in load_rows(d)[1]])
+    print(f"{len(df)} rows from {len(args.dirs)} directories")
+    bounds = envelope.time_bounds(df, cache_dir=args.cache)
+    t = er.envelope_tables(df, n_boot=args.n_boot, bounds=bounds)
+    args.out.mkdir(parents=True, exist_ok=True)
+    for name in ("fits", "dose", "thresholds", "tolerance", "rows"):
+        getattr(t, name).to_csv(args.out / f"{name}.csv", index=False)
+    (args.out / "tables.md").write_text(er.markdown(t))
+    with rc_context(_RC):
+        for name, caption, make in er.envelope_figures(t):
+            fig = make()
+            for ext in ("png", "svg"):
+                buf = io.BytesIO()
+                fig.savefig(buf, format=ext, dpi=120,
+                            metadata={"Software": None} if ext == "png" else
+                            {"Date": None, "Creator": None})
+                (args.out / f"{name}.{ext}").write_bytes(buf.getvalue())
+            print(f"{name}: {caption}")
+    counts = df.groupby(["algorithm", envelope.LEVEL_COLUMN], observed=True).size()
+    print(pd.DataFrame({"rows": counts}).to_string())
+
+
+if __name__ == "__main__":
+    main()
