@@ -139,6 +139,14 @@ def build_parser() -> argparse.ArgumentParser:
                                                     maximum=1000),
                       default=1.0,
                       help="simulated seconds per wall second, 0.01..1000 (default: 1)")
+    sitl.add_argument("--pace", choices=("wall", "client"), default="wall",
+                      help="wall: the simulated clock runs at the speed factor whatever the "
+                           "clients do (default); client: also never more than --pace-span "
+                           "past the last MAVLink message from a client (a starved client "
+                           "sees a slower world, not a different one)")
+    sitl.add_argument("--pace-span", type=number("--pace-span"), metavar="S",
+                      help="with --pace client: simulated seconds the clock may run past the "
+                           "client's last message, 0.004..60 (default 0.05)")
     sitl.add_argument("--home", metavar="LAT,LON,ALT",
                       help="geodetic home (default: PX4 SITL's 47.397742,8.545594,488)")
     sitl.add_argument("--bind", default="127.0.0.1",

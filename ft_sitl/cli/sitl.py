@@ -23,7 +23,7 @@ from ft_sitl.cli.common import (
 )
 from ft_sitl.frames import PX4_SITL_HOME, GeoReference, enu_to_ned, yaw_enu_to_ned
 from ft_sitl.mavlink.instances import InstanceBusy, instances_held
-from ft_sitl.mavlink.server import SitlServer
+from ft_sitl.mavlink.server import SitlServer, check_pacing
 from ft_sitl.physics.actuators import Actuators
 from ft_sitl.scenarios.io import scenario_from_spec
 from ft_sitl.schema import SchemaError
@@ -89,6 +89,10 @@ def cmd_sitl(args) -> int:
     # each option's own range is checked as it is parsed (cli.common.number)
     if args.instance > 1000 - args.instances:
         raise CliError(f"--instance: {args.instance} must be within 0..{1000 - args.instances}")
+    try:
+        check_pacing(args.speed_factor, args.pace, args.pace_span)
+    except ValueError as exc:
+        raise CliError(str(exc)) from None
     vehicles = _vehicles(args)  # every option checked before the ports are taken
     with contextlib.ExitStack() as held:
         try:  # its instance numbers, so that no trial over MAVLink of this machine takes them
@@ -132,7 +136,8 @@ def _serve(args, geo, loopback, p, scenario, spawn, fleet, wind, estimator, actu
     try:
         server = SitlServer(fleet, geo, bind=args.bind, speed_factor=args.speed_factor,
                             tlog=args.tlog, signing_key=args.signing_key,
-                            base_instance=args.instance)
+                            base_instance=args.instance, pace=args.pace,
+                            pace_span_s=args.pace_span)
     except (ValueError, OSError) as exc:
         raise CliError(str(exc)) from None
     urls = server.urls()
@@ -147,8 +152,10 @@ def _serve(args, geo, loopback, p, scenario, spawn, fleet, wind, estimator, actu
             out["spawn_enu"] = spawn
         print(json.dumps(out, indent=2), flush=True)
     else:
+        paced = "" if server.pace_span_s is None else \
+            f", paced by its clients (at most {server.pace_span_s:g} s ahead)"
         print(f"ft-sitl {__version__}: {args.instances} x {p.name}, speed factor "
-              f"{args.speed_factor:g}, home {geo.lat_deg:.6f}, {geo.lon_deg:.6f}, "
+              f"{args.speed_factor:g}{paced}, home {geo.lat_deg:.6f}, {geo.lon_deg:.6f}, "
               f"{geo.alt_m:.1f} m", flush=True)
         if not loopback:
             print(f"warning: listening on {args.bind}, reachable from other machines",
@@ -218,6 +225,8 @@ def _serve(args, geo, loopback, p, scenario, spawn, fleet, wind, estimator, actu
     sim_s = fleet.time_us * 1e-6
     behind = (f"; fell {server.behind_s:.1f} s behind the wall clock (stalls are not made "
               "up)" if server.behind_s >= 0.05 else "")
+    if server.pace_span_s is not None:
+        behind += f"; held {server.held_s:.1f} s waiting for its clients"
     print(f"stopped after {sim_s:.1f} s simulated; achieved speed factor "
           f"{server.achieved_speed_factor:.2f} (asked {args.speed_factor:g}); "
           f"{server.bad_packets} bad packets dropped{behind}", file=sys.stderr)

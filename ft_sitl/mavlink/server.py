@@ -10,6 +10,12 @@ Vehicle i (sysid i+1, compid 1) has two links, as PX4 SITL instance i does:
 The vehicle sends first (heartbeats to the default remote), then also answers every peer
 that has talked to it in the last 10 s. The physics runs in lockstep; the server paces
 it against the wall clock at a speed factor and measures the factor it achieves.
+
+Pacing (``pace``): ``"wall"`` runs the simulated clock at the speed factor whatever the
+clients do; ``"client"`` also never lets it run more than ``pace_span_s`` simulated seconds
+past the simulated instant at which the last MAVLink message from a client arrived, so a
+starved client sees a slower world, not a different one (the speed factor stays the
+ceiling). What that guarantees and what it cannot: docs/mavlink.md, "Pacing".
 """
 
 from __future__ import annotations
@@ -42,6 +48,41 @@ CHUNK_US = 4000  # simulated time advanced between telemetry/IO service
 #: and telemetry; the simulated clock falls behind the wall clock instead, as PX4 SITL's
 #: lockstep clock stands still while the simulator does
 MAX_CATCH_UP_S = 0.2
+#: the pacing modes (SitlServer ``pace``): the wall clock alone, or the clients' messages too
+PACES = ("wall", "client")
+#: the span a client-paced server may run ahead of its client's last message (simulated
+#: seconds): default and range (one PX4 offboard setpoint period of 20 Hz is 0.05 s; the
+#: least is one chunk of simulated time, the most the clock ever advances at once)
+PACE_SPAN_DEFAULT_S = 0.05
+PACE_SPAN_RANGE_S = (0.004, 60.0)
+#: wall seconds between the heartbeats a held or slow simulated clock is topped up with
+#: (MAVSDK declares a vehicle lost after 3 s of wall time without one)
+HEARTBEAT_TOP_UP_S = 1.0
+
+
+def check_pacing(speed_factor: float, pace: str, pace_span_s: float | None) -> float | None:
+    """The pacing options checked (ValueError naming the option and its allowed range):
+    the span client pacing runs with (None for wall pacing)."""
+    if isinstance(speed_factor, bool) or not isinstance(speed_factor, (int, float)) or not (
+            math.isfinite(speed_factor) and 0.01 <= speed_factor <= 1000):
+        extra = " (client pacing keeps the speed factor as its ceiling)" \
+            if pace == "client" else ""
+        raise ValueError(f"--speed-factor: {speed_factor!r} must be within [0.01, 1000]"
+                         f"{extra}")
+    if pace not in PACES:
+        raise ValueError(f"--pace: {pace!r} must be one of {', '.join(PACES)}")
+    lo, hi = PACE_SPAN_RANGE_S
+    if pace == "wall":
+        if pace_span_s is not None:
+            raise ValueError(f"--pace-span: {pace_span_s!r} is only for --pace client "
+                             "(wall pacing has no span)")
+        return None
+    span = PACE_SPAN_DEFAULT_S if pace_span_s is None else pace_span_s
+    if isinstance(span, bool) or not isinstance(span, (int, float)) or not (
+            math.isfinite(span) and lo <= span <= hi):
+        raise ValueError(f"--pace-span: {span!r} must be within [{lo:g}, {hi:g}] simulated "
+                         "seconds")
+    return float(span)
 
 
 def signing_secret(key: str) -> bytes:
@@ -122,9 +163,11 @@ class SitlServer:
     def __init__(self, fleet: Fleet, geo: frames.GeoReference, *, bind: str = "127.0.0.1",
                  remote_host: str = "127.0.0.1", speed_factor: float = 1.0,
                  tlog: Path | None = None, signing_key: str | None = None,
-                 base_instance: int = 0):
-        if not (math.isfinite(speed_factor) and 0.01 <= speed_factor <= 1000):
-            raise ValueError(f"--speed-factor: {speed_factor!r} must be within [0.01, 1000]")
+                 base_instance: int = 0, pace: str = "wall", pace_span_s: float | None = None):
+        #: the simulated seconds a client-paced server may run past its client's last
+        #: message (None: paced by the wall clock alone)
+        self.pace_span_s = check_pacing(speed_factor, pace, pace_span_s)
+        self.pace = pace
         self.fleet = fleet
         self.base_instance = base_instance
         self.geo = geo
@@ -148,12 +191,18 @@ class SitlServer:
             self.agents.append(VehicleAgent(fleet, i, geo, 2, ["onboard", "normal"], logs))
         self._stop = asyncio.Event()
         self.achieved_speed_factor = 0.0
-        #: wall seconds of pace not made up after stalls (MAX_CATCH_UP_S)
+        #: wall seconds of pace not made up after stalls (MAX_CATCH_UP_S), including the
+        #: time client pacing held the clock
         self.behind_s = 0.0
         self.bad_packets = 0
         #: called after every chunk of simulated time (a trial's judge, the MQTT bus)
         self.on_chunk = None
         self._last_hb_wall = [0.0] * fleet.n
+        #: simulated time (us) at which the last message from a client arrived (client
+        #: pacing holds the clock within pace_span_s of it)
+        self.client_sim_us = fleet.time_us
+        #: wall seconds the simulated clock stood waiting for a client (client pacing)
+        self.held_s = 0.0
 
     def urls(self) -> list[dict]:
         out = []
@@ -190,6 +239,7 @@ class SitlServer:
                 continue  # our own echo
             link.peers[addr] = now
             link.rx_packets += 1
+            self.client_sim_us = self.fleet.time_us
             try:
                 replies = agent.handle(m, link.index, addr, wall_us)
             except Exception as exc:  # noqa: BLE001 - a bad message must never stop the vehicle
@@ -251,10 +301,13 @@ class SitlServer:
         sim0 = self.fleet.time_us
         pace_sim0 = sim0  # simulated time due at wall0, moved back after each stall
         max_behind_us = MAX_CATCH_UP_S * self.speed_factor * 1e6
+        span_us = None if self.pace_span_s is None else round(self.pace_span_s * 1e6)
         self.service()
+        prev = wall0
         try:
             while not self._stop.is_set():
                 now = time.monotonic()
+                waited, prev = now - prev, now
                 if duration_s is not None and now - wall0 >= duration_s:
                     break
                 target = pace_sim0 + (now - wall0) * self.speed_factor * 1e6
@@ -263,6 +316,11 @@ class SitlServer:
                     pace_sim0 -= dropped_us
                     target -= dropped_us
                     self.behind_s += dropped_us / 1e6 / self.speed_factor
+                if span_us is not None and target > self.client_sim_us + span_us:
+                    # client pacing: not past the span after the client's last message
+                    target = self.client_sim_us + span_us
+                    if self.fleet.time_us + CHUNK_US > target:
+                        self.held_s += waited
                 busy_until = now + 0.02
                 while self.fleet.time_us + CHUNK_US <= target and time.monotonic() < busy_until \
                         and not self._stop.is_set():
@@ -273,10 +331,11 @@ class SitlServer:
                 wall_us = int(time.monotonic() * 1e6)
                 for a in self.agents:
                     self.send_all(a.i, a.poll(wall_us))
-                    # below real time the 1 Hz simulated-time heartbeat would come less
-                    # than once a wall second: top it up so clients stay connected
-                    if self.speed_factor < 1.0 and \
-                            time.monotonic() - self._last_hb_wall[a.i] >= 1.0:
+                    # below real time (or held by client pacing) the 1 Hz simulated-time
+                    # heartbeat would come less than once a wall second: top it up so
+                    # clients stay connected
+                    if (self.speed_factor < 1.0 or span_us is not None) and \
+                            time.monotonic() - self._last_hb_wall[a.i] >= HEARTBEAT_TOP_UP_S:
                         self._last_hb_wall[a.i] = time.monotonic()
                         self.send_all(a.i, [Outgoing(a.heartbeat())])
                 elapsed = time.monotonic() - wall0

@@ -5,7 +5,7 @@ import threading
 from contextlib import contextmanager
 
 from ft_sitl import frames
-from ft_sitl.mavlink.instances import instances_held
+from ft_sitl.mavlink.instances import InstanceLock, instances_held
 from ft_sitl.mavlink.server import SitlServer
 from ft_sitl.physics.catalog import get_platform
 from ft_sitl.sim.fleet import Fleet
@@ -77,3 +77,14 @@ def _running_sitl(instances: int = 1, speed_factor: float = 1.0, params=None, sc
         thread.join(10)
         assert not thread.is_alive(), "server thread did not stop"
         assert not errors, errors
+
+
+@contextmanager
+def free_sitl(instances: int = 1, *args, **kwargs):
+    """A SitlServer as :func:`running_sitl` on an instance number no other process of this
+    machine holds (ft_sitl.mavlink.instances.InstanceLock): for tests that may run beside
+    other SITLs. ``server.base_instance`` says which."""
+    if instances != 1:
+        raise ValueError("free_sitl serves one vehicle")
+    with InstanceLock() as inst, _running_sitl(1, *args, base_instance=inst, **kwargs) as s:
+        yield s
