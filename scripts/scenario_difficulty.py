@@ -7,7 +7,11 @@ shows (section "Difficulty"):
 * the summary table and one table per family in docs/scenarios.md, between their
   ``<!-- BEGIN generated: scenario_difficulty ... -->`` markers;
 * ``docs/img/difficulty-<family>.png``: the family's hardest configuration by flight time
-  (then by the narrowest spare), its shortest path and narrowest passage drawn.
+  (then by the narrowest spare), its shortest path and narrowest passage drawn;
+* FlightBench's metrics (traversability obstruction, view occlusion, angle over length:
+  :mod:`ft_sitl.scenarios.flightbench_metrics`) of every configuration, in the JSON beside
+  the project's measures and as the 70-row table and family summary of
+  ``docs/results/scenario-difficulty/README.md``.
 
 Run after changing a generator, the solvability search or the difficulty measures::
 
@@ -16,8 +20,9 @@ Run after changing a generator, the solvability search or the difficulty measure
 It measures the 70 configurations of seed 0 (``--seed``) for the largest platform's body
 under the current protocol's limits, through the same cache as ``ft-sitl scenarios list
 --difficulty`` (``--no-cache`` to measure afresh): about 1.5 minutes the first time on one
-core, seconds after. ``--no-images`` leaves the pictures alone; ``--check`` writes nothing
-and exits 1 when the docs differ from what it would write.
+core, seconds after; FlightBench's metrics take about 6 minutes more the first time (cached
+in ``$XDG_CACHE_HOME/ft-sitl/flightbench``). ``--no-images`` leaves the pictures alone;
+``--check`` writes nothing and exits 1 when the docs differ from what it would write.
 """
 
 from __future__ import annotations
@@ -43,12 +48,17 @@ from ft_sitl.scenarios.difficulty import (
     markdown_table,
 )
 from ft_sitl.scenarios.families import FAMILIES, build_scenario
+from ft_sitl.scenarios.flightbench_metrics import FlightBenchMetrics, cached_flightbench
+from ft_sitl.scenarios.flightbench_metrics import default_cache_dir as flightbench_cache_dir
+from ft_sitl.scenarios.flightbench_metrics import markdown_summary as flightbench_summary
+from ft_sitl.scenarios.flightbench_metrics import markdown_table as flightbench_table
 from ft_sitl.scenarios.render import render_scenario
 from ft_sitl.scenarios.scenario import INDEX_RANGE
 
 ROOT = Path(__file__).resolve().parents[1]
 RESULTS = ROOT / "docs" / "results" / "scenario-difficulty" / "difficulty.json"
 DOC = ROOT / "docs" / "scenarios.md"
+README = RESULTS.parent / "README.md"
 IMAGES = ROOT / "docs" / "img"
 DPI = 72
 
@@ -60,19 +70,23 @@ def begin(key: str) -> str:
 END = "<!-- END generated -->"
 
 
-def replace_block(text: str, key: str, body: str) -> str:
-    """``text`` with the block between ``key``'s markers replaced by ``body``."""
+def replace_block(text: str, key: str, body: str, where: Path = DOC) -> str:
+    """``text`` (of the file ``where``) with the block between ``key``'s markers replaced
+    by ``body``."""
     start = text.find(begin(key))
     if start < 0:
-        raise SystemExit(f"{DOC}: no marker {begin(key)!r}")
+        raise SystemExit(f"{where}: no marker {begin(key)!r}")
     end = text.index(END, start)
     return text[:start] + f"{begin(key)}\n{body}\n" + text[end:]
 
 
 def _measures(families: dict) -> dict:
     """The families' entries without the time each measurement took."""
-    return {f: [{**e, "difficulty": {**e["difficulty"], "compute_s": None}} for e in v]
-            for f, v in families.items()}
+    def untimed(entry: dict) -> dict:
+        return {k: {**v, "compute_s": None} if isinstance(v, dict) else v
+                for k, v in entry.items()}
+
+    return {f: [untimed(e) for e in v] for f, v in families.items()}
 
 
 def hardest(results: list[Difficulty]) -> Difficulty:
@@ -102,9 +116,11 @@ def main(argv=None) -> int:
         ap.error(f"--seed: {args.seed} must be a non-negative integer")
     platform, budget = largest_platform(), flight_budget()
     cache = None if args.no_cache else default_cache_dir()
+    fb_cache = None if args.no_cache else flightbench_cache_dir()
     lo, hi = INDEX_RANGE
     jobs = [(f, i) for f in FAMILIES for i in range(lo, hi + 1)]
     by_family: dict[str, list[Difficulty]] = {}
+    flightbench: dict[str, list[FlightBenchMetrics]] = {}
     digests: dict[str, list[str]] = {}
     scenarios = {}
     t0 = time.perf_counter()
@@ -112,9 +128,11 @@ def main(argv=None) -> int:
         sc = build_scenario(family, index, args.seed)
         scenarios[sc.name] = sc
         by_family.setdefault(family, []).append(cached_difficulty(sc, platform, budget, cache))
+        flightbench.setdefault(family, []).append(cached_flightbench(sc, None, fb_cache))
         digests.setdefault(family, []).append(sc.mesh_digest())
     elapsed = time.perf_counter() - t0
     measuring = sum(d.compute_s for found in by_family.values() for d in found)
+    measuring += sum(m.compute_s for found in flightbench.values() for m in found)
     doc = {
         "about": "scenario difficulty, written by scripts/scenario_difficulty.py "
                  "(docs/scenarios.md, 'Difficulty')",
@@ -123,19 +141,26 @@ def main(argv=None) -> int:
         "budget": {"speed_m_s": budget.speed_m_s, "acc_m_s2": budget.acc_m_s2,
                    "time_s": budget.time_s},
         "measuring_s": round(measuring, 1),
-        "families": {f: [{"mesh_sha256": h, "difficulty": d.as_dict()}
-                         for h, d in zip(digests[f], found)]
+        "families": {f: [{"mesh_sha256": h, "difficulty": d.as_dict(),
+                           "flightbench": m.as_dict()}
+                          for h, d, m in zip(digests[f], found, flightbench[f])]
                      for f, found in by_family.items()},
     }
     text = DOC.read_text()
     new = replace_block(text, "summary", markdown_summary(by_family))
     for family, found in by_family.items():
         new = replace_block(new, family, markdown_table(found))
+    readme = README.read_text()
+    new_readme = replace_block(readme, "flightbench-summary",
+                               flightbench_summary(flightbench), README)
+    new_readme = replace_block(new_readme, "flightbench", flightbench_table(
+        [(d, m) for f in by_family for d, m in zip(by_family[f], flightbench[f])]), README)
     results_text = json.dumps(doc, indent=1) + "\n"
     if args.check:
         old = json.loads(RESULTS.read_text()) if RESULTS.exists() else {}
         stale = [str(path) for path, differ in (
             (DOC, new != text),
+            (README, new_readme != readme),
             (RESULTS, _measures(old.get("families", {})) != _measures(doc["families"])),
         ) if differ]
         print("up to date" if not stale else "stale: " + ", ".join(stale))
@@ -143,7 +168,9 @@ def main(argv=None) -> int:
     RESULTS.parent.mkdir(parents=True, exist_ok=True)
     RESULTS.write_text(results_text)
     DOC.write_text(new)
-    print(f"wrote {RESULTS.relative_to(ROOT)} and the tables of {DOC.relative_to(ROOT)} "
+    README.write_text(new_readme)
+    print(f"wrote {RESULTS.relative_to(ROOT)} and the tables of {DOC.relative_to(ROOT)} and "
+          f"{README.relative_to(ROOT)} "
           f"({elapsed:.0f} s; measuring took {measuring:.0f} s in all, cached or now)")
     if not args.no_images:
         IMAGES.mkdir(parents=True, exist_ok=True)

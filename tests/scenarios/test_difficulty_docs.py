@@ -1,6 +1,7 @@
-"""docs/scenarios.md's difficulty tables are the committed measurements, and those are of
-the configurations the generators build now (scripts/scenario_difficulty.py writes all
-three; rerun it when this fails)."""
+"""docs/scenarios.md's difficulty tables and docs/results/scenario-difficulty/README.md's
+FlightBench tables are the committed measurements, and those are of the configurations
+the generators build now (scripts/scenario_difficulty.py writes them all; rerun it when
+this fails)."""
 
 import json
 from pathlib import Path
@@ -9,6 +10,12 @@ import pytest
 
 from ft_sitl.scenarios.difficulty import Difficulty, markdown_summary, markdown_table
 from ft_sitl.scenarios.families import FAMILIES, build_scenario
+from ft_sitl.scenarios.flightbench_metrics import (
+    PARAMS,
+    FlightBenchMetrics,
+)
+from ft_sitl.scenarios.flightbench_metrics import markdown_summary as flightbench_summary
+from ft_sitl.scenarios.flightbench_metrics import markdown_table as flightbench_table
 from ft_sitl.scenarios.scenario import INDEX_RANGE
 
 DOCS = Path(__file__).resolve().parents[2] / "docs"
@@ -38,6 +45,22 @@ def test_the_tables_are_the_measurements(measured):
         assert {d.seed for d in results} == {measured["seed"]}
         assert _block(family, markdown_table(results)) in text, f"{family}: {RERUN}"
         assert (DOCS / "img" / f"difficulty-{family}.png").stat().st_size > 20_000
+
+
+def test_the_flightbench_tables_are_the_measurements(measured):
+    text = (RESULTS.parent / "README.md").read_text()
+    pairs, by_family = [], {}
+    for family, entries in measured["families"].items():
+        for e in entries:
+            d = Difficulty.from_dict(e["difficulty"])
+            m = FlightBenchMetrics.from_dict(e["flightbench"])
+            assert m.scenario == d.scenario
+            assert m.params == PARAMS.defaults(), f"{d.scenario}: not FlightBench's values"
+            pairs.append((d, m))
+            by_family.setdefault(family, []).append(m)
+    assert len(pairs) == 70
+    assert _block("flightbench-summary", flightbench_summary(by_family)) in text, RERUN
+    assert _block("flightbench", flightbench_table(pairs)) in text, RERUN
 
 
 @pytest.mark.slow
