@@ -3,7 +3,11 @@ motor saturation over time (docs/results/tracking-twr).
 
     python scripts/tracking_replay.py --out docs/results/tracking-twr
 
-Flies the same spec (navigator, scenario, seed, protocol limits) on each platform with
+    python scripts/tracking_replay.py --out DIR --rows RESULTS WEAK_ID STRONG_ID
+
+Flies the same spec (navigator, scenario, seed, protocol limits) on each platform, or with
+``--rows`` two stored rows of a result directory (their specs; each re-flown row must
+equal its stored one, else the script stops), with
 ``run_trial(..., monitor=...)`` recording, after every advance of the simulation, the
 distance between the position setpoint the navigator's plan commands and the vehicle
 (tracking error) and whether any rotor sat at a limit in that stretch.
@@ -22,7 +26,9 @@ import ft_sitl  # noqa: F401  (first: pins the BLAS settings before numpy loads)
 import numpy as np
 
 from ft_sitl.autopilot import cascade as c
+from ft_sitl.cli.missions import differences
 from ft_sitl.missions.spec import PROTOCOL_VERSION, TrialSpec
+from ft_sitl.missions.store import load_rows
 from ft_sitl.missions.trial import run_trial
 from ft_sitl.navigation.base import Limits
 from ft_sitl.physics import dynamics as d
@@ -46,6 +52,19 @@ def fly(spec: TrialSpec) -> tuple[dict, np.ndarray]:
     return row, np.array(samples)
 
 
+def _stored(rows_arg) -> dict:
+    """The two stored rows ``--rows`` names, by role."""
+    directory, weak, strong = rows_arg
+    rows = load_rows(directory)[1]
+    out = {}
+    for role, prefix in (("weak", weak), ("strong", strong)):
+        found = [r for r in rows if str(r["trial_id"]).startswith(prefix)]
+        if len(found) != 1:
+            raise SystemExit(f"--rows: {prefix!r} matches {len(found)} rows of {directory}")
+        out[role] = found[0]
+    return out
+
+
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--out", type=Path, required=True)
@@ -58,14 +77,23 @@ def main(argv=None) -> int:
                     help="the trial protocol's version (default: the newest)")
     ap.add_argument("--weak", default="2.00kg-T-MOTOR", help="(TWR 1.4, arm 0.257 m)")
     ap.add_argument("--strong", default="2.00kg-UAV 8", help="(TWR 3.2, the same size)")
+    ap.add_argument("--rows", nargs=3, metavar=("RESULTS", "WEAK_ID", "STRONG_ID"),
+                    help="re-fly two stored rows (trial ids, or unique prefixes) instead")
     args = ap.parse_args(argv)
     args.out.mkdir(parents=True, exist_ok=True)
     runs = {}
+    stored = _stored(args.rows) if args.rows else {}
     for role, platform in (("weak", args.weak), ("strong", args.strong)):
-        spec = TrialSpec(args.algorithm, platform, args.family, scenario_index=args.index,
-                         limits=Limits(max_acc_m_s2=args.max_acc), campaign="tracking-twr",
-                         protocol=args.protocol)
+        if stored:
+            spec = TrialSpec.from_dict(json.loads(stored[role]["spec"]))
+            platform = spec.platform
+        else:
+            spec = TrialSpec(args.algorithm, platform, args.family, scenario_index=args.index,
+                             limits=Limits(max_acc_m_s2=args.max_acc),
+                             campaign="tracking-twr", protocol=args.protocol)
         row, s = fly(spec)
+        if stored and (diff := differences(row, stored[role])):
+            raise SystemExit(f"{role}: the re-flown row differs from the stored one: {diff}")
         runs[role] = (platform, row, s)
         with open(args.out / f"{role}.csv", "w", newline="") as fh:
             w = csv.writer(fh)
