@@ -141,18 +141,34 @@ def metric_rows(t: EnvelopeTables) -> tuple[list[str], list[list[str]]]:
 
 
 def markdown(t: EnvelopeTables) -> str:
-    """The section's tables as Markdown."""
+    """The section's tables as Markdown (:data:`TABLES`)."""
     out = []
-    for title, (head, rows) in (
-            ("Q2 with size held fixed (log-odds per SD, errors clustered by platform)",
-             fit_rows(t)),
-            ("Envelope thresholds", threshold_rows(t)),
-            ("What each catalog platform tolerates", tolerance_rows(t)),
-            ("Per-row metrics (medians)", metric_rows(t))):
-        if not rows:
+    for title, note, rows, _ in TABLES:
+        head, body = rows(t)
+        if not body:
             continue
-        out += [f"### {title}", "", "| " + " | ".join(head) + " |",
+        out += [f"### {title}", "", note, "", "| " + " | ".join(head) + " |",
                 "|" + "---|" * len(head)]
-        out += ["| " + " | ".join(str(c) for c in r) + " |" for r in rows]
+        out += ["| " + " | ".join(str(c) for c in r) + " |" for r in body]
         out.append("")
     return "\n".join(out)
+
+
+#: the section's tables: title, what it shows, rows function, CSS class
+TABLES = (
+    ("Q2 with size held fixed", "log-odds per standard deviation over the rows fitted "
+     "(p-value), scenario family fixed effects (and the body's, over the series), errors "
+     "clustered by platform; docs/scoring.md, \"Capability envelopes\".",
+     fit_rows, "envelope-fits"),
+    ("Envelope thresholds", "the smallest value of the indicator a controlled series varies "
+     "from which every stronger member succeeds within 10 points of the series' best; 95 % "
+     "bootstrap interval.", threshold_rows, "envelope-thresholds"),
+    ("What each catalog platform tolerates", "success per level, and the highest level up "
+     "to which every level keeps 80 % of the success at the gentlest level flown.",
+     tolerance_rows, "envelope-tolerance"),
+    ("Per-row metrics (medians)", "tilt_ratio: peak tilt over acos(1/TWR_max), the tilt at "
+     "which full thrust still holds altitude; tracking_rms_m: RMS distance to the commanded "
+     "position; time_ratio: time to the goal over the time-optimal bound on the "
+     "scenario's shortest path for the body under the level.", metric_rows,
+     "envelope-metrics"),
+)

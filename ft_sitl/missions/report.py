@@ -53,8 +53,9 @@ import numpy as np
 import pandas as pd
 import yaml
 
-from ft_sitl.missions import regression, scoring
+from ft_sitl.missions import envelope, envelope_report, regression, scoring
 from ft_sitl.missions.results import REASONS
+from ft_sitl.scenarios.difficulty import default_cache_dir
 from ft_sitl.scenarios.families import FAMILIES, PAPER_NAMES
 
 #: ``meta`` keys the report reads, in the order it shows them; any other key of ``meta``
@@ -126,6 +127,12 @@ class _Tables:
         self.collinearity = regression.collinearity(with_footprint)
         self.fail_algo = scoring.failure_breakdown(df, ("algorithm",))
         self.fail_family = scoring.failure_breakdown(df, ("algorithm", "family"))
+        # the capability envelopes, for a campaign with levels or the controlled series
+        # (each row's time-optimal bound needs its body's path: cached between reports)
+        self.envelope = (envelope_report.envelope_tables(
+            df, n_boot=B, seed=seed,
+            bounds=envelope.time_bounds(envelope.with_levels(df), default_cache_dir()))
+            if envelope_report.has_envelope(df) else None)
         self.B = B
         self.seed = seed
 
@@ -681,6 +688,9 @@ def _figures(t: _Tables) -> list[tuple[str, str, object]]:
         ("failures_by_family", "Exit reasons per scenario family, one panel per algorithm "
          "(the reasons that occur).", _fig_failures_by_family),
     ]
+    if t.envelope is not None:
+        figs += [(name, caption, lambda t, m=make: m())
+                 for name, caption, make in envelope_report.envelope_figures(t.envelope)]
     return figs
 
 
@@ -1001,6 +1011,7 @@ def _html(t: _Tables, facts, figures, spec_text: str, generated: str) -> str:
               '<p class="note">Pearson correlations (one point per platform) and variance '
               "inflation factors.</p>",
               _html_table(*_collinearity_rows(t), "collinearity"),
+              *_envelope_html(t),
               "<h2>Exit reasons</h2>", _html_table(*_failure_rows(t), "failures"),
               *([f'<p class="note">{e(note)}</p>'] if (note := _absent_reasons_note(t))
                 else []),
@@ -1009,6 +1020,30 @@ def _html(t: _Tables, facts, figures, spec_text: str, generated: str) -> str:
               "<h2>Campaign spec</h2>", f"<pre>{e(spec_text)}</pre>",
               "</body>", "</html>"]
     return "\n".join(parts) + "\n"
+
+
+def _envelope_html(t: _Tables) -> list[str]:
+    if t.envelope is None:
+        return []
+    e = html.escape
+    parts = ["<h2>Capability envelopes</h2>"]
+    for title, note, rows, cls in envelope_report.TABLES:
+        head, body = rows(t.envelope)
+        if body:
+            parts += [f"<h3>{e(title)}</h3>", f'<p class="note">{e(note)}</p>',
+                      _html_table(head, body, cls)]
+    return parts
+
+
+def _envelope_markdown(t: _Tables) -> list[str]:
+    if t.envelope is None:
+        return []
+    lines = ["## Capability envelopes", ""]
+    for title, note, rows, _ in envelope_report.TABLES:
+        head, body = rows(t.envelope)
+        if body:
+            lines += [f"### {title}", "", note, "", _md_table(head, body), ""]
+    return lines
 
 
 def _markdown(t: _Tables, facts, figures, spec_text: str, generated: str) -> str:
@@ -1032,6 +1067,7 @@ def _markdown(t: _Tables, facts, figures, spec_text: str, generated: str) -> str
               "### Collinearity of the predictors over the platforms", "",
               "Pearson correlations (one point per platform) and variance inflation factors.",
               "", _md_table(*_collinearity_rows(t)), "",
+              *_envelope_markdown(t),
               "## Exit reasons", "",
               _md_table(*_failure_rows(t)), "",
               *([_absent_reasons_note(t), ""] if _absent_reasons_note(t) else []),

@@ -39,14 +39,16 @@ from scipy.stats import binomtest
 
 from ft_sitl.missions.results import REASONS
 from ft_sitl.physics.catalog import catalog
+from ft_sitl.physics.series import SERIES_CATEGORY
 from ft_sitl.scenarios.families import CATEGORY, FAMILIES
 
 #: The paper's initial scenario weights (Sec. IV, Q5) by scenario category. ``user``
 #: scenarios (imported meshes, custom families) count like theoretical ones.
 DEFAULT_SCENARIO_WEIGHTS = {"classic": 1.2, "theoretical": 1.0, "user": 1.0}
 #: The paper's initial platform weights (Sec. IV, Q5) by platform category. ``user``
-#: platforms count like virtual ones.
-DEFAULT_PLATFORM_WEIGHTS = {"real": 1.5, "virtual": 1.0, "user": 1.0}
+#: platforms and the controlled ``series`` (synthetic, like the virtual set) count like
+#: virtual ones.
+DEFAULT_PLATFORM_WEIGHTS = {"real": 1.5, "virtual": 1.0, "user": 1.0, SERIES_CATEGORY: 1.0}
 #: The paper's stability-penalty coefficient (Sec. IV, Q5).
 DEFAULT_BETA = 0.3
 

@@ -239,3 +239,13 @@ def test_the_report_section_is_there_for_levels_or_series_and_lists_its_tables()
     got = t.rows.set_index(["level", "sample"])["tracking_rms_m"]
     assert got[("paper", "series")] == pytest.approx(0.2)
     assert got[("paper", "catalog")] == pytest.approx(0.1)
+
+
+def test_a_campaign_of_series_platforms_gets_a_composite_score():
+    # the series weigh like the virtual set; before, the score refused their category
+    from ft_sitl.missions import scoring
+
+    rows = _rows(_twr_series()[:3], lambda p, f, lv: 0.5, trials=4, levels=("paper",))
+    rows["scenario_category"] = "classic"
+    score = scoring.composite_score(rows)
+    assert len(score) == 1 and np.isfinite(score["FinalScore"]).all()

@@ -224,3 +224,60 @@ def test_partial_dependence_says_which_algorithm_has_no_line_and_why(browser, pa
     legend = [t["text"] for t in _svg(browser, page, "success_partial_dependence")
               if t["legend"]]
     assert "straight" not in legend and {"ego", "fast", "pgo"} <= set(legend)
+
+
+# --- the capability-envelope section (issue 44) ----------------------------------------
+ENVELOPE_LEVELS = {"gentle": (2.0, 2.0), "paper": (4.0, 3.0), "brisk": (6.0, 6.0),
+                   "aggressive": (8.0, 10.0)}
+
+
+def _envelope_table():
+    from ft_sitl.physics.catalog import series
+
+    members = [p for name, p in series().items()
+               if name.startswith(("series-0.55kg-UAV1-", "series-5.00kg-UAV16-"))]
+    platforms = members + _real_platforms(6)
+    rows = []
+    for k, (level, (speed, acc)) in enumerate(ENVELOPE_LEVELS.items()):
+        for r in _rows(["ego", "fast", "pgo"], platforms, ["forest", "sudden_drop"], 3,
+                       seed=20 + k):
+            r.update(trial_id=f"{r['trial_id']}/{level}", aggressiveness=level,
+                     speed_limit_m_s=speed, acc_limit_m_s2=acc, max_tilt_deg=30.0,
+                     saturation_fraction=0.01 * k, tracking_rms_m=0.1 * (k + 1))
+            rows.append(r)
+    return to_frame(rows)
+
+
+@pytest.fixture(scope="module")
+def envelope_page(tmp_path_factory):
+    out = tmp_path_factory.mktemp("envelope")
+    return write_report(_envelope_table(), out, campaign_spec=SPEC, meta=META,
+                        B=50)["report.html"]
+
+
+def test_the_envelope_section_fits_the_window_and_its_figures_are_readable(browser,
+                                                                           envelope_page):
+    browser.get(envelope_page.resolve().as_uri())
+    m = browser.execute_script(_MEASURE)
+    tables = {b["name"] for b in m["boxes"] if b["tag"] == "TABLE"}
+    assert {"envelope-fits", "envelope-thresholds", "envelope-tolerance",
+            "envelope-metrics"} <= tables
+    for b in m["boxes"]:
+        assert b["left"] >= 0 and b["right"] <= m["client"], b
+        if b["tag"] != "PRE":
+            assert b["scroll"] <= b["client"] + 1, b
+    assert m["pageScroll"] <= m["client"], "the page scrolls sideways"
+    assert m["emptyHeads"] == []
+    shown = {i["name"]: i["scale"] for i in browser.execute_script(_SHOWN)}
+    new = {"envelope", "envelope_dose_twr", "envelope_dose_axy", "envelope_tolerance"}
+    assert new <= set(shown)
+    for name in new:
+        assert shown[name] > 0
+        texts = [t for t in _svg(browser, envelope_page, name) if t["text"]]
+        assert texts, name
+        for t in texts:
+            on_page = t["units"] * _DPI / 72 * shown[name]
+            assert t["px"] >= MIN_TEXT_PX and on_page >= MIN_TEXT_PX, (name, t, on_page)
+    # the envelope's legend names the families and the bodies it draws, nothing else
+    legend = {t["text"] for t in _svg(browser, envelope_page, "envelope") if t["legend"]}
+    assert legend == {"forest", "sudden_drop", "body 0.55kg-UAV1", "body 5.00kg-UAV16"}
