@@ -43,6 +43,7 @@ from ft_sitl.bus.codec import (
 )
 from ft_sitl.bus.options import BrokerOptions, TlsOptions, parse_broker_url
 from ft_sitl.bus.publisher import QOS, close_socket, mqtt_log
+from ft_sitl.bus.tick import decode_tick
 from ft_sitl.bus.topics import PUBLISHED_KINDS, check_vehicle, parse_topic, topic, topic_filter
 
 __all__ = ["DEFAULT_KINDS", "BusClient", "BusMessage", "subscribe"]
@@ -59,6 +60,7 @@ _DECODERS = {
     "points": lambda payload: codec.decode_frame(payload, expect_kind="points"),
     "movers": codec.decode_movers,
     "status": codec.decode_status,
+    "tick": decode_tick,
 }
 
 

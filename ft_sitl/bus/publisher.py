@@ -59,6 +59,7 @@ from ft_sitl.bus.codec import (
     Telemetry,
 )
 from ft_sitl.bus.options import BrokerOptions, TlsOptions, parse_broker_url
+from ft_sitl.bus.tick import encode_tick
 from ft_sitl.bus.topics import check_vehicle, topic
 
 if TYPE_CHECKING:
@@ -71,11 +72,11 @@ log = logging.getLogger("ft_sitl.bus")
 mqtt_log = logging.getLogger("ft_sitl.bus.mqtt")
 
 #: The kinds a publisher sends, in the sender's priority order.
-DATA_KINDS = ("events", "telemetry", "movers", "depth", "points")
+DATA_KINDS = ("events", "telemetry", "movers", "depth", "points", "tick")
 #: QoS per topic kind: telemetry, movers and frames are streams (a lost sample is replaced
 #: by the next), events are rare and matter (at least once); status and config use QoS 1.
 QOS = {"telemetry": 0, "events": 1, "movers": 0, "depth": 0, "points": 0, "status": 1,
-       "config": 1}
+       "config": 1, "tick": 1}
 
 
 @dataclass(frozen=True)
@@ -159,7 +160,7 @@ class BusPublisher:
                                                                "config")}
         self._capacity = {"events": queue_size, "telemetry": queue_size,
                           "movers": queue_size, "depth": frame_queue_size,
-                          "points": frame_queue_size}
+                          "points": frame_queue_size, "tick": queue_size}
         self._on_config = on_config
         self._keepalive_s = keepalive_s
         self._reconnect_min_s = float(reconnect_min_s)
@@ -308,6 +309,10 @@ class BusPublisher:
         if not self._accepting("points"):
             return False
         return self._offer("points", codec.encode_points(frame, config, frame_id))
+
+    def publish_tick(self, tick) -> bool:
+        """Queue a lockstep tick (``bus.tick.Tick``, QoS 1). True if queued."""
+        return self._offer("tick", encode_tick(tick))
 
     # -- queueing ----------------------------------------------------------------------------
     def _check_started(self) -> None:

@@ -12,6 +12,7 @@ points        binary point cloud (``SensorFrame``)         simulator -> clients
 movers        JSON ``MoverStates`` (moving obstacles)      simulator -> clients
 status        JSON ``Status``, retained, last will         simulator -> clients
 config        JSON config request                          clients -> simulator
+tick          binary lockstep tick (``tick.Tick``)         simulator -> clients
 ============  ==========================================  =======================
 
 ``v1`` is the topic-tree version (``TREE_VERSION``). It changes only when the tree itself
@@ -41,9 +42,9 @@ PREFIX = "ft-sitl"
 #: Second level: the topic-tree version.
 TREE_VERSION = "v1"
 #: Every kind of topic under a vehicle.
-KINDS = ("telemetry", "events", "depth", "points", "movers", "status", "config")
+KINDS = ("telemetry", "events", "depth", "points", "movers", "status", "config", "tick")
 #: The kinds the simulator publishes (``config`` is the one it subscribes to).
-PUBLISHED_KINDS = ("telemetry", "events", "depth", "points", "movers", "status")
+PUBLISHED_KINDS = ("telemetry", "events", "depth", "points", "movers", "status", "tick")
 
 _VEHICLE_RE = re.compile(r"[A-Za-z0-9_-]{1,64}")
 

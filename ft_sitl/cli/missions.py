@@ -195,7 +195,8 @@ def cmd_campaign_run(args) -> int:
     executor = _executor(args)
     out = Path(args.out)
     try:
-        transport = mavlink_transport(args.transport, args.speed_factor, args.mqtt)
+        transport = mavlink_transport(args.transport, args.speed_factor, args.mqtt,
+                                      lockstep=not args.free_running)
         if transport.kind == "mavlink":  # each trial's navigator flies as a MAVSDK client
             require_mavsdk()
     except (CampaignError, NavigateError) as exc:

@@ -19,6 +19,7 @@ from ft_sitl.wire.navigate import (
     ClientResult,
     NavigateError,
     fly,
+    fly_lockstep,
     require_mavsdk,
     task_from_json,
 )
@@ -108,11 +109,18 @@ def cmd_navigate(args) -> int:
             d = float(np.linalg.norm(obs.position - task.goal))
             print(f"t {t:6.1f} s  {d:6.1f} m to the goal", file=sys.stderr, flush=True)
 
+    if args.lockstep and not args.mqtt:
+        raise CliError("--lockstep: needs --mqtt URL (the ticks come on the simulator's bus)")
     try:
-        out = asyncio.run(fly(nav, task, args.connect, mqtt=args.mqtt, vehicle=args.vehicle,
-                              speed_factor=args.speed_factor,
-                              connect_timeout_s=args.connect_timeout, progress=progress,
-                              real_latency="latency_s" not in params))
+        if args.lockstep:
+            out = asyncio.run(fly_lockstep(nav, task, args.connect, mqtt=args.mqtt,
+                                           vehicle=args.vehicle,
+                                           connect_timeout_s=args.connect_timeout))
+        else:
+            out = asyncio.run(fly(nav, task, args.connect, mqtt=args.mqtt,
+                                  vehicle=args.vehicle, speed_factor=args.speed_factor,
+                                  connect_timeout_s=args.connect_timeout, progress=progress,
+                                  real_latency="latency_s" not in params))
     except NavigateError as exc:
         print(f"ft-sitl navigate: {exc}", file=sys.stderr)
         return 3

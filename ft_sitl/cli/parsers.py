@@ -37,6 +37,14 @@ class _Version(argparse.Action):
         parser.exit()
 
 
+_INSTANCE = number("--instance", minimum=0, maximum=999, integer=True)
+
+
+def _instance_number(text: str):
+    """``--instance``: a number 0..999, or ``auto`` (a free one, chosen when serving)."""
+    return "auto" if text == "auto" else _INSTANCE(text)
+
+
 def build_parser() -> argparse.ArgumentParser:
     ap = argparse.ArgumentParser(
         prog="ft-sitl",
@@ -130,11 +138,11 @@ def build_parser() -> argparse.ArgumentParser:
     sitl.add_argument("--camera", choices=("benchmark", "d435", "none"), default="benchmark",
                       help="depth camera for bus depth frames with --scenario (default "
                            "benchmark: 160 x 120 @ 15 Hz)")
-    sitl.add_argument("--instance", type=number("--instance", minimum=0, maximum=999,
-                                                 integer=True),
-                      default=0, metavar="I",
+    sitl.add_argument("--instance", type=_instance_number, default=0, metavar="I|auto",
                       help="first instance number, as PX4's -i: ports 14580+I, 14540+I, "
-                           "18570+I (default 0; I + instances <= 1000)")
+                           "18570+I (default 0; I + instances <= 1000); auto: the lowest "
+                           "free run of numbers in 20..59 whose ports are free (--json "
+                           "says which)")
     sitl.add_argument("--speed-factor", type=number("--speed-factor", minimum=0.01,
                                                     maximum=1000),
                       default=1.0,
@@ -259,7 +267,12 @@ def _add_missions(sub) -> None:
                          "trial's vehicle served over MAVLink and its navigator run as a "
                          "MAVSDK client process (docs/wire.md)")
     cr.add_argument("--speed-factor", type=float, default=2.0,
-                    help="simulated/wall time over MAVLink (default 2)")
+                    help="simulated/wall time over MAVLink when free-running (default 2)")
+    cr.add_argument("--free-running", action="store_true",
+                    help="over MAVLink, pace the simulator against the wall clock at "
+                         "--speed-factor and let the navigator run on its own (for latency "
+                         "studies); default: lockstep, rows equal to in-process ones "
+                         "(protocol 10 on; docs/wire.md, Lockstep)")
     cr.add_argument("--mqtt", metavar="URL", help="MQTT broker for the bus over MAVLink "
                     "(default: an embedded broker per worker)")
     cr.set_defaults(handler="missions:cmd_campaign_run")
@@ -362,6 +375,10 @@ def _add_navigate(sub) -> None:
     p.add_argument("--connect-timeout", type=number("--connect-timeout", above=0),
                    default=60.0, help="seconds to wait for the vehicle (default 60)")
     p.add_argument("--task-json", metavar="JSON", help=argparse.SUPPRESS)
+    p.add_argument("--lockstep", action="store_true",
+                   help="answer a lockstep trial's ticks (the simulator flies the approach and "
+                        "holds its clock at every tick until the setpoint has arrived; needs "
+                        "--mqtt; docs/wire.md, Lockstep)")
     p.add_argument("--json", action="store_true", help="print the result as JSON")
     p.add_argument("--quiet", action="store_true", help="no progress lines")
     p.set_defaults(handler="navigate:cmd_navigate")

@@ -16,6 +16,7 @@ from pymavlink.dialects.v20 import common as mav
 from ft_sitl import frames
 from ft_sitl.autopilot import commander as cm
 from ft_sitl.autopilot.setpoints import Setpoint, SetpointError
+from ft_sitl.autopilot.wire_setpoint import from_local_ned
 from ft_sitl.mavlink.vehicle import Vehicle
 
 #: type_mask bits (POSITION_TARGET_TYPEMASK, ATTITUDE_TARGET_TYPEMASK)
@@ -95,6 +96,12 @@ class Offboard:
         if pos is None and vel is None and acc is None:
             return self._reject("type_mask ignores position, velocity and accel")
         try:
+            if frame == mav.MAV_FRAME_LOCAL_NED and yaw_rate is None:
+                # what a MAVSDK client's offboard setpoint is (autopilot.wire_setpoint:
+                # protocol 10 flies in-process setpoints through the same arithmetic)
+                self.v.fleet.offboard_setpoint(
+                    self.v.index, from_local_ned(pos, vel, acc, yaw, self.v.origin))
+                return []
             sp = Setpoint.trajectory(
                 to_enu(pos, True), to_enu(vel, False), to_enu(acc, False),
                 yaw=None if yaw is None else frames.yaw_ned_to_enu(yaw),

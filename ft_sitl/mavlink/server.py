@@ -23,6 +23,8 @@ from __future__ import annotations
 import asyncio
 import hashlib
 import math
+import select
+import socket
 import struct
 import time
 from dataclasses import dataclass, field
@@ -159,6 +161,22 @@ class _Protocol(asyncio.DatagramProtocol):
         pass
 
 
+class _SocketTransport:
+    """A link's UDP socket served without an event loop (SitlServer.open / pump)."""
+
+    def __init__(self, sock: socket.socket):
+        self.sock = sock
+
+    def sendto(self, data: bytes, addr) -> None:
+        try:
+            self.sock.sendto(data, addr)
+        except OSError:  # a peer not there yet (ICMP), a full buffer: as a lost datagram
+            pass
+
+    def close(self) -> None:
+        self.sock.close()
+
+
 class SitlServer:
     def __init__(self, fleet: Fleet, geo: frames.GeoReference, *, bind: str = "127.0.0.1",
                  remote_host: str = "127.0.0.1", speed_factor: float = 1.0,
@@ -197,6 +215,9 @@ class SitlServer:
         self.bad_packets = 0
         #: called after every chunk of simulated time (a trial's judge, the MQTT bus)
         self.on_chunk = None
+        #: called with (vehicle index, message) for every message from a client, before
+        #: the vehicle handles it (a lockstep trial reads its tick acknowledgements here)
+        self.on_message = None
         self._last_hb_wall = [0.0] * fleet.n
         #: simulated time (us) at which the last message from a client arrived (client
         #: pacing holds the clock within pace_span_s of it)
@@ -240,6 +261,8 @@ class SitlServer:
             link.peers[addr] = now
             link.rx_packets += 1
             self.client_sim_us = self.fleet.time_us
+            if self.on_message is not None:
+                self.on_message(link.vehicle, m)
             try:
                 replies = agent.handle(m, link.index, addr, wall_us)
             except Exception as exc:  # noqa: BLE001 - a bad message must never stop the vehicle
@@ -272,6 +295,43 @@ class SitlServer:
             transport, _ = await loop.create_datagram_endpoint(
                 lambda link=link: _Protocol(self, link), local_addr=link.listen)
             link.transport = transport
+
+    def open(self) -> None:
+        """Bind the links without an event loop, for a driver that steps the fleet itself
+        and serves the links between its steps (:meth:`service`, :meth:`pump`): the
+        lockstep wire trials (ft_sitl.transport.lockstep). OSError if a port is taken."""
+        for link in self.links:
+            sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+            try:
+                sock.setblocking(False)
+                sock.bind(link.listen)
+            except OSError:
+                sock.close()
+                self.close()
+                raise
+            link.transport = _SocketTransport(sock)
+
+    def pump(self, timeout_s: float) -> None:
+        """Handle every datagram that has arrived on the links (after :meth:`open`), waiting
+        up to ``timeout_s`` wall seconds for the first; then the vehicles' wall-clock
+        duties."""
+        socks = {link.transport.sock: link for link in self.links}
+        ready, _, _ = select.select(list(socks), [], [], timeout_s)
+        for sock in ready:
+            while True:
+                try:
+                    data, addr = sock.recvfrom(65535)
+                except (BlockingIOError, InterruptedError):
+                    break
+                except OSError:  # ICMP port unreachable of an earlier send: no datagram
+                    continue
+                self.on_datagram(socks[sock], data, addr)
+        wall_us = int(time.monotonic() * 1e6)
+        for a in self.agents:
+            self.send_all(a.i, a.poll(wall_us))
+            if time.monotonic() - self._last_hb_wall[a.i] >= HEARTBEAT_TOP_UP_S:
+                self._last_hb_wall[a.i] = time.monotonic()
+                self.send_all(a.i, [Outgoing(a.heartbeat())])
 
     def stop(self) -> None:
         self._stop.set()

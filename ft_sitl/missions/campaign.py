@@ -79,6 +79,9 @@ class Transport:
     speed_factor: float = 2.0
     mqtt: str | None = None
     wire: Callable | None = None
+    #: over MAVLink, registered navigators fly in lockstep (rows equal to in-process ones);
+    #: False: free-running, paced against the wall clock (runs.json records which)
+    lockstep: bool = True
 
     def __post_init__(self):
         if self.kind not in ("inprocess", "mavlink"):
@@ -313,6 +316,7 @@ def run_campaign(campaign: Campaign, out_dir: str | Path, *, workers: int = 1,
             "machine": machine_info(),
             "numeric": numeric_env.in_force(),
             "transport": transport.kind,
+            **({"lockstep": transport.lockstep} if transport.kind == "mavlink" else {}),
             "code_version": __version__})
     if store.done:
         store.write_tables()

@@ -83,6 +83,11 @@ class ProtocolRules:
     #: in-process trial's (streams.trial_streams); before, the wire seeded both its own
     #: way (streams.legacy_wire_streams). In-process trials fly as before.
     wire_streams_shared: bool = False
+    #: in-process, every navigator setpoint reaches the flight controller as a MAVSDK
+    #: client's does over MAVLink (autopilot.wire_setpoint: local NED, float32, yaw through
+    #: degrees), so that a lockstep wire trial flies the same numbers; before, in full
+    #: float64 precision
+    setpoints_as_on_the_wire: bool = False
 
 
 def _versions(first: ProtocolRules, *changes: tuple[str, dict]) -> dict[int, ProtocolRules]:
@@ -138,6 +143,11 @@ PROTOCOLS = _versions(
      "and noisy depth frames differed between the transports); trials flown in-process are "
      "as in 8",
      {"wire_streams_shared": True}),
+    ("in-process setpoints reach the flight controller as a MAVSDK client's do over MAVLink "
+     "(local NED relative to the take-off point, every field a float32, the yaw through "
+     "degrees), so that a navigator flown over MAVLink in lockstep gives the in-process "
+     "row column for column but the wall times; observations and depth frames are as in 9",
+     {"setpoints_as_on_the_wire": True}),
 )
 #: the version new trials and campaigns fly unless they name another
 PROTOCOL_VERSION = max(PROTOCOLS)

@@ -31,6 +31,7 @@ import numpy as np
 
 from ft_sitl.autopilot.commander import MAIN_OFFBOARD
 from ft_sitl.autopilot.setpoints import Setpoint, offboard_problem
+from ft_sitl.autopilot.wire_setpoint import through_local_ned
 from ft_sitl.missions.perception import Perception
 from ft_sitl.missions.plan import TrialPlan, plan_trial
 from ft_sitl.missions.protocol import (
@@ -51,7 +52,7 @@ from ft_sitl.navigation.base import GiveUp, Observation, ObstacleStates
 from ft_sitl.navigation.registry import create
 
 __all__ = ["TrialSpec", "TrialSpecError", "TrialOutcome", "run_trial", "platform_for",
-           "load_scenario_for"]
+           "load_scenario_for", "fly", "InProcessPilot"]
 
 
 def load_scenario_for(spec: TrialSpec):
@@ -79,23 +80,71 @@ def run_trial(spec: TrialSpec, *, record: bool = False, navigator=None,
                                                          dict(plan.navigator_params))
     guard, fleet = trial_vehicle(plan)
     ref = TrialReferee(fleet, guard, plan, record=record)
-    watchdog = WallWatchdog(wall0, wall_budget_s)
+    fly(plan, fleet, ref, InProcessPilot(nav, plan, fleet),
+        WallWatchdog(wall0, wall_budget_s), monitor=monitor)
+    row = ref.finish(replans=replan_count(getattr(nav, "replans", 0)), wall0=wall0)
+    return TrialOutcome(row, ref.trajectory(), plan.scenario)
+
+
+class InProcessPilot:
+    """Who answers the trial driver's navigator calls (:func:`fly`): the navigator itself,
+    called in this process. A transport's pilot answers them from another process
+    (:mod:`ft_sitl.transport.lockstep`); the driver around them is the same.
+
+    ``navigator`` is what the driver reads the navigator's camera, rate and wishes from;
+    ``reset`` / ``observe`` are its calls; ``tick`` hands it a navigation tick's
+    observation and puts its setpoint (and, the first time, offboard mode) into the
+    flight controller; ``advanced`` is called after every advance of the simulation."""
+
+    def __init__(self, nav, plan: TrialPlan, fleet):
+        self.navigator = nav
+        wire = plan.rules.setpoints_as_on_the_wire
+        self._origin = plan.task().origin if wire else None
+        self._home = np.asarray(fleet.commanders[0].home, dtype=float) if wire else None
+
+    def reset(self, task, m) -> None:
+        _call(self.navigator.reset, task, "reset", m)
+
+    def observe(self, obs, m) -> None:
+        _call(self.navigator.observe, obs, "observe", m)
+
+    def tick(self, fleet, obs, m) -> None:
+        sp = _ask(self.navigator, obs, m)
+        if self._origin is not None:  # protocol 10: as over MAVLink
+            sp = through_local_ned(sp, self._origin, self._home)
+        cmd = fleet.commanders[0]
+        fleet.offboard_setpoint(0, sp)
+        if cmd.main_mode != MAIN_OFFBOARD:  # PX4: a setpoint first, then the mode
+            res = cmd.set_mode(MAIN_OFFBOARD)
+            if res.name != "ACCEPTED" or cmd.main_mode != MAIN_OFFBOARD:
+                raise TrialFailure(Outcome.NAVIGATOR_ERROR,
+                                   "the flight controller refused offboard mode")
+            fleet.offboard_setpoint(0, sp)
+
+    def advanced(self, fleet) -> None:
+        pass
+
+
+def fly(plan: TrialPlan, fleet, ref: TrialReferee, pilot, watchdog: WallWatchdog, *,
+        monitor=None) -> None:
+    """The protocol's driver: approach and navigation of ``fleet`` under the referee
+    ``ref`` until its outcome, the navigator's calls answered by ``pilot``
+    (:class:`InProcessPilot` or a transport's); failures end the trial in ``ref``."""
+    nav = pilot.navigator
     try:
         eyes = _Eyes(nav, plan)
         with watchdog:
             if plan.rules.observe_approach:  # the navigator sees from arming on (protocol 3)
-                _call(nav.reset, plan.task(), "reset", ref.metrics)
+                pilot.reset(plan.task(), ref.metrics)
             _approach(fleet, plan.scenario, ref,
-                      nav if plan.rules.observe_approach else None, eyes)
+                      pilot if plan.rules.observe_approach else None, eyes)
             if ref.phase is Phase.NAVIGATION:
-                _navigate(nav, fleet, plan, ref, watchdog, eyes,
+                _navigate(pilot, fleet, plan, ref, watchdog, eyes,
                           reset=not plan.rules.observe_approach, monitor=monitor)
     except TrialFailure as f:
         ref.end(f.reason, f.detail)
     except WallBudgetExceeded:
         ref.end(Outcome.NAVIGATOR_ERROR, watchdog.detail(ref.nav_time_s()))
-    row = ref.finish(replans=replan_count(getattr(nav, "replans", 0)), wall0=wall0)
-    return TrialOutcome(row, ref.trajectory(), plan.scenario)
 
 
 class _Eyes:
@@ -218,28 +267,31 @@ def _approach(fleet, sc, ref: TrialReferee, observer, eyes: _Eyes) -> None:
         tick_end_us = fleet.time_us + tick_us
         while seeing and t_arm_us + eyes.next_event_us() < tick_end_us:
             fleet.run_us(t_arm_us + eyes.next_event_us() - fleet.time_us)
+            observer.advanced(fleet)
             t_us = fleet.time_us - t_arm_us
             frame = eyes.due(fleet, t_us)
             if frame is not None:
-                obs = _observation(fleet, t_us, fleet.state(0), frame, observer)
-                _call(observer.observe, obs, "observe", ref.metrics)
+                obs = _observation(fleet, t_us, fleet.state(0), frame, observer.navigator)
+                observer.observe(obs, ref.metrics)
         fleet.run_us(tick_end_us - fleet.time_us)
+        if observer is not None:
+            observer.advanced(fleet)
         if not repositioned and abs(fleet.state(0).position[2] - sc.start[2]) < STABLE_POS_M:
             cmd.reposition(sc.start.copy(), sc.start_yaw)
             repositioned = True
         ref.after_step()
 
 
-def _navigate(nav, fleet, plan: TrialPlan, ref: TrialReferee, watchdog: WallWatchdog,
+def _navigate(pilot, fleet, plan: TrialPlan, ref: TrialReferee, watchdog: WallWatchdog,
               eyes: _Eyes, *, reset: bool, monitor=None) -> None:
     """Offboard flight with the navigator in the loop until the protocol's outcome
     (``reset``: the navigator is reset now, as before protocol 3)."""
-    cmd = fleet.commanders[0]
+    nav = pilot.navigator
     m = ref.metrics
     t_nav0_us = ref.t_nav0_us
     spec = plan.spec
     if reset:
-        _call(nav.reset, plan.task(), "reset", m)
+        pilot.reset(plan.task(), m)
     period_us = _period_us(nav, fleet.sim.dt_us)
     next_nav_us = t_nav0_us
     eyes.start(period_us, floor=False)
@@ -262,17 +314,11 @@ def _navigate(nav, fleet, plan: TrialPlan, ref: TrialReferee, watchdog: WallWatc
                 obs = Observation(time_s=obs.time_s, position=p, velocity=v, yaw=yaw,
                                   attitude=att, angular_velocity=rates, depth=depth,
                                   movers=obs.movers)
-            sp = _ask(nav, obs, m)
-            fleet.offboard_setpoint(0, sp)
-            if cmd.main_mode != MAIN_OFFBOARD:  # PX4: a setpoint first, then the mode
-                res = cmd.set_mode(MAIN_OFFBOARD)
-                if res.name != "ACCEPTED" or cmd.main_mode != MAIN_OFFBOARD:
-                    raise TrialFailure(Outcome.NAVIGATOR_ERROR,
-                                       "the flight controller refused offboard mode")
-                fleet.offboard_setpoint(0, sp)
+            pilot.tick(fleet, obs, m)
             next_nav_us += period_us
         # to the next navigator step or commander tick, at least one physics step
         fleet.run_us(max(fleet.sim.dt_us, min(tick_us, next_nav_us - fleet.time_us)))
+        pilot.advanced(fleet)
         if monitor is not None:
             monitor(fleet, fleet.time_us - t_nav0_us)
         if ref.after_step():

@@ -2,7 +2,9 @@
 
 - :mod:`ft_sitl.transport.mavlink_trial`: one trial of the protocol with the vehicle served
   over MAVLink and the navigator in another process (``ft-sitl navigate`` or a user's
-  program), judged by the same referee as in-process;
+  program), judged by the same referee as in-process, free-running against the wall clock;
+- :mod:`ft_sitl.transport.lockstep`: the same in lockstep: the in-process driver holds its
+  clock at every navigator call until the client's answer has arrived;
 - :mod:`ft_sitl.transport.sitl_bus`: a served vehicle's telemetry, events and depth frames
   on the MQTT bus.
 
@@ -13,13 +15,28 @@ campaign runner (:mod:`ft_sitl.missions.campaign`) flies trials over MAVLink thr
 
 from __future__ import annotations
 
+import functools
+
 from ft_sitl.missions.campaign import Transport
-from ft_sitl.transport.mavlink_trial import fly_over_mavlink
+from ft_sitl.missions.campaign_file import COMMAND
+from ft_sitl.missions.spec import TrialSpec
+from ft_sitl.transport.lockstep import run_trial_lockstep
+from ft_sitl.transport.mavlink_trial import fly_over_mavlink, worker_bus
+
+
+def fly_wire(spec: TrialSpec, speed_factor: float, mqtt: str | None, *,
+             lockstep: bool = True) -> dict:
+    """One campaign trial over MAVLink, its row: in lockstep (a registered navigator,
+    ``lockstep``), else free-running at ``speed_factor`` (a ``command`` navigator always)."""
+    if lockstep and spec.algorithm != COMMAND:
+        return run_trial_lockstep(spec, **worker_bus(mqtt)).row
+    return fly_over_mavlink(spec, speed_factor, mqtt)
 
 
 def transport(kind: str = "inprocess", speed_factor: float = 2.0,
-              mqtt: str | None = None) -> Transport:
+              mqtt: str | None = None, *, lockstep: bool = True) -> Transport:
     """A campaign's transport that can fly trials over MAVLink (``kind`` "mavlink", and a
-    ``command`` algorithm in any campaign); CampaignError for a bad kind or speed
-    factor."""
-    return Transport(kind, speed_factor, mqtt, wire=fly_over_mavlink)
+    ``command`` algorithm in any campaign), in lockstep (default) or free-running;
+    CampaignError for a bad kind or speed factor."""
+    return Transport(kind, speed_factor, mqtt,
+                     wire=functools.partial(fly_wire, lockstep=lockstep), lockstep=lockstep)

@@ -88,12 +88,14 @@ def make_bus_factory(url: str):
     trial id); the depth camera is the plan's (the benchmark camera for a command), its
     noise drawn from the plan's camera stream for the wire."""
 
-    def factory(server, fleet, plan: TrialPlan, vehicle):
-        camera = plan.frame_camera
-        if camera is None:
-            camera = camera_config("benchmark", None, None, None)
+    def factory(server, fleet, plan: TrialPlan, vehicle, camera: bool = True):
+        """(``camera`` False: no depth frames, as in lockstep, where they travel in the
+        ticks)"""
+        cam = plan.frame_camera
+        if cam is None:
+            cam = camera_config("benchmark", None, None, None)
         bus = SitlBus(lambda on_config: BusPublisher(url, vehicle, on_config=on_config),
-                      fleet, 0, scenario=plan.scenario, camera=camera,
+                      fleet, 0, scenario=plan.scenario, camera=cam if camera else None,
                       rng=plan.wire_streams.rng("camera"))
         bus.pub.wait_connected(10.0)
         return bus
@@ -173,14 +175,14 @@ def run_trial_wire(spec: TrialSpec, *, speed_factor: float = 2.0, mqtt: str | No
                                    f"cannot start {argv[0]}: {exc}") from None
             asyncio.run(_serve(server, fleet, ref, proc, spec, speed_factor, arm_timeout_s,
                                bus, out_path))
-        client = _client_result(out_path)
+        client = client_result(out_path)
         if ref.outcome == Outcome.NAVIGATOR_ERROR and not ref.detail:
-            ref.detail = _tail(err_path)
+            ref.detail = tail(err_path)
     except TrialFailure as f:
         ref.end(f.reason, f.detail)
     finally:
         if proc is not None:
-            _stop(proc)
+            stop_client(proc)
         if lock is not None:
             lock.__exit__(None, None, None)
     # setpoints the client sent (unknown when the judge ended it first)
@@ -221,7 +223,7 @@ async def _serve(server, fleet, ref: TrialReferee, proc, spec, speed_factor: flo
             elif code is not None and code != 0 and ref.outcome is None:
                 # ft-sitl navigate exits 1 when it gives up (or times out by its own
                 # clock): the protocol's "no plan" timeout; anything else is an error
-                res = _client_result(out_path) if code == 1 else {}
+                res = client_result(out_path) if code == 1 else {}
                 if res.get("result") in (ClientResult.GAVE_UP, ClientResult.TIMEOUT):
                     ref.end(Outcome.TIMEOUT, f"navigator gave up: {res.get('detail', '')}")
                 else:
@@ -245,7 +247,8 @@ async def _serve(server, fleet, ref: TrialReferee, proc, spec, speed_factor: flo
             bus.close()
 
 
-def _client_result(path: Path) -> dict:
+def client_result(path: Path) -> dict:
+    """The navigator process's JSON summary line (empty if it wrote none)."""
     try:
         lines = path.read_text(errors="replace").strip().splitlines()
         return json.loads(lines[-1]) if lines else {}
@@ -253,7 +256,8 @@ def _client_result(path: Path) -> dict:
         return {}
 
 
-def _tail(path: Path, n: int = 300) -> str:
+def tail(path: Path, n: int = 300) -> str:
+    """The last line of a navigator process's stderr (for a failed trial's detail)."""
     try:
         lines = [ln for ln in path.read_text(errors="replace").splitlines() if ln.strip()]
     except OSError:
@@ -261,7 +265,9 @@ def _tail(path: Path, n: int = 300) -> str:
     return lines[-1][-n:] if lines else "the navigator process failed (no output)"
 
 
-def _stop(proc) -> None:
+def stop_client(proc) -> None:
+    """SIGTERM to the navigator process's group (``ft-sitl navigate`` prints its summary),
+    then SIGKILL after 5 s."""
     if proc.poll() is not None:
         return
     try:

@@ -17,6 +17,7 @@ import numpy as np
 from ft_sitl import frames
 from ft_sitl.autopilot import cascade as cs
 from ft_sitl.autopilot.setpoints import Setpoint
+from ft_sitl.autopilot.wire_setpoint import local_ned_fields
 from ft_sitl.physics.quaternion import qto_euler
 
 
@@ -44,14 +45,9 @@ def to_offboard(sp: Setpoint, origin_enu) -> OffboardCommand:
     row = sp.row
     kind = int(row[cs.SP_KIND])
     if kind == cs.KIND_TRAJECTORY:
-        p = row[cs.SP_POS:cs.SP_POS + 3] - np.asarray(origin_enu, dtype=float)
-        yaw = row[cs.SP_YAW]
-        return OffboardCommand(
-            "pva", position=_t(frames.enu_to_ned(p)),
-            velocity=_t(frames.enu_to_ned(row[cs.SP_VEL:cs.SP_VEL + 3])),
-            acceleration=_t(frames.enu_to_ned(row[cs.SP_ACC:cs.SP_ACC + 3])),
-            yaw_deg=math.nan if math.isnan(yaw) else math.degrees(
-                frames.wrap_pi(frames.yaw_enu_to_ned(float(yaw)))))
+        p, v, a, yaw_deg = local_ned_fields(sp, origin_enu)
+        return OffboardCommand("pva", position=_t(p), velocity=_t(v), acceleration=_t(a),
+                               yaw_deg=yaw_deg)
     if kind == cs.KIND_ATTITUDE:
 
         q = frames.q_enu_flu_to_ned_frd(row[cs.SP_Q:cs.SP_Q + 4])

@@ -25,6 +25,8 @@ import asyncio
 import json
 import logging
 import math
+import signal
+import sys
 import time
 from enum import StrEnum
 
@@ -44,6 +46,7 @@ from ft_sitl.navigation.base import (
 )
 from ft_sitl.physics.quaternion import qto_euler
 from ft_sitl.wire.convert import ned_to_world, send, to_offboard
+from ft_sitl.wire.tick_observation import tick_observation
 
 log = logging.getLogger("ft_sitl.navigate")
 
@@ -421,3 +424,102 @@ async def _navigate(nav, task: Task, off, state: _State, t_wall0: float,
             return {"result": ClientResult.TIMEOUT.value,
                     "detail": f"{dist:.1f} m from the goal after {task.limits.timeout_s:g} s",
                     "steps": steps}
+
+
+#: wall seconds between a lockstep client's "ready" messages until the first tick comes
+READY_REPEAT_S = 0.5
+
+
+async def fly_lockstep(nav, task: Task, connect: str, *, mqtt: str, vehicle: str = "0",
+                       connect_timeout_s: float = 60.0) -> dict:
+    """Answer a lockstep trial's ticks (:mod:`ft_sitl.transport.lockstep`) with ``nav``
+    until the simulator ends the trial (SIGTERM: the summary line is printed then, with
+    the steps and the navigator's replans) or the navigator gives up (``gave_up``).
+
+    The simulator flies the approach; the navigator is reset with ``task`` first (its
+    modelled latency stays: in lockstep the wire adds none). Each tick's observation comes
+    on the bus, bit for bit; an ``observe`` tick goes to ``nav.observe``, a ``step`` tick
+    to ``nav.step``, whose setpoint goes out with MAVSDK Offboard (the first: setpoint,
+    offboard mode, setpoint). Then the tick is acknowledged on the same MAVLink connection
+    with a TIMESYNC: ``tc1`` the tick's simulated time in ns, ``ts1`` its number (0: ready).
+    """
+    require_mavsdk()
+    # MAVSDK and the MQTT client: loaded only by the navigator client that flies over them
+    from mavsdk import ComponentType
+    from mavsdk.asyncio import Configuration, Mavsdk
+    from mavsdk.asyncio.plugins.mavlink_direct import MavlinkDirectAsync
+    from mavsdk.asyncio.plugins.offboard import OffboardAsync
+    from mavsdk.plugins.mavlink_direct import MavlinkMessage
+
+    nav.reset(task)
+    state = {"steps": 0}
+
+    def summary(result: str, detail: str) -> dict:
+        replans = getattr(nav, "replans", -1)
+        return {"result": result, "detail": detail, "steps": state["steps"],
+                "replans": replans if isinstance(replans, int) else -1}
+
+    def stopped(signum, frame):  # the simulator ended the trial: say what was done
+        sys.stdout.write(json.dumps(summary("stopped", "the simulator ended the trial"))
+                         + "\n")
+        sys.stdout.flush()
+        raise SystemExit(0)
+
+    signal.signal(signal.SIGTERM, stopped)
+    m = Mavsdk(Configuration.create_with_component_type(ComponentType.GROUND_STATION))
+    try:
+        await m.add_any_connection(connect)
+        drone = await m.first_autopilot(timeout_s=connect_timeout_s)
+        if drone is None:
+            raise NavigateError(f"no autopilot at {connect} within {connect_timeout_s:g} s")
+        off, direct = OffboardAsync(drone), MavlinkDirectAsync(drone)
+
+        async def ack(time_usec: int, seq: int) -> None:
+            fields = {"tc1": max(1, int(time_usec) * 1000), "ts1": int(seq),
+                      "target_system": 1, "target_component": 1}
+            await direct.send_message(MavlinkMessage("TIMESYNC", 0, 0, 1, 1,
+                                                     json.dumps(fields)))
+
+        offboard = False
+        last = 0
+        async with BusClient(mqtt, vehicle, kinds=("tick",), queue_size=4096) as bus:
+            async def ready():
+                while last == 0:
+                    await ack(0, 0)
+                    await asyncio.sleep(READY_REPEAT_S)
+
+            asker = asyncio.create_task(ready())
+            try:
+                async for msg in bus:
+                    tick = msg.data
+                    if tick.seq <= last:
+                        continue  # a repeated delivery (QoS 1)
+                    if tick.seq != last + 1:
+                        raise NavigateError(f"lockstep: tick {last + 1} was lost (got "
+                                            f"{tick.seq})")
+                    last = tick.seq
+                    obs = tick_observation(tick)
+                    try:
+                        if tick.phase == "observe":
+                            nav.observe(obs)
+                        else:
+                            sp = nav.step(obs)
+                    except GiveUp as exc:
+                        return summary(ClientResult.GAVE_UP.value, str(exc))
+                    if tick.phase == "step":
+                        if not isinstance(sp, Setpoint):
+                            raise NavigateError(f"navigator returned {type(sp).__name__}, "
+                                                "not a Setpoint")
+                        cmd = to_offboard(sp, task.origin)
+                        await send(off, cmd)
+                        if not offboard:  # PX4: a setpoint first, then the mode
+                            await off.start()
+                            await send(off, cmd)
+                            offboard = True
+                        state["steps"] += 1
+                    await ack(tick.time_usec, tick.seq)
+            finally:
+                asker.cancel()
+        raise NavigateError("the bus closed")
+    finally:
+        m.destroy()

@@ -1,0 +1,214 @@
+"""One trial flown over MAVLink in lockstep: the in-process driver, its navigator in another
+process.
+
+``run_trial_lockstep(spec, ...)`` flies the trial with the in-process protocol driver
+(:func:`ft_sitl.missions.trial.fly`: the same approach, the same physics steps, the same
+judge calls, the same camera frames from the same noise stream) and answers the driver's
+navigator calls through :class:`LockstepPilot`, from ``ft-sitl navigate --lockstep`` in
+another process:
+
+1. the vehicle is served on MAVLink (:class:`~ft_sitl.mavlink.server.SitlServer`, its links
+   read only while the clock stands) and on the bus; the client connects with MAVSDK,
+   subscribes to the bus's ``tick`` topic and says it is ready with a TIMESYNC;
+2. wherever the in-process driver would call ``observe`` (a camera frame during the
+   approach) or ``step`` (a navigation tick), the simulator publishes the observation,
+   bit for bit, as a tick (:mod:`ft_sitl.bus.tick`) and holds its clock;
+3. the client calls its navigator, sends a step's setpoint with MAVSDK Offboard (the first
+   one: setpoint, offboard mode, setpoint, as the in-process driver does), then
+   acknowledges the tick on the same MAVLink connection: a TIMESYNC whose ``tc1`` is the
+   tick's simulated time in nanoseconds (the client's clock is the simulator's) and whose
+   ``ts1`` is the tick's number; the flight controller takes the setpoint as it arrives;
+4. the clock goes on when the acknowledgement has arrived: behind it on the link, the
+   setpoint already has.
+
+Setpoints cross MAVLink as float32 and protocol 10 flies in-process setpoints through the
+same conversion (:mod:`ft_sitl.autopilot.wire_setpoint`), so from protocol 10 the row is
+the in-process row column for column but the wall times (``wall_time_s``,
+``planner_time_s``); docs/wire.md, "Lockstep".
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import subprocess
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+from ft_sitl import frames
+from ft_sitl.autopilot.commander import MAIN_OFFBOARD
+from ft_sitl.bus.codec import EventType
+from ft_sitl.mavlink.instances import InstanceLock
+from ft_sitl.mavlink.server import SitlServer
+from ft_sitl.missions.campaign_file import COMMAND
+from ft_sitl.missions.plan import PERCEPTION_WIRE, plan_trial
+from ft_sitl.missions.protocol import (
+    APPROACH_TIMEOUT_S,
+    TrialFailure,
+    TrialOutcome,
+    TrialReferee,
+    trial_vehicle,
+)
+from ft_sitl.missions.results import Outcome
+from ft_sitl.missions.spec import TrialSpec, TrialSpecError
+from ft_sitl.missions.trial import fly, replan_count
+from ft_sitl.missions.watchdog import WallWatchdog
+from ft_sitl.navigation.registry import create
+from ft_sitl.transport.mavlink_trial import client_result, stop_client, tail
+from ft_sitl.transport.sitl_bus import SitlBus
+from ft_sitl.wire.navigate import ClientResult, task_env
+from ft_sitl.wire.tick_observation import observation_tick
+
+#: wall seconds the client has to connect and say it is ready
+READY_TIMEOUT_S = 120.0
+#: wall seconds one tick may take the client (its navigator's step included)
+TICK_TIMEOUT_S = 300.0
+
+
+class LockstepPilot:
+    """The driver's navigator calls answered by a client process over the bus and MAVLink
+    (module docstring). ``navigator``: an instance of the trial's navigator, made here only
+    to read what the driver asks of it (camera, rate, whether it wants the movers' truth);
+    it is never stepped."""
+
+    def __init__(self, navigator, server: SitlServer, bus: SitlBus, proc, out_path: Path,
+                 err_path: Path):
+        self.navigator = navigator
+        self.server, self.bus, self.proc = server, bus, proc
+        self.out_path, self.err_path = out_path, err_path
+        self.seq = 0
+        self.acked = -1
+        server.on_message = self._on_message
+
+    def _on_message(self, vehicle: int, m) -> None:
+        if m.get_type() == "TIMESYNC" and m.tc1 != 0:  # a client's clock: its acknowledgement
+            self.acked = max(self.acked, int(m.ts1))
+
+    def wait_ready(self) -> None:
+        """Until the client has connected and said so (TIMESYNC, ts1 0)."""
+        self._wait(0, READY_TIMEOUT_S, "connect")
+
+    def _wait(self, seq: int, timeout_s: float, what: str) -> None:
+        deadline = time.monotonic() + timeout_s
+        while self.acked < seq:
+            self.server.pump(0.02)
+            if self.acked >= seq:
+                break
+            code = self.proc.poll()
+            if code is not None:
+                raise self._client_ended(code)
+            if time.monotonic() > deadline:
+                raise TrialFailure(Outcome.NAVIGATOR_ERROR, f"the navigator process did not "
+                                                            f"{what} within {timeout_s:g} s")
+
+    def _client_ended(self, code: int) -> TrialFailure:
+        res = client_result(self.out_path)
+        if code == 1 and res.get("result") == ClientResult.GAVE_UP:
+            return TrialFailure(Outcome.TIMEOUT, f"navigator gave up: {res.get('detail', '')}")
+        return TrialFailure(Outcome.NAVIGATOR_ERROR, tail(self.err_path))
+
+    def _exchange(self, phase: str, obs) -> None:
+        self.seq += 1
+        tick = observation_tick(self.seq, phase, self.server.fleet.time_us, obs)
+        deadline = time.monotonic() + 10.0
+        while not self.bus.pub.publish_tick(tick):  # the broker is away: wait for it
+            if time.monotonic() > deadline:
+                raise TrialFailure(Outcome.NAVIGATOR_ERROR, "the bus did not take a tick")
+            time.sleep(0.01)
+        self._wait(self.seq, TICK_TIMEOUT_S, f"answer tick {self.seq}")
+
+    # -- the driver's calls ------------------------------------------------------------------
+    def reset(self, task, m) -> None:
+        pass  # the client resets its navigator with the same task before it says ready
+
+    def observe(self, obs, m) -> None:
+        self._exchange("observe", obs)
+
+    def tick(self, fleet, obs, m) -> None:
+        m.planner_calls += 1
+        self._exchange("step", obs)
+        if fleet.commanders[0].main_mode != MAIN_OFFBOARD:
+            raise TrialFailure(Outcome.NAVIGATOR_ERROR,
+                               "the flight controller refused offboard mode")
+
+    def advanced(self, fleet) -> None:
+        self.server.service()
+        self.bus.service()
+
+
+def lockstep_argv(plan, connect: str, mqtt: str, vehicle: str) -> tuple[list[str], dict]:
+    """The client's command line and extra environment."""
+    task = plan.task(wire=True)
+    env = task_env(task, connect, mqtt, vehicle)
+    argv = [sys.executable, "-m", "ft_sitl", "navigate", "--algorithm", plan.spec.algorithm,
+            "--connect", connect, "--vehicle", vehicle, "--task-json", env["FT_SITL_TASK"],
+            "--mqtt", mqtt, "--lockstep", "--quiet", "--json"]
+    for k, v in sorted(plan.navigator_params.items()):
+        argv += ["--param", f"{k}={json.dumps(v)}"]
+    return argv, env
+
+
+def run_trial_lockstep(spec: TrialSpec, *, mqtt: str, bus_factory, record: bool = False,
+                       instance: int | None = None, log_dir: Path | None = None
+                       ) -> TrialOutcome:
+    """Fly one trial in lockstep with its navigator in another process (module
+    docstring). ``bus_factory`` makes the simulator's side of the bus (its camera is not
+    used: frames travel in the ticks)."""
+    if spec.perception is not None:
+        raise TrialSpecError(PERCEPTION_WIRE)
+    if spec.algorithm == COMMAND:
+        raise TrialSpecError("a command navigator cannot fly in lockstep (it does not answer "
+                             "ticks): fly it free-running")
+    wall0 = time.perf_counter()
+    plan = plan_trial(spec)
+    nav = create(spec.algorithm, dict(plan.navigator_params))
+    guard, fleet = trial_vehicle(plan)
+    ref = TrialReferee(fleet, guard, plan, record=record)
+    vehicle = spec.trial_id
+    lock = InstanceLock() if instance is None else None
+    inst = lock.__enter__() if lock is not None else instance
+    proc = server = bus = None
+    logs = Path(log_dir or tempfile.mkdtemp(prefix="ft-sitl-nav-"))
+    logs.mkdir(parents=True, exist_ok=True)
+    out_path, err_path = logs / f"{spec.trial_id}.out", logs / f"{spec.trial_id}.err"
+    client: dict = {}
+    try:
+        server = SitlServer(fleet, frames.GeoReference(*frames.PX4_SITL_HOME),
+                            base_instance=inst)
+        server.open()
+        bus = bus_factory(server, fleet, plan, vehicle, camera=False)
+        ref.on_start = lambda: bus.event(EventType.TRIAL_START, trial=spec.trial_id)
+        connect = f"udpin://0.0.0.0:{server.links[0].default_remote[1]}"
+        argv, env = lockstep_argv(plan, connect, mqtt, vehicle)
+        with open(out_path, "wb") as out_fh, open(err_path, "wb") as err_fh:
+            try:
+                proc = subprocess.Popen(argv, stdout=out_fh, stderr=err_fh,
+                                        env={**os.environ, **env}, start_new_session=True)
+            except OSError as exc:
+                raise TrialFailure(Outcome.NAVIGATOR_ERROR,
+                                   f"cannot start {argv[0]}: {exc}") from None
+            pilot = LockstepPilot(nav, server, bus, proc, out_path, err_path)
+            server.service()
+            pilot.wait_ready()
+            # a ceiling against a hang only: the ticks wait as long as the client computes
+            budget = READY_TIMEOUT_S + 20.0 * (APPROACH_TIMEOUT_S + spec.limits.timeout_s
+                                               + spec.limits.hold_s)
+            fly(plan, fleet, ref, pilot, WallWatchdog(time.perf_counter(), budget))
+    except TrialFailure as f:
+        ref.end(f.reason, f.detail)
+    finally:
+        if proc is not None:
+            stop_client(proc)
+            client = client_result(out_path)
+        if bus is not None:
+            bus.event(EventType.TRIAL_END, trial=spec.trial_id,
+                      outcome=ref.outcome.value if ref.outcome is not None else "?")
+            bus.close()
+        if server is not None:
+            server.close()
+        if lock is not None:
+            lock.__exit__(None, None, None)
+    row = ref.finish(replans=replan_count(client.get("replans", -1)), wall0=wall0)
+    return TrialOutcome(row, ref.trajectory(), plan.scenario)
