@@ -13,7 +13,7 @@ from pathlib import Path
 
 from ft_sitl import __version__, numeric_env
 from ft_sitl.bridge import ARDUPILOT_DEFAULT_PORT
-from ft_sitl.cli.common import number
+from ft_sitl.cli.common import CliError, number
 from ft_sitl.navigation.base import LIMITS  # numpy and the setpoint type: cheap too
 from ft_sitl.physics.platform import CATEGORIES  # loaded by cli.common anyway
 from ft_sitl.scenarios.render import DEFAULT_DPI  # numpy only: cheap at start-up
@@ -42,7 +42,13 @@ _INSTANCE = number("--instance", minimum=0, maximum=999, integer=True)
 
 def _instance_number(text: str):
     """``--instance``: a number 0..999, or ``auto`` (a free one, chosen when serving)."""
-    return "auto" if text == "auto" else _INSTANCE(text)
+    if text == "auto":
+        return text
+    try:
+        int(text)
+    except ValueError:
+        raise CliError(f"--instance: {text!r} is neither an integer nor auto") from None
+    return _INSTANCE(text)
 
 
 def build_parser() -> argparse.ArgumentParser:

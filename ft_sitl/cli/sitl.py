@@ -22,7 +22,8 @@ from ft_sitl.cli.common import (
     wind_option,
 )
 from ft_sitl.frames import PX4_SITL_HOME, GeoReference, enu_to_ned, yaw_enu_to_ned
-from ft_sitl.mavlink.instances import InstanceBusy, instances_held
+from ft_sitl.mavlink.instances import InstanceBusy, free_instances, instances_held
+from ft_sitl.mavlink.ports import instance_ports, taken_message, taken_ports
 from ft_sitl.mavlink.server import SitlServer, check_pacing
 from ft_sitl.physics.actuators import Actuators
 from ft_sitl.scenarios.io import scenario_from_spec
@@ -87,7 +88,8 @@ def _sitl_bus(args, server, fleet, scenario):
 
 def cmd_sitl(args) -> int:
     # each option's own range is checked as it is parsed (cli.common.number)
-    if args.instance > 1000 - args.instances:
+    auto = args.instance == "auto"
+    if not auto and args.instance > 1000 - args.instances:
         raise CliError(f"--instance: {args.instance} must be within 0..{1000 - args.instances}")
     try:
         check_pacing(args.speed_factor, args.pace, args.pace_span)
@@ -96,10 +98,24 @@ def cmd_sitl(args) -> int:
     vehicles = _vehicles(args)  # every option checked before the ports are taken
     with contextlib.ExitStack() as held:
         try:  # its instance numbers, so that no trial over MAVLink of this machine takes them
-            held.enter_context(instances_held(args.instance, args.instances))
+            if auto:  # the lowest free run whose ports are free too (no client lingering on
+                # 14540+i, no PX4 SITL or other program on the listen ports)
+                args.instance = held.enter_context(free_instances(
+                    args.instances, lambda i: not taken_ports(i, args.bind, client=True)))
+            else:
+                held.enter_context(instances_held(args.instance, args.instances))
         except InstanceBusy as exc:
             raise CliError(f"--instance: {exc}") from None
+        _check_ports(args)
         return _serve(args, *vehicles)
+
+
+def _check_ports(args) -> None:
+    """A CliError naming each listen port another program holds, and who."""
+    for i in range(args.instance, args.instance + args.instances):
+        taken = taken_ports(i, args.bind, client=False)
+        if taken:
+            raise CliError(f"cannot listen on {args.bind}: {taken_message(i, taken)}")
 
 
 def _vehicles(args):
@@ -141,6 +157,9 @@ def _serve(args, geo, loopback, p, scenario, spawn, fleet, wind, estimator, actu
     except (ValueError, OSError) as exc:
         raise CliError(str(exc)) from None
     urls = server.urls()
+    for k, u in enumerate(urls):
+        u["instance"] = args.instance + k
+        u["ports"] = instance_ports(args.instance + k)
     buses, broker = _sitl_bus(args, server, fleet, scenario)
     for u, b in zip(urls, buses):
         u["mqtt"] = b.pub.url
@@ -198,7 +217,9 @@ def _serve(args, geo, loopback, p, scenario, spawn, fleet, wind, estimator, actu
     async def main():
         try:
             await server.start()
-        except OSError as exc:
+        except OSError as exc:  # taken since _check_ports: name the port if it still is
+            server.close()
+            _check_ports(args)
             raise CliError(f"cannot listen on {args.bind}: {exc.strerror}") from None
         loop = asyncio.get_running_loop()
         for sig in (signal.SIGINT, signal.SIGTERM):

@@ -64,6 +64,38 @@ def instances_held(first: int, count: int = 1, wait_s: float = 0.0):
             fh.close()
 
 
+@contextmanager
+def free_instances(count: int = 1, usable=lambda i: True, base: int = INSTANCE_BASE,
+                   slots: int = INSTANCE_SLOTS):
+    """Hold the lowest ``count`` consecutive instance numbers within ``base ..
+    base + slots - 1`` that no process of this machine holds and for which ``usable(i)``
+    says yes (their ports are free), for as long as the context lasts; yields the first.
+    Taking them is atomic among ft-sitl processes: a number is chosen only while its lock is
+    held. Raises :class:`InstanceBusy` when no such run of numbers is free."""
+    for first in range(base, base + slots - count + 1):
+        held = []
+        for i in range(first, first + count):
+            fh = _try_lock(i)
+            if fh is None or not usable(i):
+                if fh is not None:
+                    fh.close()
+                break
+            held.append(fh)
+        if len(held) < count:
+            for fh in held:
+                fh.close()
+            continue
+        try:
+            yield first
+        finally:
+            for fh in held:
+                fh.close()
+        return
+    raise InstanceBusy(f"no {count} consecutive SITL instance numbers free in {base}.."
+                       f"{base + slots - 1} (each held by another ft-sitl process of this "
+                       f"machine or with a port taken)")
+
+
 class InstanceLock:
     """An exclusive instance number (ports 14580+i, 14540+i, 18570+i) among the processes
     of this machine, held with a lock file."""

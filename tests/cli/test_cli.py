@@ -222,6 +222,7 @@ BAD_NUMBERS = [
      "--connect-timeout: -1 must be more than 0"),
     (["navigate", "--algorithm", "straight", "--heading", "nan"],
      "--heading: nan is not a finite number"),
+    (["sitl", "--instance", "any"], "--instance: 'any' is neither an integer nor auto"),
 ]
 
 
