@@ -20,7 +20,7 @@ Run after changing a generator, the solvability search or the difficulty measure
 It measures the 70 configurations of seed 0 (``--seed``) for the largest platform's body
 under the current protocol's limits, through the same cache as ``ft-sitl scenarios list
 --difficulty`` (``--no-cache`` to measure afresh): about 1.5 minutes the first time on one
-core, seconds after; FlightBench's metrics take about 6 minutes more the first time (cached
+core, seconds after; FlightBench's metrics take about 9 minutes more the first time (cached
 in ``$XDG_CACHE_HOME/ft-sitl/flightbench``). ``--no-images`` leaves the pictures alone;
 ``--check`` writes nothing and exits 1 when the docs differ from what it would write.
 """
