@@ -3,6 +3,7 @@ state on the MQTT bus and renders them in the bus's depth frames; a trial flown 
 MAVLink ends as `mover_collision` when one is driven into the vehicle's path."""
 
 import asyncio
+import json
 import subprocess
 import sys
 from pathlib import Path
@@ -13,11 +14,14 @@ import trimesh
 
 from ft_sitl.bus.client import BusClient
 from ft_sitl.missions.trial import TrialSpec, run_trial
-from ft_sitl.transport.mavlink_trial import run_trial_wire, worker_bus
+from ft_sitl.transport.lockstep import run_trial_lockstep
+from ft_sitl.transport.mavlink_trial import worker_bus
 
 from ..bus.conftest import Mosquitto
 
 pytestmark = pytest.mark.e2e  # (tests/lanes.py)
+#: the columns that measure wall time (and when the row was written)
+WALL_COLUMNS = ("wall_time_s", "planner_time_s", "finished_utc")
 
 AGILE = "0.98kg-EGO Planner DIY"
 FT_SITL = str(Path(sys.executable).parent / "ft-sitl")
@@ -115,14 +119,18 @@ def test_sitl_publishes_movers_and_its_depth_frames_see_them_move(tmp_path):
 def test_wire_trial_ends_as_mover_collision(tmp_path):
     """A ball waits 15 m up the start-goal line until navigation starts, then flies down
     it at 2 m/s at the start's altitude: the baseline navigator, flying the line, meets it
-    head on, in-process and over MAVLink (the SITL side's guard ends the trial there)."""
+    head on, in-process and over MAVLink in lockstep, with the same row (the SITL side's
+    guard ends the trial there)."""
     spec_file = _yard(tmp_path, "  - {shape: sphere, radius_m: 0.8, z_m: 1.5, "
                                 "points: [[15, 20], [15, 2]], speed_m_s: 2.0}\n")
     spec = TrialSpec(algorithm="straight", platform=AGILE, family="yard",
                      scenario_file=str(spec_file))
     inproc = run_trial(spec).row
     assert inproc["reason"] == "mover_collision", inproc["detail"]
-    row = run_trial_wire(spec, speed_factor=3.0, log_dir=tmp_path, **worker_bus(None)).row
+    row = run_trial_lockstep(spec, log_dir=tmp_path, **worker_bus(None)).row
+    # in lockstep the wire row is the in-process row but the wall times
+    assert {k: (v, row[k]) for k, v in inproc.items() if k not in WALL_COLUMNS
+            and json.dumps(v) != json.dumps(row[k])} == {}
     assert row["reason"] == "mover_collision", row["detail"]
     assert row["detail"].startswith("hit ball 1 (moving) at "), row["detail"]
     assert row["mover_count"] == 1 and row["nav_time_s"] > 0.5
