@@ -14,6 +14,6 @@ ROOT = Path(__file__).resolve().parents[1]
 def test_ruff_check_passes():
     ruff = shutil.which("ruff", path=str(Path(sys.executable).parent))
     assert ruff, "ruff is a test dependency: install with scripts/setup.sh --test"
-    proc = subprocess.run([ruff, "check", "ft_sitl", "ft_sitl_pytest", "tests"], cwd=ROOT, capture_output=True,
-                          text=True, timeout=120)
+    proc = subprocess.run([ruff, "check", "ft_sitl", "ft_sitl_pytest", "tests"], cwd=ROOT,
+                          capture_output=True, text=True, timeout=120)
     assert proc.returncode == 0, proc.stdout + proc.stderr
