@@ -30,9 +30,10 @@ The guide path
 
 Traversability obstruction, TO (lines 55-214)
     A corridor of balls ``B_0 .. B_n`` is laid along the guide path. A ball centred at c
-    has radius ``r(c) = min(d(c) - r_q, r_s)``: d the distance to the nearest obstacle,
-    r_q = :data:`drone_radius_m` 0.15 m (line 53), r_s = :data:`sensing_range_m` 4 m
-    (line 202). ``B_0`` sits at the start. From the current ball (p, r) the next is found
+    has radius ``r(c) = min(d(c) - r_q, r_s)``: d the distance to the nearest obstacle
+    (here also the floor, the ceiling or a side of the area: see below), r_q =
+    ``drone_radius_m`` 0.15 m (line 53), r_s = ``sensing_range_m`` 4 m (line 202).
+    ``B_0`` sits at the start. From the current ball (p, r) the next is found
     so:
 
     * the guide point g: a progress counter along the path (kept from ball to ball)
@@ -74,16 +75,16 @@ Angle over length, AOL (lines 269-288)
     that term never occurs. A straight path gives 0.
 
 What we chose where the source leaves it open, or could not be followed
-    * Obstacles are the scenario mesh (which holds the obstacles only): the floor, the
-      ceiling and the area's sides are not obstacles. FlightBench reads a point cloud of
-      its Unity scene, voxel-filtered at 0.15 m (line 13), and does not say whether its
-      ground is in it; its values suggest not: its forests are flown 2 m above the
-      ground (sst.yaml), where a ball touching the ground would have a radius of at most
-      1.85 m and TO could not fall below 1.08, yet forest-low's TO is 0.76.
-    * d is the exact distance to the mesh (python-fcl through
-      :class:`~ft_sitl.scenarios.collision.CollisionWorld`; negative inside a closed
-      obstacle, so such a candidate is never admissible), not the distance to the nearest
-      point of a 0.15 m point cloud.
+    * What bounds a ball. FlightBench reads a point cloud of its Unity scene,
+      voxel-filtered at 0.15 m (line 13), and does not say whether the ground is in it.
+      Here d is the exact distance (python-fcl through
+      :meth:`~ft_sitl.scenarios.collision.CollisionWorld.clearance`) to the scenario's
+      mesh, its floor, its ceiling and the sides of its area, all of which end a flight:
+      with the mesh alone (which holds the obstacles only) the balls escape through the
+      floor, where nothing limits them (forest-01's corridor wandered to z = -4 m). Inside
+      a closed obstacle d is negative, so no candidate there is admissible.
+    * VO sees the mesh only, as the navigators' depth camera does: the floor, ceiling and
+      sides are no obstacles in view.
     * VO's nearest surface point per ring is found by casting rays
       (:meth:`~ft_sitl.scenarios.camera.DepthCamera.cast_fans`, Embree) on a grid of
       ``view_ray_spacing_deg`` 0.5 degrees over the cone: a ring is star-shaped about the
