@@ -84,13 +84,13 @@ def sitl_arguments(options: dict, where: str) -> list[str]:
             if len(value) != 3:
                 raise OptionError(f"{where}: home: {value!r} must be (lat_deg, lon_deg, "
                                   f"alt_m)")
-            argv += [opt.flag, ",".join(_text("home", v) for v in value)]
+            argv.append(f"{opt.flag}={','.join(_text('home', v) for v in value)}")
         elif name == "platform_file" and isinstance(value, (tuple, list)):
-            for v in value:
-                argv += [opt.flag, os.fspath(v)]
+            argv += [f"{opt.flag}={os.fspath(v)}" for v in value]
         else:
-            argv += [opt.flag, _text(name, os.fspath(value) if isinstance(value, os.PathLike)
-                                     else value)]
+            # FLAG=VALUE: a value that starts with "-" (a southern latitude) stays a value
+            text = _text(name, os.fspath(value) if isinstance(value, os.PathLike) else value)
+            argv.append(f"{opt.flag}={text}")
     if options.get("instance") is None:
         argv += ["--instance", "auto"]
     if options.get("mqtt") not in (None, True, False):

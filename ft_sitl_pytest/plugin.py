@@ -144,15 +144,18 @@ def _options(request, fixture: str) -> dict:
 
 @contextmanager
 def _served(request, factory: SitlFactory, fixture: str, vehicles: int):
+    problem = None
     try:
         options = _options(request, fixture)
         options.setdefault("vehicles", vehicles)
         if fixture == "ft_sitl_vehicle" and options["vehicles"] != 1:
-            raise OptionError(f"ft_sitl_vehicle serves one vehicle, not vehicles="
+            raise OptionError(f"it serves one vehicle, not vehicles="
                               f"{options['vehicles']!r}: use ft_sitl_fleet")
         sitl = factory.serve(name=request.node.nodeid, **options)
     except (OptionError, SitlStartError) as exc:
-        pytest.fail(f"{fixture}: {exc}", pytrace=False)
+        problem = f"{fixture}: {exc}"
+    if problem is not None:  # (outside the except: the error alone, not a chain)
+        pytest.fail(problem, pytrace=False)
     request.node.stash.setdefault(_OWNED, []).append(sitl)
     try:
         yield sitl
