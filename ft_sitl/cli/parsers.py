@@ -149,6 +149,13 @@ def build_parser() -> argparse.ArgumentParser:
                            "18570+I (default 0; I + instances <= 1000); auto: the lowest "
                            "free run of numbers in 20..59 whose ports are free (--json "
                            "says which)")
+    sitl.add_argument("--autopilot", choices=("px4", "ardupilot"), default="px4",
+                      help="the face on the wire: px4 (PX4 SITL's UDP ports, default) or "
+                           "ardupilot (ArduCopter: TCP 5760+10*I for SERIAL0, 5762+10*I and "
+                           "5763+10*I, ArduCopter's modes and parameters; docs/mavlink.md)")
+    sitl.add_argument("--out", action="append", default=[], metavar="udp:HOST:PORT",
+                      help="with --autopilot ardupilot: also send to (and answer) this UDP "
+                           "target, as MAVProxy's --out (repeatable)")
     sitl.add_argument("--speed-factor", type=number("--speed-factor", minimum=0.01,
                                                     maximum=1000),
                       default=1.0,

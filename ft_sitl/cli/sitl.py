@@ -22,8 +22,14 @@ from ft_sitl.cli.common import (
     wind_option,
 )
 from ft_sitl.frames import PX4_SITL_HOME, GeoReference, enu_to_ned, yaw_enu_to_ned
+from ft_sitl.mavlink.ardupilot.server import (
+    ArduPilotServer,
+    parse_out,
+    tcp_port_free,
+    tcp_ports,
+)
 from ft_sitl.mavlink.instances import InstanceBusy, free_instances, instances_held
-from ft_sitl.mavlink.ports import instance_ports, taken_message, taken_ports
+from ft_sitl.mavlink.ports import describe_holder, instance_ports, taken_message, taken_ports
 from ft_sitl.mavlink.server import SitlServer, check_pacing
 from ft_sitl.physics.actuators import Actuators
 from ft_sitl.scenarios.io import scenario_from_spec
@@ -101,7 +107,7 @@ def cmd_sitl(args) -> int:
             if auto:  # the lowest free run whose ports are free too (no client lingering on
                 # 14540+i, no PX4 SITL or other program on the listen ports)
                 args.instance = held.enter_context(free_instances(
-                    args.instances, lambda i: not taken_ports(i, args.bind, client=True)))
+                    args.instances, lambda i: _ports_free(args, i)))
             else:
                 held.enter_context(instances_held(args.instance, args.instances))
         except InstanceBusy as exc:
@@ -110,8 +116,22 @@ def cmd_sitl(args) -> int:
         return _serve(args, *vehicles)
 
 
+def _ports_free(args, i: int) -> bool:
+    """Whether instance i's ports are free for the face asked for."""
+    if args.autopilot == "ardupilot":
+        return all(tcp_port_free(args.bind, p) for p in tcp_ports(i))
+    return not taken_ports(i, args.bind, client=True)
+
+
 def _check_ports(args) -> None:
     """A CliError naming each listen port another program holds, and who."""
+    if args.autopilot == "ardupilot":
+        for i in range(args.instance, args.instance + args.instances):
+            taken = [p for p in tcp_ports(i) if not tcp_port_free(args.bind, p)]
+            if taken:
+                raise CliError(f"cannot listen on {args.bind}: instance {i}'s TCP port "
+                               f"{taken[0]} is taken ({describe_holder(taken[0])})")
+        return
     for i in range(args.instance, args.instance + args.instances):
         taken = taken_ports(i, args.bind, client=False)
         if taken:
@@ -150,16 +170,24 @@ def _vehicles(args):
 
 def _serve(args, geo, loopback, p, scenario, spawn, fleet, wind, estimator, actuators) -> int:
     try:
-        server = SitlServer(fleet, geo, bind=args.bind, speed_factor=args.speed_factor,
-                            tlog=args.tlog, signing_key=args.signing_key,
-                            base_instance=args.instance, pace=args.pace,
-                            pace_span_s=args.pace_span)
+        kwargs = {}
+        if args.autopilot == "ardupilot":
+            kwargs["outs"] = [parse_out(o) for o in args.out]
+        elif args.out:
+            raise ValueError("--out: only with --autopilot ardupilot (the PX4 face sends to "
+                             "PX4 SITL's ports)")
+        server_class = ArduPilotServer if args.autopilot == "ardupilot" else SitlServer
+        server = server_class(fleet, geo, bind=args.bind, speed_factor=args.speed_factor,
+                              tlog=args.tlog, signing_key=args.signing_key,
+                              base_instance=args.instance, pace=args.pace,
+                              pace_span_s=args.pace_span, **kwargs)
     except (ValueError, OSError) as exc:
         raise CliError(str(exc)) from None
     urls = server.urls()
     for k, u in enumerate(urls):
         u["instance"] = args.instance + k
-        u["ports"] = instance_ports(args.instance + k)
+        u["ports"] = {"serial": tcp_ports(args.instance + k)} if args.autopilot == \
+            "ardupilot" else instance_ports(args.instance + k)
     buses, broker = _sitl_bus(args, server, fleet, scenario)
     for u, b in zip(urls, buses):
         u["mqtt"] = b.pub.url
@@ -189,6 +217,11 @@ def _serve(args, geo, loopback, p, scenario, spawn, fleet, wind, estimator, actu
             print("estimator: " + ", ".join(f"{k} {v}" for k, v in estimator.items()),
                   flush=True)
         for u in urls:
+            if args.autopilot == "ardupilot":
+                outs = f"   out {', '.join(u['out'])}" if u["out"] else ""
+                print(f"  vehicle sysid {u['sysid']} (ArduCopter): SERIAL0 {u['serial'][0]}"
+                      f"   SERIAL1/2 {', '.join(u['serial'][1:])}{outs}", flush=True)
+                continue
             print(f"  vehicle sysid {u['sysid']}: MAVSDK {u['mavsdk']}   pymavlink "
                   f"{u['pymavlink']}   GCS {u['gcs']}", flush=True)
         if buses:

@@ -60,22 +60,33 @@ class VehicleAgent:
     ``n_links`` links whose stream rates start as ``link_modes`` says ("onboard" or
     "normal" per link) and ``logs`` to serve for log download and FTP."""
 
+    #: the pieces a personality's agent may replace (the ArduCopter face:
+    #: :mod:`ft_sitl.mavlink.ardupilot.agent`); each is built with the same arguments
+    vehicle_class = Vehicle
+    telemetry_class = Telemetry
+    streams_class = Streams
+    commands_class = Commands
+    parameters_class = Parameters
+    offboard_class = Offboard
+    receiver_class = Receiver
+
     def __init__(self, fleet: Fleet, index: int, geo: frames.GeoReference, n_links: int,
                  link_modes: list[str], logs: list[files.LogFile] | None = None):
-        v = Vehicle(fleet, index, geo)
+        v = self.vehicle_class(fleet, index, geo)
+        self.vehicle = v
         self.fleet, self.i, self.sysid, self.geo = fleet, index, v.sysid, geo
         self.cmd: cm.Commander = v.cmd
         self.params, self.origin, self.n_links = v.params, v.origin, n_links
-        self.telemetry = Telemetry(v)
-        self.streams = Streams(self.telemetry, link_modes)
+        self.telemetry = self.telemetry_class(v)
+        self.streams = self.streams_class(self.telemetry, link_modes)
         self.rates = self.streams.rates
         self.next_due = self.streams.next_due
         self._events = Events(self.telemetry)
-        self.commands = Commands(self.telemetry, self.streams)
+        self.commands = self.commands_class(self.telemetry, self.streams)
         self.mission = MissionProtocol(MissionItems(v), self.telemetry)
-        self.parameters = Parameters(v)
-        self.offboard = Offboard(v)
-        self.receiver = Receiver(v)
+        self.parameters = self.parameters_class(v)
+        self.offboard = self.offboard_class(v)
+        self.receiver = self.receiver_class(v)
         self.services = Services(Shell(self), n_links, self.parameters.file,
                                  list(logs or []), self._warn)
         self._handlers = self._dispatch_table()

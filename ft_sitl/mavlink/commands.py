@@ -46,7 +46,10 @@ class CommandArgs:
 
 
 class Commands:
-    """The commands one vehicle answers."""
+    """The commands one vehicle answers (:attr:`handlers`, by MAV_CMD)."""
+
+    #: the handler of each MAV_CMD (the table below; a personality's subclass extends it)
+    handlers: dict = {}
 
     def __init__(self, telemetry: Telemetry, streams: Streams):
         self.telemetry = telemetry
@@ -62,7 +65,7 @@ class Commands:
         else:
             p += [m.param5, m.param6, m.param7]
         args = CommandArgs(p, is_int, getattr(m, "frame", 0), link, peer)
-        handler = HANDLERS.get(m.command)
+        handler = self.handlers.get(m.command)
         try:
             result, extra = handler(self, args) if handler is not None else \
                 (Result.UNSUPPORTED, [])
@@ -232,3 +235,4 @@ HANDLERS = {
     mav.MAV_CMD_PREFLIGHT_CALIBRATION: Commands._calibrate,
     mav.MAV_CMD_PREFLIGHT_REBOOT_SHUTDOWN: Commands._reboot,
 }
+Commands.handlers = HANDLERS

@@ -46,7 +46,7 @@ def _param_from_wire(name: str, value: float, ptype: int) -> float:
     return float(value)
 
 
-def _param_name(raw) -> str:
+def param_name(raw) -> str:
     if isinstance(raw, bytes):
         raw = raw.decode("ascii", "replace")
     return raw.split("\x00", 1)[0]
@@ -89,13 +89,13 @@ class Parameters:
                 return []
             name = PARAM_NAMES[m.param_index]
         else:
-            name = _param_name(m.param_id)
+            name = param_name(m.param_id)
             if name not in PARAMS:
                 return []
         return [Outgoing(self.value(name), link, peer)]
 
     def on_set(self, m, link, peer, wall_us):
-        name = _param_name(m.param_id)
+        name = param_name(m.param_id)
         if name not in PARAMS:
             self.v.cmd.text(cm.Severity.WARNING, f"Param {name[:16]} unknown: not set")
             return []

@@ -198,15 +198,9 @@ class SitlServer:
         self.links: list[Link] = []
         self.agents: list[VehicleAgent] = []
         for i in range(fleet.n):
-            k = base_instance + i
-            links = [
-                Link(i, 0, (bind, API_LISTEN_BASE + k), (remote_host, API_REMOTE_BASE + k),
-                     i + 1, self.secret),
-                Link(i, 1, (bind, GCS_LISTEN_BASE + k), (remote_host, GCS_REMOTE_PORT),
-                     i + 1, self.secret),
-            ]
+            links, agent = self._vehicle(i, base_instance + i, bind, remote_host, logs)
             self.links.extend(links)
-            self.agents.append(VehicleAgent(fleet, i, geo, 2, ["onboard", "normal"], logs))
+            self.agents.append(agent)
         self._stop = asyncio.Event()
         self.achieved_speed_factor = 0.0
         #: wall seconds of pace not made up after stalls (MAX_CATCH_UP_S), including the
@@ -224,6 +218,17 @@ class SitlServer:
         self.client_sim_us = fleet.time_us
         #: wall seconds the simulated clock stood waiting for a client (client pacing)
         self.held_s = 0.0
+
+    def _vehicle(self, i: int, k: int, bind: str, remote_host: str, logs: list) -> tuple:
+        """Vehicle i's two links and its agent as instance k: PX4 SITL's UDP ports and the
+        PX4 face (another personality overrides it: ft_sitl.mavlink.ardupilot.server)."""
+        links = [
+            Link(i, 0, (bind, API_LISTEN_BASE + k), (remote_host, API_REMOTE_BASE + k),
+                 i + 1, self.secret),
+            Link(i, 1, (bind, GCS_LISTEN_BASE + k), (remote_host, GCS_REMOTE_PORT),
+                 i + 1, self.secret),
+        ]
+        return links, VehicleAgent(self.fleet, i, self.geo, 2, ["onboard", "normal"], logs)
 
     def urls(self) -> list[dict]:
         out = []

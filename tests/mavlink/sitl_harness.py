@@ -25,7 +25,8 @@ def running_sitl(instances: int = 1, *args, **kwargs):
 
 @contextmanager
 def _running_sitl(instances: int = 1, speed_factor: float = 1.0, params=None, scenario=None,
-                  estimator=None, platform: str = PLATFORM, **kwargs):
+                  estimator=None, platform: str = PLATFORM, server_class=SitlServer,
+                  **kwargs):
     p = get_platform(platform)
     if scenario is None:
         spawn, yaw = [[0.0, 2.0 * i, 0.0] for i in range(instances)], None
@@ -36,8 +37,8 @@ def _running_sitl(instances: int = 1, speed_factor: float = 1.0, params=None, sc
                   scenario=scenario)
     for i in range(instances):  # (None: the truth, as without)
         fleet.sim.set_estimator(i, estimator, seed=i)
-    server = SitlServer(fleet, frames.GeoReference(*frames.PX4_SITL_HOME),
-                        speed_factor=speed_factor, **kwargs)
+    server = server_class(fleet, frames.GeoReference(*frames.PX4_SITL_HOME),
+                          speed_factor=speed_factor, **kwargs)
     loop = asyncio.new_event_loop()
     started = threading.Event()
     serving = threading.Event()

@@ -1,0 +1,95 @@
+"""The commands ArduCopter answers differently from PX4: arming (its force value, its
+"PreArm:" and "Arm:" texts, FAILED), DO_SET_MODE with ArduCopter's mode numbers,
+NAV_TAKEOFF in GUIDED (param7 above home), NAV_LAND / NAV_RETURN_TO_LAUNCH / MISSION_START
+as mode changes (ArduCopter/GCS_Mavlink.cpp). The rest is the PX4 face's table."""
+
+from __future__ import annotations
+
+import math
+
+from pymavlink.dialects.v20 import ardupilotmega as apm
+
+from ft_sitl.autopilot import commander as cm
+from ft_sitl.autopilot.arming import arming_denial
+from ft_sitl.autopilot.commander import Result
+from ft_sitl.mavlink.ardupilot import modes
+from ft_sitl.mavlink.commands import HANDLERS, CommandArgs, Commands
+
+#: ArduPilot's param2 values that force arming (AP_Arming) and disarming in flight
+FORCE_ARM, FORCE_DISARM = 2989, 21196
+
+
+def prearm_text(denial: str) -> str:
+    """A PX4-worded arming denial as ArduCopter words a failed pre-arm check."""
+    reason = denial.split(": ", 1)[-1]
+    return f"PreArm: {reason[:1].upper()}{reason[1:]}"
+
+
+class ArduCopterCommands(Commands):
+    """The commands one vehicle answers, ArduCopter's way."""
+
+    def _arm_disarm(self, a: CommandArgs):
+        c, p = self.v.cmd, a.p
+        if not math.isfinite(p[0]):
+            return Result.FAILED, []
+        if p[0] < 0.5:
+            force = math.isfinite(p[1]) and round(p[1]) == FORCE_DISARM
+            result = c.disarm(force)
+            return (Result.ACCEPTED if result == Result.ACCEPTED else Result.FAILED), []
+        if c.armed:
+            return Result.ACCEPTED, []
+        force = math.isfinite(p[1]) and round(p[1]) == FORCE_ARM
+        if not force:
+            if self.v.modes.number not in modes.ARMABLE:
+                c.text(cm.Severity.CRITICAL, "Arm: Mode not armable")
+                return Result.FAILED, []
+            denial = arming_denial(c)
+            if denial:
+                c.text(cm.Severity.CRITICAL, prearm_text(denial))
+                return Result.FAILED, []
+        c.arm(force=True)  # (checked above, ArduCopter's way)
+        return Result.ACCEPTED, []
+
+    def _set_mode(self, a: CommandArgs):
+        p = a.p
+        if not (math.isfinite(p[0]) and math.isfinite(p[1])):
+            return Result.FAILED, []
+        if not int(p[0]) & apm.MAV_MODE_FLAG_CUSTOM_MODE_ENABLED:
+            return Result.UNSUPPORTED, []
+        return self.v.modes.set(int(p[1])), []
+
+    def _takeoff(self, a: CommandArgs):
+        """MAV_CMD_NAV_TAKEOFF: in GUIDED, armed and landed, climb to param7 metres above
+        home (Mode::do_user_takeoff); FAILED otherwise."""
+        c, alt = self.v.cmd, a.p[6]
+        if not self.v.modes.in_guided or not c.armed or \
+                c.landed_state != cm.LandedState.ON_GROUND or not math.isfinite(alt) or \
+                c.home[2] + alt <= c.position_now()[2]:
+            return Result.FAILED, []
+        c.takeoff(c.home[2] + alt)
+        return Result.ACCEPTED, []
+
+    def _land(self, a: CommandArgs):
+        return self.v.modes.set(modes.LAND), []
+
+    def _return_to_launch(self, a: CommandArgs):
+        return self.v.modes.set(modes.RTL), []
+
+    def _mission_start(self, a: CommandArgs):
+        c, p = self.v.cmd, a.p
+        if not c.mission:
+            return Result.FAILED, []
+        if math.isfinite(p[0]) and p[0] >= 0:
+            c.set_mission_current(int(p[0]))
+        return self.v.modes.set(modes.AUTO), []
+
+
+ArduCopterCommands.handlers = {
+    **HANDLERS,
+    apm.MAV_CMD_COMPONENT_ARM_DISARM: ArduCopterCommands._arm_disarm,
+    apm.MAV_CMD_DO_SET_MODE: ArduCopterCommands._set_mode,
+    apm.MAV_CMD_NAV_TAKEOFF: ArduCopterCommands._takeoff,
+    apm.MAV_CMD_NAV_LAND: ArduCopterCommands._land,
+    apm.MAV_CMD_NAV_RETURN_TO_LAUNCH: ArduCopterCommands._return_to_launch,
+    apm.MAV_CMD_MISSION_START: ArduCopterCommands._mission_start,
+}

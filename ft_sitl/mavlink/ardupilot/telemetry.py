@@ -1,0 +1,57 @@
+"""HEARTBEAT and AUTOPILOT_VERSION as ArduCopter fills them; every other message is the
+PX4 face's (:class:`~ft_sitl.mavlink.telemetry.Telemetry`): the same state, the same
+encoding."""
+
+from __future__ import annotations
+
+from pymavlink.dialects.v20 import ardupilotmega as apm
+
+from ft_sitl.mavlink.ardupilot.modes import GUIDED_FLAG_MODES
+from ft_sitl.mavlink.telemetry import Telemetry
+
+#: what ArduPilot advertises (GCS_MAVLINK::capabilities): parameters C-cast, not bytewise
+CAPABILITIES = (
+    apm.MAV_PROTOCOL_CAPABILITY_MISSION_FLOAT
+    | apm.MAV_PROTOCOL_CAPABILITY_PARAM_FLOAT
+    | apm.MAV_PROTOCOL_CAPABILITY_MISSION_INT
+    | apm.MAV_PROTOCOL_CAPABILITY_COMMAND_INT
+    | apm.MAV_PROTOCOL_CAPABILITY_PARAM_ENCODE_C_CAST
+    | apm.MAV_PROTOCOL_CAPABILITY_SET_POSITION_TARGET_LOCAL_NED
+    | apm.MAV_PROTOCOL_CAPABILITY_SET_POSITION_TARGET_GLOBAL_INT
+    | apm.MAV_PROTOCOL_CAPABILITY_SET_ATTITUDE_TARGET
+    | apm.MAV_PROTOCOL_CAPABILITY_FLIGHT_TERMINATION
+    | apm.MAV_PROTOCOL_CAPABILITY_MAVLINK2
+)
+#: the ArduCopter release this face answers as (flight_sw_version 4.5.7, official)
+VERSION = (4, 5, 7)
+
+
+class ArduCopterTelemetry(Telemetry):
+    """One vehicle's telemetry with ArduCopter's identity."""
+
+    def heartbeat(self) -> apm.MAVLink_heartbeat_message:
+        c = self.v.cmd
+        mode = self.v.modes.number
+        # GCS_MAVLINK_Copter::base_mode: stabilise and manual input always, guided in the
+        # navigating modes, armed, custom mode
+        base = (apm.MAV_MODE_FLAG_STABILIZE_ENABLED | apm.MAV_MODE_FLAG_MANUAL_INPUT_ENABLED
+                | apm.MAV_MODE_FLAG_CUSTOM_MODE_ENABLED)
+        if mode in GUIDED_FLAG_MODES:
+            base |= apm.MAV_MODE_FLAG_GUIDED_ENABLED
+        if c.armed:
+            base |= apm.MAV_MODE_FLAG_SAFETY_ARMED
+        if c.terminated:
+            status = apm.MAV_STATE_EMERGENCY
+        elif c.armed:
+            status = apm.MAV_STATE_ACTIVE
+        else:
+            status = apm.MAV_STATE_STANDBY
+        return apm.MAVLink_heartbeat_message(apm.MAV_TYPE_QUADROTOR,
+                                             apm.MAV_AUTOPILOT_ARDUPILOTMEGA, base, mode,
+                                             status, 3)
+
+    def autopilot_version(self) -> apm.MAVLink_autopilot_version_message:
+        major, minor, patch = VERSION
+        return apm.MAVLink_autopilot_version_message(
+            CAPABILITIES, (major << 24) | (minor << 16) | (patch << 8) | 255, 0, 0, 0,
+            [0] * 8, [0] * 8, [0] * 8, 0, 0, 0x46540000 + self.v.sysid, [0] * 18)
