@@ -55,6 +55,8 @@ OPTIONS: dict[str, Option] = {
 
 #: the arguments every served vehicle process gets from the plugin (not options)
 FIXED_FLAGS = ("--json", "--tlog", "--no-mqtt")
+#: arguments the plugin cannot serve with: its readiness probe sends unsigned MAVLink
+UNSUPPORTED_FLAGS = {"--signing-key": "the plugin's readiness probe is unsigned"}
 
 
 def check_names(options: dict, where: str) -> None:
@@ -101,8 +103,12 @@ def sitl_arguments(options: dict, where: str) -> list[str]:
     if isinstance(extra, str) or not all(isinstance(a, str) for a in extra):
         raise OptionError(f"{where}: args: {extra!r} must be a list of strings")
     for a in extra:
-        if a.split("=", 1)[0] in FIXED_FLAGS:
+        flag = a.split("=", 1)[0]
+        if flag in FIXED_FLAGS:
             raise OptionError(f"{where}: args: {a} is set by the plugin")
+        if flag in UNSUPPORTED_FLAGS:
+            raise OptionError(f"{where}: args: {flag} is not supported "
+                              f"({UNSUPPORTED_FLAGS[flag]})")
     return argv + list(extra)
 
 
