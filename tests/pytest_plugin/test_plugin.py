@@ -78,6 +78,8 @@ def test_a_failing_test_gets_its_tlog_and_trajectory_plot(pytester):
 
 
 OPTIONS = '''
+import time
+
 import pytest
 from pymavlink import mavutil
 
@@ -108,6 +110,30 @@ def test_fleet(ft_sitl_fleet):
         assert v.mavsdk_url == f"udpin://0.0.0.0:{v.ports.client}"
         assert first(v.pymavlink_url, "HEARTBEAT").get_srcSystem() == v.sysid
 
+@pytest.mark.ft_sitl(pace="client", pace_span=0.05)
+def test_client_paced(ft_sitl_vehicle):
+    # the clock runs at most 50 ms past a client's last message: after one heartbeat, a
+    # wall second of telemetry spans at most that (wall pacing would give about 1 s)
+    link = mavutil.mavlink_connection(ft_sitl_vehicle.pymavlink_url, source_system=245,
+                                      source_component=190)
+    try:
+        assert link.wait_heartbeat(timeout=120) is not None
+        link.mav.heartbeat_send(6, 8, 0, 0, 0)
+        times = []
+        end = time.monotonic() + 1.0
+        while time.monotonic() < end:
+            m = link.recv_match(type="ATTITUDE", blocking=True, timeout=0.2)
+            if m is not None:
+                times.append(m.time_boot_ms)
+    finally:
+        link.close()
+    assert times, "the clock did not move after the message"
+    assert max(times) - min(times) <= 50 + 4 + 10, times  # span + a chunk + one period
+
+@pytest.mark.ft_sitl(pace_span=0.1)
+def test_span_without_client_pacing(ft_sitl_vehicle):
+    pass
+
 @pytest.mark.ft_sitl(speed_fctor=2)
 def test_misspelt(ft_sitl_vehicle):
     pass
@@ -127,7 +153,7 @@ def test_options_reach_the_vehicles_and_bad_ones_are_one_line_errors(pytester, m
     pytester.makepyfile(test_options=OPTIONS)
     monkeypatch.setenv("COLUMNS", "400")  # the summary's lines whole
     result = pytester.runpytest_subprocess("-p", "no:cacheprovider", "-rE")
-    result.assert_outcomes(passed=3, errors=3)
+    result.assert_outcomes(passed=4, errors=4)
     out = result.stdout.str()
     assert ("ERROR test_options.py::test_misspelt - Failed: ft_sitl_vehicle: ft-sitl vehicles "
             "'test_options.py::test_misspelt': unknown option 'speed_fctor' (options: "
@@ -138,6 +164,8 @@ def test_options_reach_the_vehicles_and_bad_ones_are_one_line_errors(pytester, m
         "sitl exited with status 2 before serving:*",
         "ft-sitl: error: --speed-factor: 0 must be within 0.01..1000",
     ])
+    assert ("ft-sitl: error: --pace-span: 0.1 is only for --pace client (wall pacing has no "
+            "span)") in out
     assert ("ERROR test_options.py::test_one_is_one - Failed: ft_sitl_vehicle: it serves "
             "one vehicle, not vehicles=2: use ft_sitl_fleet") in out
     assert "During handling" not in out
