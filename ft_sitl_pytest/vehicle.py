@@ -132,8 +132,15 @@ class Sitl:
         self.stop()
 
     def replay_command(self) -> str:
-        """The command line that serves the same vehicles by hand (a shell line)."""
-        return shlex.join(["ft-sitl", *self.command[3:]])
+        """The command line that serves the same vehicles by hand (a shell line), without
+        the plugin's --json and --tlog (which would append to this flight's log)."""
+        args, rest = [], iter(self.command[3:])
+        for a in rest:
+            if a == "--tlog":
+                next(rest, None)
+            elif a != "--json":
+                args.append(a)
+        return shlex.join(["ft-sitl", *args])
 
 
 def log_tail(path: Path, n: int = LOG_TAIL_LINES) -> str:

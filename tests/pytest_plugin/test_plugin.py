@@ -67,6 +67,8 @@ def test_a_failing_test_gets_its_tlog_and_trajectory_plot(pytester):
     assert "achieved speed factor" in log.read_text()
     assert any(ln.strip().startswith("vehicle sysid 1: ") and "positions over" in ln
                for ln in section), section
+    # the command that serves the same vehicle by hand, without the plugin's own options
+    assert "  serve again:     ft-sitl sitl --instances=1 --instance auto --no-mqtt" in section
     # the passing test's files are not kept
     assert sorted(p.name for p in logs.iterdir()) == [tlog.parent.name]
     # JUnit XML (what CI services show) carries the paths as the test case's properties
