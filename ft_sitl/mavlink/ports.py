@@ -44,10 +44,15 @@ def udp_port_free(host: str, port: int) -> bool:
     return True
 
 
+#: the /proc/net tables searched for a port's sockets: UDP (the PX4 face) and TCP (the
+#: ArduCopter face's serial ports); a number is rarely held in both by different programs
+TABLES = ("udp", "udp6", "tcp", "tcp6")
+
+
 def _socket_inodes(port: int, proc: Path) -> set[str]:
-    """The inodes of the UDP sockets bound to ``port`` (any address), from /proc/net."""
+    """The inodes of the UDP and TCP sockets on local ``port`` (any address)."""
     inodes = set()
-    for table in ("udp", "udp6"):
+    for table in TABLES:
         try:
             lines = (proc / "net" / table).read_text().splitlines()[1:]
         except OSError:
@@ -61,8 +66,8 @@ def _socket_inodes(port: int, proc: Path) -> set[str]:
 
 
 def port_holders(port: int, proc: Path = PROC) -> list[str] | None:
-    """The processes holding UDP ``port``, as ``pid N (command line)``: [] when the socket's
-    owner is not visible to this user, None where there is no /proc (not Linux)."""
+    """The processes holding ``port`` (UDP or TCP), as ``pid N (command line)``: [] when the
+    socket's owner is not visible to this user, None where there is no /proc (not Linux)."""
     if not (proc / "net" / "udp").exists():
         return None
     inodes = _socket_inodes(port, proc)
@@ -92,7 +97,7 @@ def port_holders(port: int, proc: Path = PROC) -> list[str] | None:
 
 
 def describe_holder(port: int) -> str:
-    """Who holds UDP ``port``, for an error message."""
+    """Who holds ``port`` (UDP or TCP), for an error message."""
     holders = port_holders(port)
     if holders is None:
         return "held by another program (this system does not say which)"

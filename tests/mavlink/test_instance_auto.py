@@ -65,6 +65,15 @@ def test_a_taken_port_names_its_holder():
                                f"{os.getpid()} ("), lines
 
 
+@pytest.mark.e2e
+def test_the_holder_of_a_tcp_port_is_named_too():
+    with socket.socket(socket.AF_INET, socket.SOCK_STREAM) as s:
+        s.bind(("127.0.0.1", 0))
+        s.listen()
+        holders = port_holders(s.getsockname()[1])
+    assert holders is not None and any(h.startswith(f"pid {os.getpid()} (") for h in holders)
+
+
 def _start_auto(*args):
     return subprocess.Popen([sys.executable, "-m", "ft_sitl", "sitl", "--instance", "auto",
                              "--json", "--no-mqtt", *args], stdout=subprocess.PIPE,
