@@ -14,12 +14,17 @@ import numpy as np
 import pytest
 
 from ft_sitl.bus import BusClient, BusPublisher, MoverState, MoverStates, TlsOptions
+from ft_sitl.bus.tick import Tick
 
 from .busutil import DEADLINE_S, receive_until, telemetry, wait_until
 
 MOVER = {"name": "box 2", "shape": "box", "p_world_m": (4.5, -2.0, 0.8), "heading_rad": 1.25,
          "v_world_m_s": (0.5, 1.5, 0.0), "length_m": 3.0, "width_m": 1.5, "height_m": 1.6}
-ALL_KINDS = ("telemetry", "events", "depth", "points", "movers", "status")
+ALL_KINDS = ("telemetry", "events", "depth", "points", "movers", "status", "tick")
+#: a lockstep tick with the kinds of fields an observation carries
+TICK = Tick(7, "step", 2_500_000, {"yaw": 0.1 + 0.2, "has_depth": 1},
+            {"position": np.array([1.0 / 3.0, -2.5, 1.5e-300]),
+             "depth": np.arange(12, dtype=np.float32).reshape(3, 4)})
 
 
 @pytest.fixture
@@ -47,15 +52,16 @@ def test_round_trip_every_kind(broker_url, vehicle, depth_sample):
                 assert pub.publish_depth(frame, config)
                 assert pub.publish_points(frame, config, "body")
                 assert pub.publish_movers(MoverStates(1_300_000, [MOVER]))
+                assert pub.publish_tick(TICK)
                 got = {k: [] for k in ALL_KINDS}
 
                 def complete(msg):
                     got[msg.kind].append(msg)
                     return (len(got["telemetry"]) == 5 and got["events"] and got["depth"]
-                            and got["points"] and got["movers"])
+                            and got["points"] and got["movers"] and got["tick"])
 
                 await receive_until(client, complete, "5 telemetry, 1 event, 1 depth frame, "
-                                                      "1 point cloud, 1 movers state")
+                                                      "1 point cloud, 1 movers state, 1 tick")
                 return samples, got
 
         samples, got = asyncio.run(scenario())
@@ -75,9 +81,17 @@ def test_round_trip_every_kind(broker_url, vehicle, depth_sample):
     np.testing.assert_allclose(points.points, frame.points_body, rtol=1e-6, atol=1e-5)
     movers = got["movers"][0].data
     assert movers.time_usec == 1_300_000 and movers.movers == (MoverState(**MOVER),)
-    assert stats.sent == {"events": 1, "telemetry": 5, "movers": 1, "depth": 1, "points": 1}
+    tick = got["tick"][0].data  # exactly: the lockstep observation's bits
+    assert (tick.seq, tick.phase, tick.time_usec, tick.scalars) == (
+        TICK.seq, TICK.phase, TICK.time_usec, TICK.scalars)
+    assert tick.arrays.keys() == TICK.arrays.keys()
+    for name, a in TICK.arrays.items():
+        assert tick.arrays[name].dtype == a.dtype
+        np.testing.assert_array_equal(tick.arrays[name], a)
+    assert stats.sent == {"events": 1, "telemetry": 5, "movers": 1, "depth": 1, "points": 1,
+                          "tick": 1}
     assert stats.dropped == {"events": 0, "telemetry": 0, "movers": 0, "depth": 0,
-                             "points": 0}
+                             "points": 0, "tick": 0}
     assert stats.connects == 1 and stats.reconnects == 0 and stats.last_error is None
 
 

@@ -6,6 +6,7 @@ named by file, entry, key and range."""
 
 import json
 import math
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
@@ -100,8 +101,10 @@ def test_every_trial_flies_at_every_level_with_one_seed(yard):
 
 
 def test_campaigns_without_the_axis_keep_their_trial_ids():
-    # ids of the presets as they were before the axis existed (computed at bd3250f)
-    quick = load_campaign("quick").trial_specs()
+    # ids of the presets as they were before the axis existed (computed at bd3250f, when
+    # protocol 9 was the newest: a spec names its version, so the ids of the same trials
+    # under a newer version differ by that field alone)
+    quick = [replace(s, protocol=9) for s in load_campaign("quick").trial_specs()]
     assert (quick[0].trial_id, quick[-1].trial_id) == ("dff37a3b94334a07",
                                                        "b440e8f0c46437fe")
     assert all(s.aggressiveness is None and "aggressiveness" not in s.to_dict()
