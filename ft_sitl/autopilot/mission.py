@@ -31,6 +31,7 @@ CMD_NAV_RETURN_TO_LAUNCH = 20
 CMD_NAV_LAND = 21
 CMD_NAV_TAKEOFF = 22
 CMD_NAV_DELAY = 93
+CMD_DO_JUMP = 177
 CMD_DO_CHANGE_SPEED = 178
 
 
@@ -56,6 +57,9 @@ class MissionItem:
     yaw_rad: float = math.nan
     speed_m_s: float = math.nan
     autocontinue: bool = True
+    #: DO_JUMP: the index (in this list) to jump to, and how often (-1: for ever)
+    jump_to: int = -1
+    repeat: int = 0
 
 
 class MissionExecutor:
@@ -68,12 +72,15 @@ class MissionExecutor:
         self.item_hold_until: int | None = None
         #: a mission started on the ground climbs here first (None: no climb pending)
         self.takeoff: np.ndarray | None = None
+        #: the jumps each DO_JUMP item (by index) has made since the mission was loaded
+        self.jumps: dict[int, int] = {}
 
     def load(self, items: list[MissionItem]) -> None:
         """A new mission replaces the old one; an empty one in AUTO.MISSION holds."""
         c = self.cmdr
         c.mission = list(items)
         self.takeoff = None
+        self.jumps = {}
         c.mission_seq = 0
         c.mission_state = MissionState.NOT_STARTED if items else MissionState.NO_MISSION
         self.item_started = False
@@ -136,6 +143,15 @@ class MissionExecutor:
             c.change_speed(item.speed_m_s)
             done = True
             sp = c.last_setpoint
+        elif item.command == CMD_DO_JUMP and 0 <= item.jump_to < len(c.mission) and \
+                (item.repeat < 0 or self.jumps.get(c.mission_seq, 0) < item.repeat):
+            # (a jump out of range, or one whose repeats are used up, is skipped below)
+            self.jumps[c.mission_seq] = self.jumps.get(c.mission_seq, 0) + 1
+            c.mission_seq = item.jump_to
+            self.item_started = False
+            self.item_hold_until = None
+            last = c.last_setpoint
+            return last if last.kind != 0 else Setpoint.position(s.position, yaw=s.yaw)
         elif item.command == CMD_NAV_TAKEOFF:
             if s.position[2] >= nav.target[2] - 0.2 and not s.on_ground:
                 done = True

@@ -69,6 +69,8 @@ class VehicleAgent:
     parameters_class = Parameters
     offboard_class = Offboard
     receiver_class = Receiver
+    mission_class = MissionProtocol
+    mission_items_class = MissionItems
 
     def __init__(self, fleet: Fleet, index: int, geo: frames.GeoReference, n_links: int,
                  link_modes: list[str], logs: list[files.LogFile] | None = None):
@@ -83,7 +85,7 @@ class VehicleAgent:
         self.next_due = self.streams.next_due
         self._events = Events(self.telemetry)
         self.commands = self.commands_class(self.telemetry, self.streams)
-        self.mission = MissionProtocol(MissionItems(v), self.telemetry)
+        self.mission = self.mission_class(self.mission_items_class(v), self.telemetry)
         self.parameters = self.parameters_class(v)
         self.offboard = self.offboard_class(v)
         self.receiver = self.receiver_class(v)

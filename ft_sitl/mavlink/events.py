@@ -57,7 +57,7 @@ class Events:
         out = self.texts()
         reached = list(self.v.cmd.reached)
         for seq in reached[self._reached_sent:]:
-            out.append(Outgoing(mav.MAVLink_mission_item_reached_message(seq)))
+            out.append(Outgoing(self.telemetry.item_reached(seq)))
         self._reached_sent = len(reached)
         mc = self.telemetry.mission_current()
         key = (mc.seq, mc.total, mc.mission_state, mc.mission_mode)

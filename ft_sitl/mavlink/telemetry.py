@@ -144,6 +144,10 @@ class Telemetry:
             float(ned[0]), float(ned[1]), float(ned[2]), [1.0, 0.0, 0.0, 0.0], 0.0, 0.0, 0.0,
             self.v.fleet.time_us)
 
+    def item_reached(self, seq: int) -> mav.MAVLink_mission_item_reached_message:
+        """MISSION_ITEM_REACHED for the commander's mission item ``seq``."""
+        return mav.MAVLink_mission_item_reached_message(seq)
+
     def mission_current(self) -> mav.MAVLink_mission_current_message:
         c = self.v.cmd
         n = len(c.mission)

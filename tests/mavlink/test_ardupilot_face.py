@@ -115,3 +115,105 @@ def test_parameters_by_arducopter_names_honoured_and_refused():
             _wait(conn, lambda m: "[1000, 8000] cdeg" in m.text, 10.0, type="STATUSTEXT")
         finally:
             conn.close()
+
+
+def _upload(conn, loader) -> int:
+    """The mission protocol's upload as a ground station drives it: MISSION_COUNT, each
+    requested item from the loader, the vehicle's MISSION_ACK (its result)."""
+    conn.waypoint_count_send(loader.count())
+    while True:
+        m = _wait(conn, lambda m: True, 10.0,
+                  type=["MISSION_REQUEST", "MISSION_REQUEST_INT", "MISSION_ACK"])
+        if m.get_type() == "MISSION_ACK":
+            return m.type
+        w = loader.wp(m.seq)
+        w.target_system, w.target_component = conn.target_system, conn.target_component
+        conn.mav.send(w)
+
+
+def test_auto_mission_with_home_at_zero_flies_to_the_land_and_disarms():
+    """A mission built with pymavlink's MAVWPLoader (item 0 a placeholder for home):
+    TAKEOFF, DO_CHANGE_SPEED, a waypoint with a delay, LOITER_TIME, DO_JUMP back once,
+    LAND; armed in GUIDED, flown in AUTO; reached items and MISSION_CURRENT in ArduPilot's
+    numbering, home read back as item 0."""
+    from pymavlink import mavwp
+
+    mavutil.set_dialect("ardupilotmega")
+    mav = mavutil.mavlink
+    with free_instances(1, _free) as k, \
+            _running_sitl(1, speed_factor=4.0, server_class=ArduPilotServer,
+                          base_instance=k) as server:
+        conn = mavutil.mavlink_connection(f"tcp:127.0.0.1:{tcp_ports(k)[0]}",
+                                          source_system=250)
+        try:
+            conn.wait_heartbeat(timeout=30)
+            conn.mav.request_data_stream_send(conn.target_system, conn.target_component,
+                                              mav.MAV_DATA_STREAM_ALL, 10, 1)
+            home = _wait(conn, lambda m: True, 10.0, type="GLOBAL_POSITION_INT")
+            lat0, lon0 = home.lat * 1e-7, home.lon * 1e-7
+            north, east = 1 / 111320.0, 1 / (111320.0 * 0.9)  # (deg per m, roughly)
+            rel = mav.MAV_FRAME_GLOBAL_RELATIVE_ALT
+
+            def item(seq, command, p1=0, p2=0, lat=0.0, lon=0.0, alt=0.0, frame=rel):
+                return mav.MAVLink_mission_item_message(
+                    conn.target_system, conn.target_component, seq, frame, command, 0, 1,
+                    p1, p2, 0, 0, lat, lon, alt)
+
+            loader = mavwp.MAVWPLoader(target_system=conn.target_system,
+                                       target_component=conn.target_component)
+            for w in (item(0, mav.MAV_CMD_NAV_WAYPOINT, lat=lat0, lon=lon0,
+                           frame=mav.MAV_FRAME_GLOBAL),
+                      item(1, mav.MAV_CMD_NAV_TAKEOFF, alt=10),
+                      item(2, mav.MAV_CMD_DO_CHANGE_SPEED, 1, 8),
+                      item(3, mav.MAV_CMD_NAV_WAYPOINT, 1, lat=lat0 + 25 * north, lon=lon0,
+                           alt=10),
+                      item(4, mav.MAV_CMD_NAV_LOITER_TIME, 2, lat=lat0 + 25 * north,
+                           lon=lon0 + 20 * east, alt=12),
+                      item(5, mav.MAV_CMD_DO_JUMP, 3, 1),
+                      item(6, mav.MAV_CMD_NAV_LAND, lat=lat0, lon=lon0 + 20 * east)):
+                loader.add(w)
+            assert _upload(conn, loader) == mav.MAV_MISSION_ACCEPTED
+            assert len(server.fleet.commanders[0].mission) == 6  # (home is not flown)
+
+            # read back: item 0 is home as the vehicle holds it, the rest as uploaded
+            conn.waypoint_request_list_send()
+            assert _wait(conn, lambda m: True, 10.0, type="MISSION_COUNT").count == 7
+            for seq in (0, 5):
+                conn.waypoint_request_send(seq)
+                m = _wait(conn, lambda m, seq=seq: m.seq == seq, 10.0,
+                          type=["MISSION_ITEM", "MISSION_ITEM_INT"])
+                if seq == 0:
+                    x = m.x if m.get_type() == "MISSION_ITEM" else m.x * 1e-7
+                    assert abs(x - lat0) < 1e-6 and m.command == mav.MAV_CMD_NAV_WAYPOINT
+                else:
+                    assert m.command == mav.MAV_CMD_DO_JUMP and m.param1 == 3
+            conn.mav.mission_ack_send(conn.target_system, conn.target_component, 0)
+
+            conn.set_mode("GUIDED")
+            _wait(conn, lambda m: m.custom_mode == 4, 10.0, type="HEARTBEAT")
+            conn.arducopter_arm()
+            conn.motors_armed_wait()
+            conn.set_mode("AUTO")
+            _wait(conn, lambda m: m.custom_mode == 3, 10.0, type="HEARTBEAT")
+            reached = []
+            deadline = time.time() + 240
+            while time.time() < deadline:
+                m = conn.recv_match(type=["MISSION_ITEM_REACHED", "HEARTBEAT"],
+                                    blocking=True, timeout=1.0)
+                if m is None:
+                    continue
+                if m.get_type() == "MISSION_ITEM_REACHED":
+                    if not reached or reached[-1] != m.seq:
+                        reached.append(m.seq)
+                elif reached and not m.base_mode & mav.MAV_MODE_FLAG_SAFETY_ARMED:
+                    break
+            # DO_JUMP 3 once: 3 and 4 twice, then the jump is spent (5), then LAND (6)
+            assert reached == [1, 2, 3, 4, 3, 4, 5, 6], reached
+            m = _wait(conn, lambda m: True, 10.0, type="GLOBAL_POSITION_INT")
+            assert m.relative_alt < 300
+            assert abs((m.lon * 1e-7 - lon0) / east - 20) < 2.0  # landed at item 6
+            assert abs((m.lat * 1e-7 - lat0) / north) < 2.0
+            mc = _wait(conn, lambda m: True, 10.0, type="MISSION_CURRENT")
+            assert mc.seq == 6 and mc.total == 7
+        finally:
+            conn.close()

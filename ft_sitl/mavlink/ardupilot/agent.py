@@ -7,6 +7,7 @@ from ft_sitl import frames
 from ft_sitl.mavlink.agent import VehicleAgent
 from ft_sitl.mavlink.ardupilot.commands import ArduCopterCommands
 from ft_sitl.mavlink.ardupilot.guided import ArduCopterReceiver, GuidedTargets
+from ft_sitl.mavlink.ardupilot.mission import ArduCopterMission, ArduCopterMissionItems
 from ft_sitl.mavlink.ardupilot.modes import FlightModes
 from ft_sitl.mavlink.ardupilot.parameters import ArduCopterParameters
 from ft_sitl.mavlink.ardupilot.params import ApParamSet
@@ -36,6 +37,8 @@ class ArduCopterAgent(VehicleAgent):
     parameters_class = ArduCopterParameters
     offboard_class = GuidedTargets
     receiver_class = ArduCopterReceiver
+    mission_class = ArduCopterMission
+    mission_items_class = ArduCopterMissionItems
 
     def _dispatch_table(self) -> dict:
         table = super()._dispatch_table()

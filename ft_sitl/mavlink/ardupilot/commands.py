@@ -79,8 +79,8 @@ class ArduCopterCommands(Commands):
         c, p = self.v.cmd, a.p
         if not c.mission:
             return Result.FAILED, []
-        if math.isfinite(p[0]) and p[0] >= 0:
-            c.set_mission_current(int(p[0]))
+        if math.isfinite(p[0]) and p[0] >= 1:  # (ArduPilot's numbering: home is item 0)
+            c.set_mission_current(int(p[0]) - 1)
         return self.v.modes.set(modes.AUTO), []
 
 

@@ -55,3 +55,14 @@ class ArduCopterTelemetry(Telemetry):
         return apm.MAVLink_autopilot_version_message(
             CAPABILITIES, (major << 24) | (minor << 16) | (patch << 8) | 255, 0, 0, 0,
             [0] * 8, [0] * 8, [0] * 8, 0, 0, 0x46540000 + self.v.sysid, [0] * 18)
+
+    def item_reached(self, seq: int) -> apm.MAVLink_mission_item_reached_message:
+        return apm.MAVLink_mission_item_reached_message(seq + 1)  # (home is item 0)
+
+    def mission_current(self) -> apm.MAVLink_mission_current_message:
+        """MISSION_CURRENT in ArduPilot's numbering: home is item 0, so the commander's
+        item k is k + 1 and the total counts home."""
+        mc = super().mission_current()
+        n = len(self.v.cmd.mission)
+        return apm.MAVLink_mission_current_message(mc.seq + 1 if n else 0, n + 1 if n else 0,
+                                                   mc.mission_state, mc.mission_mode)

@@ -1,0 +1,70 @@
+"""The mission protocol as ArduCopter serves it: item 0 of the mission list is home.
+
+ArduPilot's mission (AP_Mission) keeps home at index 0, written by the vehicle: a
+download's item 0 is the home now, and an upload's item 0 is a placeholder the vehicle
+does not fly. Items 1..n are the commander's mission 0..n-1, so every sequence number on
+the wire (MISSION_CURRENT, MISSION_ITEM_REACHED, MISSION_SET_CURRENT, MISSION_START's
+first item, DO_JUMP's target) is the commander's plus one. ArduCopter's commands map onto
+the executor's (:mod:`ft_sitl.autopilot.mission`): NAV_LOITER_TIME is a waypoint held
+param1 seconds, DO_JUMP jumps param2 times (-1: for ever). Fences and rally points are
+the PX4 face's lists, unchanged.
+"""
+
+from __future__ import annotations
+
+import math
+
+from pymavlink.dialects.v20 import ardupilotmega as apm
+
+from ft_sitl.autopilot import commander as cm
+from ft_sitl.autopilot.commander import MissionItem, Result
+from ft_sitl.autopilot.mission import CMD_DO_JUMP, CMD_NAV_WAYPOINT
+from ft_sitl.mavlink.mission import MissionProtocol
+from ft_sitl.mavlink.mission_items import MissionItems, deg_e7
+from ft_sitl.mavlink.outgoing import Outgoing
+
+_MISSION = apm.MAV_MISSION_TYPE_MISSION
+
+
+class ArduCopterMissionItems(MissionItems):
+    """Item conversions with ArduCopter's command set and its sequence offset of one."""
+
+    def to_mission_item(self, it) -> MissionItem:
+        if it.command == apm.MAV_CMD_NAV_LOITER_TIME:
+            hold = it.param1 if math.isfinite(it.param1) else 0.0
+            return MissionItem(CMD_NAV_WAYPOINT, self.position(it), hold_s=max(0.0, hold))
+        if it.command == CMD_DO_JUMP:
+            target = int(it.param1) if math.isfinite(it.param1) else 0
+            repeat = int(it.param2) if math.isfinite(it.param2) else 0
+            return MissionItem(CMD_DO_JUMP, jump_to=target - 1, repeat=repeat)
+        return super().to_mission_item(it)
+
+
+class ArduCopterMission(MissionProtocol):
+    """One vehicle's mission protocol with home at sequence 0 of the mission list."""
+
+    def _apply_upload(self, mtype: int, items: list) -> None:
+        if mtype != _MISSION:
+            super()._apply_upload(mtype, items)
+            return
+        # item 0 is home's placeholder: the vehicle flies items 1..n
+        self.v.cmd.set_mission([self.items.to_mission_item(it) for it in items[1:]])
+        self._stored[mtype] = list(items)
+
+    def _download(self, mtype: int) -> list | None:
+        if mtype != _MISSION:
+            return super()._download(mtype)
+        return [self._home_item()] + self._stored[mtype][1:]
+
+    def _home_item(self):
+        """Item 0: home now, as AP_Mission writes it (absolute altitude, MAV_FRAME_GLOBAL)."""
+        lat, lon, alt = self.v.geo.to_global(tuple(float(x) for x in self.v.cmd.home))
+        return apm.MAVLink_mission_item_int_message(
+            0, 0, 0, apm.MAV_FRAME_GLOBAL, apm.MAV_CMD_NAV_WAYPOINT, 0, 1, 0.0, 0.0, 0.0, 0.0,
+            deg_e7(lat), deg_e7(lon), float(alt), _MISSION)
+
+    def on_set_current(self, m, link, peer, wall_us):
+        seq = max(int(m.seq), 1)  # (ArduPilot: home cannot be the current item)
+        if self.v.cmd.set_mission_current(seq - 1) != Result.ACCEPTED:
+            self.v.cmd.text(cm.Severity.WARNING, f"Mission item {m.seq} does not exist")
+        return [Outgoing(self.telemetry.mission_current())]
