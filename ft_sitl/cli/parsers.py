@@ -156,6 +156,12 @@ def build_parser() -> argparse.ArgumentParser:
     sitl.add_argument("--out", action="append", default=[], metavar="udp:HOST:PORT",
                       help="with --autopilot ardupilot: also send to (and answer) this UDP "
                            "target, as MAVProxy's --out (repeatable)")
+    sitl.add_argument("--mission", type=Path, metavar="FILE",
+                      help="with --autopilot ardupilot: load this QGC WPL 110 .waypoints "
+                           "file into every vehicle at start, as an upload (item 0 home)")
+    sitl.add_argument("--mission-out", type=Path, metavar="FILE",
+                      help="with --autopilot ardupilot: on stopping, write vehicle 1's "
+                           "mission (as a download reads it, home at 0) as QGC WPL 110")
     sitl.add_argument("--speed-factor", type=number("--speed-factor", minimum=0.01,
                                                     maximum=1000),
                       default=1.0,

@@ -22,6 +22,7 @@ from ft_sitl.cli.common import (
     wind_option,
 )
 from ft_sitl.frames import PX4_SITL_HOME, GeoReference, enu_to_ned, yaw_enu_to_ned
+from ft_sitl.mavlink.ardupilot import waypoints
 from ft_sitl.mavlink.ardupilot.server import (
     ArduPilotServer,
     parse_out,
@@ -173,14 +174,21 @@ def _serve(args, geo, loopback, p, scenario, spawn, fleet, wind, estimator, actu
         kwargs = {}
         if args.autopilot == "ardupilot":
             kwargs["outs"] = [parse_out(o) for o in args.out]
-        elif args.out:
-            raise ValueError("--out: only with --autopilot ardupilot (the PX4 face sends to "
-                             "PX4 SITL's ports)")
+        elif args.out or args.mission or args.mission_out:
+            what = "--out" if args.out else "--mission" if args.mission else "--mission-out"
+            raise ValueError(f"{what}: only with --autopilot ardupilot (the PX4 face "
+                             f"takes missions over the mission protocol)")
         server_class = ArduPilotServer if args.autopilot == "ardupilot" else SitlServer
         server = server_class(fleet, geo, bind=args.bind, speed_factor=args.speed_factor,
                               tlog=args.tlog, signing_key=args.signing_key,
                               base_instance=args.instance, pace=args.pace,
                               pace_span_s=args.pace_span, **kwargs)
+        if args.mission is not None:
+            items = waypoints.read(args.mission)
+            for agent in server.agents:
+                agent.mission.load(items)
+    except waypoints.WaypointsError as exc:
+        raise CliError(f"--mission: {exc}") from None
     except (ValueError, OSError) as exc:
         raise CliError(str(exc)) from None
     urls = server.urls()
@@ -276,6 +284,9 @@ def _serve(args, geo, loopback, p, scenario, spawn, fleet, wind, estimator, actu
             b.close()
         if broker is not None:
             broker.stop()
+        if args.mission_out is not None:
+            waypoints.write(args.mission_out, server.agents[0].mission.mission_items())
+            print(f"mission of vehicle 1 written to {args.mission_out}", file=sys.stderr)
     sim_s = fleet.time_us * 1e-6
     behind = (f"; fell {server.behind_s:.1f} s behind the wall clock (stalls are not made "
               "up)" if server.behind_s >= 0.05 else "")

@@ -63,6 +63,16 @@ class ArduCopterMission(MissionProtocol):
             0, 0, 0, apm.MAV_FRAME_GLOBAL, apm.MAV_CMD_NAV_WAYPOINT, 0, 1, 0.0, 0.0, 0.0, 0.0,
             deg_e7(lat), deg_e7(lon), float(alt), _MISSION)
 
+    def load(self, items: list) -> None:
+        """Take a whole mission (MISSION_ITEM_INT, item 0 home's placeholder) as an
+        upload would (ValueError: refused, nothing changed)."""
+        self._apply_upload(_MISSION, list(items))
+
+    def mission_items(self) -> list:
+        """The mission as a download returns it (item 0: home now; only home when no
+        mission is loaded)."""
+        return self._download(_MISSION)
+
     def on_set_current(self, m, link, peer, wall_us):
         seq = max(int(m.seq), 1)  # (ArduPilot: home cannot be the current item)
         if self.v.cmd.set_mission_current(seq - 1) != Result.ACCEPTED:
