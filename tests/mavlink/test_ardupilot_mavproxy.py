@@ -1,0 +1,105 @@
+"""A MAVProxy session, unmodified (the MAVProxy installed beside ft-sitl, its commands fed
+on stdin as a user types them), against the ArduCopter face over SERIAL0's TCP port:
+`mode guided`, `arm throttle`, `takeoff 10`, `param set WPNAV_SPEED 800`, `wp load FILE`
+(a QGC WPL 110 file, home at 0), `mode auto`, `rtl`. Each step is checked on the
+vehicle's own state (mode, arming, altitude, parameters, mission, items reached,
+position), not on what MAVProxy prints."""
+
+import math
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import pytest
+
+from ft_sitl.mavlink.ardupilot.server import ArduPilotServer, tcp_port_free, tcp_ports
+from ft_sitl.mavlink.instances import free_instances
+
+from .sitl_harness import _running_sitl
+
+pytestmark = pytest.mark.e2e  # (tests/lanes.py: a MAVProxy process, TCP)
+
+MAVPROXY = Path(sys.executable).parent / "mavproxy.py"  # (pyproject's test extra)
+
+
+def _free(k: int) -> bool:
+    return all(tcp_port_free("127.0.0.1", p) for p in tcp_ports(k))
+
+
+def _until(what, timeout_s: float, describe: str, log: Path):
+    deadline = time.time() + timeout_s
+    while time.time() < deadline:
+        if what():
+            return
+        time.sleep(0.1)
+    tail = log.read_text()[-1500:] if log.exists() else ""
+    raise AssertionError(f"timed out waiting for {describe}; MAVProxy said:\n{tail}")
+
+
+def test_mavproxy_session_flies_guided_a_waypoints_file_in_auto_and_rtl(tmp_path):
+    with free_instances(1, _free) as k, \
+            _running_sitl(1, speed_factor=4.0, server_class=ArduPilotServer,
+                          base_instance=k) as server:
+        agent = server.agents[0]
+        c = agent.cmd
+        geo = agent.geo
+        home = c.home.copy()
+
+        def latlon(east, north):
+            lat, lon, _ = geo.to_global((home[0] + east, home[1] + north, home[2]))
+            return f"{lat:.8f}\t{lon:.8f}"
+
+        wp_file = tmp_path / "square.waypoints"
+        wp_file.write_text(
+            "QGC WPL 110\n"
+            f"0\t1\t0\t16\t0\t0\t0\t0\t{latlon(0, 0)}\t{geo.alt_m:.2f}\t1\n"
+            f"1\t0\t3\t16\t0\t0\t0\t0\t{latlon(0, 20)}\t10\t1\n"
+            f"2\t0\t3\t16\t0\t0\t0\t0\t{latlon(20, 20)}\t12\t1\n")
+        log = tmp_path / "mavproxy.out"
+        with open(log, "w") as out:
+            proc = subprocess.Popen(
+                [sys.executable, str(MAVPROXY), f"--master=tcp:127.0.0.1:{tcp_ports(k)[0]}",
+                 f"--state-basedir={tmp_path}", "--logfile", str(tmp_path / "mav.tlog")],
+                stdin=subprocess.PIPE, stdout=out, stderr=subprocess.STDOUT, text=True,
+                cwd=tmp_path)
+        try:
+            def type_(line: str) -> None:
+                proc.stdin.write(line + "\n")
+                proc.stdin.flush()
+
+            # (MAVProxy reads commands once it has the vehicle's heartbeat)
+            _until(lambda: "Received" in log.read_text(), 60, "MAVProxy's parameter fetch",
+                   log)
+            type_("mode guided")
+            _until(lambda: agent.mode_name == "GUIDED", 30, "GUIDED", log)
+            type_("arm throttle")
+            _until(lambda: c.armed, 30, "armed", log)
+            type_("takeoff 10")
+            _until(lambda: c.position_now()[2] - home[2] > 9.5, 60, "10 m up", log)
+            assert agent.mode_name == "GUIDED"
+
+            type_("param set WPNAV_SPEED 800")
+            _until(lambda: server.fleet.params[0]["MPC_XY_CRUISE"] == 8.0, 30,
+                   "WPNAV_SPEED 800 honoured", log)
+
+            type_(f"wp load {wp_file}")
+            _until(lambda: len(c.mission) == 2, 30, "the file's two items uploaded", log)
+            p1 = c.mission[0].position
+            assert abs(p1[1] - home[1] - 20) < 0.1 and abs(p1[2] - home[2] - 10) < 0.1
+
+            type_("mode auto")
+            _until(lambda: agent.mode_name == "AUTO", 30, "AUTO", log)
+            _until(lambda: 1 in c.reached, 120, "the file's last waypoint reached", log)
+            p = c.position_now()
+            assert math.hypot(p[0] - home[0] - 20, p[1] - home[1] - 20) < 3.0
+
+            type_("rtl")
+            _until(lambda: agent.mode_name == "RTL", 30, "RTL", log)
+            _until(lambda: not c.armed, 180, "landed at home and disarmed", log)
+            p = c.position_now()
+            assert math.hypot(p[0] - home[0], p[1] - home[1]) < 2.0
+            assert p[2] - home[2] < 0.5
+        finally:
+            proc.kill()
+            proc.wait(10)
