@@ -107,6 +107,7 @@ class MissionExecutor:
                 or c.mission_seq >= len(c.mission)):
             if c.mission_seq >= len(c.mission):
                 c.mission_seq = 0
+                self.jumps = {}  # (a restarted mission jumps again, as ArduPilot's)
         c.mission_state = MissionState.ACTIVE
         self.item_started = False
         self.item_hold_until = None

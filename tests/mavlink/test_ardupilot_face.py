@@ -217,3 +217,53 @@ def test_auto_mission_with_home_at_zero_flies_to_the_land_and_disarms():
             assert mc.seq == 6 and mc.total == 7
         finally:
             conn.close()
+
+
+def test_auto_mission_return_to_launch_item_lands_at_home_and_disarms():
+    """TAKEOFF, a waypoint 20 m east, NAV_RETURN_TO_LAUNCH: the vehicle comes back, lands
+    at home and disarms; MISSION_SET_CURRENT and MISSION_CURRENT in ArduPilot's numbering."""
+    from pymavlink import mavwp
+
+    mavutil.set_dialect("ardupilotmega")
+    mav = mavutil.mavlink
+    with free_instances(1, _free) as k, \
+            _running_sitl(1, speed_factor=4.0, server_class=ArduPilotServer,
+                          base_instance=k) as server:
+        conn = mavutil.mavlink_connection(f"tcp:127.0.0.1:{tcp_ports(k)[0]}",
+                                          source_system=250)
+        try:
+            conn.wait_heartbeat(timeout=30)
+            conn.mav.request_data_stream_send(conn.target_system, conn.target_component,
+                                              mav.MAV_DATA_STREAM_ALL, 10, 1)
+            home = _wait(conn, lambda m: True, 10.0, type="GLOBAL_POSITION_INT")
+            rel = mav.MAV_FRAME_GLOBAL_RELATIVE_ALT
+            east = 20 / (111320.0 * 0.67)  # (20 m at about 47.4 deg north)
+            loader = mavwp.MAVWPLoader(target_system=conn.target_system,
+                                       target_component=conn.target_component)
+            for seq, (command, lon, alt) in enumerate(
+                    ((mav.MAV_CMD_NAV_WAYPOINT, 0.0, 0), (mav.MAV_CMD_NAV_TAKEOFF, 0.0, 8),
+                     (mav.MAV_CMD_NAV_WAYPOINT, home.lon * 1e-7 + east, 8),
+                     (mav.MAV_CMD_NAV_RETURN_TO_LAUNCH, 0.0, 0))):
+                lat = home.lat * 1e-7 if lon else 0.0
+                loader.add(mav.MAVLink_mission_item_message(
+                    conn.target_system, conn.target_component, seq, rel, command, 0, 1,
+                    0, 0, 0, 0, lat, lon, alt))
+            assert _upload(conn, loader) == mav.MAV_MISSION_ACCEPTED
+            conn.waypoint_set_current_send(1)
+            mc = _wait(conn, lambda m: True, 10.0, type="MISSION_CURRENT")
+            assert mc.seq == 1 and mc.total == 4
+            conn.set_mode("GUIDED")
+            conn.arducopter_arm()
+            conn.motors_armed_wait()
+            conn.set_mode("AUTO")
+            _wait(conn, lambda m: m.seq == 2, 120.0, type="MISSION_ITEM_REACHED")
+            far = _wait(conn, lambda m: True, 10.0, type="LOCAL_POSITION_NED")
+            assert far.y > 15  # out east before returning
+            conn.motors_disarmed_wait()
+            c = server.agents[0].cmd
+            p = c.position_now()
+            assert abs(p[0] - c.home[0]) < 2.0 and abs(p[1] - c.home[1]) < 2.0
+            assert p[2] - c.home[2] < 0.5
+            assert 2 in c.reached  # (the commander's index of item 3, RTL)
+        finally:
+            conn.close()
