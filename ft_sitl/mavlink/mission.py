@@ -176,6 +176,10 @@ class MissionProtocol:
             self._fence_made = (fence, self.items.fence_items(fence))
         return self._fence_made[1]
 
+    def _current_seq(self) -> int:
+        """The sequence number on the wire of the mission item in progress."""
+        return self.v.cmd.mission_seq
+
     def on_request_list(self, m, link, peer, wall_us):
         mtype = getattr(m, "mission_type", 0)
         count = len(self._download(mtype) or [])
@@ -190,7 +194,7 @@ class MissionProtocol:
         if not 0 <= m.seq < len(stored):
             return [_ack(m, mav.MAV_MISSION_INVALID_SEQUENCE, link, peer, mtype)]
         it = stored[m.seq]
-        current = 1 if mtype == mav.MAV_MISSION_TYPE_MISSION and it.seq == self.v.cmd.mission_seq \
+        current = 1 if mtype == mav.MAV_MISSION_TYPE_MISSION and it.seq == self._current_seq() \
             else 0
         return [Outgoing(mav.MAVLink_mission_item_int_message(
             m.get_srcSystem(), m.get_srcComponent(), it.seq, it.frame, it.command,

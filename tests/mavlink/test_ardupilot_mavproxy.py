@@ -13,6 +13,7 @@ from pathlib import Path
 
 import pytest
 
+from ft_sitl.mavlink.ardupilot import waypoints
 from ft_sitl.mavlink.ardupilot.server import ArduPilotServer, tcp_port_free, tcp_ports
 from ft_sitl.mavlink.instances import free_instances
 
@@ -88,6 +89,17 @@ def test_mavproxy_session_flies_guided_a_waypoints_file_in_auto_and_rtl(tmp_path
             p1 = c.mission[0].position
             assert abs(p1[1] - home[1] - 20) < 0.1 and abs(p1[2] - home[2] - 10) < 0.1
 
+            saved = tmp_path / "saved.waypoints"
+            type_(f"wp save {saved}")
+            _until(lambda: saved.exists() and len(saved.read_text().splitlines()) == 4, 30,
+                   "MAVProxy's download saved", log)
+            back = waypoints.read(saved)
+            assert [it.command for it in back] == [16, 16, 16]
+            assert [it.current for it in back] == [0, 1, 0]  # (item 1 is next to fly)
+            lat, lon, _ = geo.to_global(home)
+            assert abs(back[0].x - lat * 1e7) <= 1 and abs(back[0].y - lon * 1e7) <= 1
+            assert back[2].z == 12
+
             type_("mode auto")
             _until(lambda: agent.mode_name == "AUTO", 30, "AUTO", log)
             _until(lambda: 1 in c.reached, 120, "the file's last waypoint reached", log)
@@ -100,6 +112,15 @@ def test_mavproxy_session_flies_guided_a_waypoints_file_in_auto_and_rtl(tmp_path
             p = c.position_now()
             assert math.hypot(p[0] - home[0], p[1] - home[1]) < 2.0
             assert p[2] - home[2] < 0.5
+
+            # DO_FENCE_ENABLE: FENCE_ENABLE, written through to the geofence's limits
+            type_("fence enable")
+            ap = agent.vehicle.ap_params
+            _until(lambda: ap["FENCE_ENABLE"] == 1, 30, "the fence enabled", log)
+            assert server.fleet.params[0]["GF_MAX_HOR_DIST"] == ap["FENCE_RADIUS"] > 0
+            type_("fence disable")
+            _until(lambda: ap["FENCE_ENABLE"] == 0, 30, "the fence disabled", log)
+            assert server.fleet.params[0]["GF_MAX_HOR_DIST"] == 0
         finally:
             proc.kill()
             proc.wait(10)

@@ -12,6 +12,7 @@ from pymavlink.dialects.v20 import ardupilotmega as apm
 from ft_sitl.autopilot import commander as cm
 from ft_sitl.autopilot.arming import arming_denial
 from ft_sitl.autopilot.commander import Result
+from ft_sitl.autopilot.params import ParamError
 from ft_sitl.mavlink.ardupilot import modes
 from ft_sitl.mavlink.commands import HANDLERS, CommandArgs, Commands
 
@@ -75,6 +76,19 @@ class ArduCopterCommands(Commands):
     def _return_to_launch(self, a: CommandArgs):
         return self.v.modes.set(modes.RTL), []
 
+    def _fence_enable(self, a: CommandArgs):
+        """MAV_CMD_DO_FENCE_ENABLE: param1 1 on, 0 off (FENCE_ENABLE, written through to
+        the geofence); 2 (the floor only) is not modelled: UNSUPPORTED."""
+        p = a.p[0]
+        if not math.isfinite(p) or round(p) not in (0, 1):
+            return Result.UNSUPPORTED, []
+        try:
+            self.v.ap_params.set("FENCE_ENABLE", round(p))
+        except ParamError:
+            return Result.FAILED, []
+        self.v.fleet.refresh_params()
+        return Result.ACCEPTED, []
+
     def _mission_start(self, a: CommandArgs):
         c, p = self.v.cmd, a.p
         if not c.mission:
@@ -92,4 +106,5 @@ ArduCopterCommands.handlers = {
     apm.MAV_CMD_NAV_LAND: ArduCopterCommands._land,
     apm.MAV_CMD_NAV_RETURN_TO_LAUNCH: ArduCopterCommands._return_to_launch,
     apm.MAV_CMD_MISSION_START: ArduCopterCommands._mission_start,
+    apm.MAV_CMD_DO_FENCE_ENABLE: ArduCopterCommands._fence_enable,
 }

@@ -73,6 +73,9 @@ class ArduCopterMission(MissionProtocol):
         mission is loaded)."""
         return self._download(_MISSION)
 
+    def _current_seq(self) -> int:
+        return self.v.cmd.mission_seq + 1 if self.v.cmd.mission else -1
+
     def on_set_current(self, m, link, peer, wall_us):
         seq = max(int(m.seq), 1)  # (ArduPilot: home cannot be the current item)
         if self.v.cmd.set_mission_current(seq - 1) != Result.ACCEPTED:
