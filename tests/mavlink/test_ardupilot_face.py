@@ -220,7 +220,7 @@ def test_auto_mission_with_home_at_zero_flies_to_the_land_and_disarms():
 
 
 def test_auto_mission_return_to_launch_item_lands_at_home_and_disarms():
-    """TAKEOFF, a waypoint 20 m east, NAV_RETURN_TO_LAUNCH: the vehicle comes back, lands
+    """TAKEOFF, a spline waypoint 20 m east, NAV_RETURN_TO_LAUNCH: the vehicle comes back, lands
     at home and disarms; MISSION_SET_CURRENT and MISSION_CURRENT in ArduPilot's numbering."""
     from pymavlink import mavwp
 
@@ -242,7 +242,7 @@ def test_auto_mission_return_to_launch_item_lands_at_home_and_disarms():
                                        target_component=conn.target_component)
             for seq, (command, lon, alt) in enumerate(
                     ((mav.MAV_CMD_NAV_WAYPOINT, 0.0, 0), (mav.MAV_CMD_NAV_TAKEOFF, 0.0, 8),
-                     (mav.MAV_CMD_NAV_WAYPOINT, home.lon * 1e-7 + east, 8),
+                     (mav.MAV_CMD_NAV_SPLINE_WAYPOINT, home.lon * 1e-7 + east, 8),
                      (mav.MAV_CMD_NAV_RETURN_TO_LAUNCH, 0.0, 0))):
                 lat = home.lat * 1e-7 if lon else 0.0
                 loader.add(mav.MAVLink_mission_item_message(

@@ -6,8 +6,8 @@ does not fly. Items 1..n are the commander's mission 0..n-1, so every sequence n
 the wire (MISSION_CURRENT, MISSION_ITEM_REACHED, MISSION_SET_CURRENT, MISSION_START's
 first item, DO_JUMP's target) is the commander's plus one. ArduCopter's commands map onto
 the executor's (:mod:`ft_sitl.autopilot.mission`): NAV_LOITER_TIME is a waypoint held
-param1 seconds, DO_JUMP jumps param2 times (-1: for ever). Fences and rally points are
-the PX4 face's lists, unchanged.
+param1 seconds, NAV_SPLINE_WAYPOINT a waypoint flown straight, DO_JUMP jumps param2
+times (-1: for ever). Fences and rally points are the PX4 face's lists, unchanged.
 """
 
 from __future__ import annotations
@@ -31,6 +31,9 @@ class ArduCopterMissionItems(MissionItems):
 
     def to_mission_item(self, it) -> MissionItem:
         if it.command == apm.MAV_CMD_NAV_LOITER_TIME:
+            hold = it.param1 if math.isfinite(it.param1) else 0.0
+            return MissionItem(CMD_NAV_WAYPOINT, self.position(it), hold_s=max(0.0, hold))
+        if it.command == apm.MAV_CMD_NAV_SPLINE_WAYPOINT:  # (flown straight, see docs)
             hold = it.param1 if math.isfinite(it.param1) else 0.0
             return MissionItem(CMD_NAV_WAYPOINT, self.position(it), hold_s=max(0.0, hold))
         if it.command == CMD_DO_JUMP:
