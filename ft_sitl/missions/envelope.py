@@ -114,13 +114,16 @@ def series_members(df: pd.DataFrame) -> pd.DataFrame:
 
 
 def _design(g: pd.DataFrame, fixed: list[str]) -> tuple[pd.DataFrame, list[str]]:
-    """The standardised terms (constant ones dropped) and the fixed-effect dummies."""
+    """The standardised terms (constant ones dropped; the half span too when the body is
+    a fixed effect, which holds it) and the fixed-effect dummies."""
     x = pd.DataFrame(index=g.index)
     raw = {"log_twr": np.log(g["twr_max"].astype(float)),
            "log_alpha_xy": np.log(g["alpha_xy_max"].astype(float)),
            "half_span": g["half_span_m"].astype(float)}
     kept = []
     for term, _ in TERMS:
+        if term == "half_span" and "base" in fixed:
+            continue
         v = raw[term]
         sd = float(v.std(ddof=0))
         if sd > 1e-12 * max(1.0, abs(float(v.mean()))):

@@ -59,7 +59,7 @@ from scipy.special import expit
 from scipy.stats import norm
 
 from ft_sitl.missions.spec import TrialSpec, TrialSpecError, platform_for, vehicle_half_span_m
-from ft_sitl.physics.catalog import catalog
+from ft_sitl.physics.catalog import catalog, series
 from ft_sitl.scenarios.families import FAMILIES
 
 
@@ -106,7 +106,7 @@ def footprints(df: pd.DataFrame) -> pd.Series:
                 if "protocol_version" in df.columns else pd.Series(1, index=df.index))
     specs = df["spec"] if "spec" in df.columns else pd.Series(None, index=df.index,
                                                               dtype=object)
-    known = catalog()
+    known = {**catalog(), **series()}  # the controlled series by name too
     sizes: dict[tuple[str, int], float] = {}
     out = np.full(len(df), math.nan)
     for i, (name, version, spec) in enumerate(zip(names, versions, specs, strict=True)):

@@ -249,3 +249,20 @@ def test_a_campaign_of_series_platforms_gets_a_composite_score():
     rows["scenario_category"] = "classic"
     score = scoring.composite_score(rows)
     assert len(score) == 1 and np.isfinite(score["FinalScore"]).all()
+
+
+def test_over_the_series_the_body_holds_the_size_and_twr_is_fitted():
+    # two bodies, TWR deciding within each: the series fit has TWR (and alpha) terms, the
+    # body as a fixed effect, and no half span (it would be collinear with the body)
+    members = [p for name, p in series().items()
+               if name.startswith(("series-0.55kg-UAV1-", "series-5.00kg-UAV16-"))]
+
+    def chance(p, fam, lv):
+        return 1.0 / (1.0 + math.exp(-2.0 * (p.indicators().twr_max - 2.5)))
+
+    rows = _rows(members, chance, trials=40, levels=("brisk",), seed=5)
+    fits = envelope.size_controlled_fits(rows)
+    got = fits[fits["sample"] == "series"].set_index("term")
+    assert got.loc["log TWR_max", "coef_per_sd"] > 0.5 and got.loc["log TWR_max", "p"] < 0.01
+    assert math.isnan(got.loc["half span", "coef_per_sd"])
+    assert got["note"].str.contains("platforms").all()
