@@ -30,7 +30,7 @@ from ft_sitl.missions.results import rows_from_parquet, to_frame
 from ft_sitl.missions.spec import PROTOCOLS, TrialSpec, TrialSpecError
 from ft_sitl.missions.store import (
     PARQUET_FILE,
-    SPEC_FILE,
+    TRIALS_FILE,
     ResultStore,
     StoreError,
     load_rows,
@@ -352,10 +352,10 @@ def cmd_campaign_compare(args) -> int:
 # --- trial -----------------------------------------------------------------------------------
 def _stored_rows(directory) -> list[dict]:
     """The finished rows of a result directory: a campaign's (campaign.json,
-    trials.jsonl) or, without campaign.json, the table of one holding only trials.parquet
-    (e.g. docs/results/paper)."""
+    trials.jsonl) or, without trials.jsonl, the table of one holding trials.parquet
+    (e.g. docs/results/paper, or a committed campaign kept with its campaign.json)."""
     d = Path(directory)
-    if not (d / SPEC_FILE).exists() and (d / PARQUET_FILE).is_file():
+    if not (d / TRIALS_FILE).exists() and (d / PARQUET_FILE).is_file():
         try:
             return rows_from_parquet(d / PARQUET_FILE)
         except (OSError, ValueError) as exc:

@@ -284,6 +284,11 @@ def test_rerun_from_a_directory_holding_only_trials_parquet(capsys, done, tmp_pa
     row = _row(done, "slow", 1)
     rc, text, err = cli(capsys, "trial", "rerun", out, row["trial_id"][:8])
     assert (rc, err) == (0, "")
+    # a committed campaign keeps its campaign.json beside the table (docs/results/envelope):
+    # without trials.jsonl its rows are the table's
+    shutil.copyfile(done / "campaign.json", out / "campaign.json")
+    rc, again, err = cli(capsys, "trial", "rerun", out, row["trial_id"][:8])
+    assert (rc, err) == (0, "") and "  identical to the stored result" in again
     lines = text.splitlines()
     assert lines[0].startswith(f"trial {row['trial_id']}: slow on {PLATFORM} in yard (trial 1)")
     assert "  identical to the stored result (all but wall-clock columns)" in lines
