@@ -21,8 +21,16 @@ from matplotlib import rc_context  # noqa: E402
 from ft_sitl.missions import envelope  # noqa: E402
 from ft_sitl.missions import envelope_report as er  # noqa: E402
 from ft_sitl.missions.report import _RC  # noqa: E402
-from ft_sitl.missions.results import to_frame  # noqa: E402
+from ft_sitl.missions.results import rows_from_parquet, to_frame  # noqa: E402
 from ft_sitl.missions.store import load_rows  # noqa: E402
+
+
+def _rows(directory: Path) -> list[dict]:
+    """A result directory's rows: its trials.jsonl (a campaign's own directory), else its
+    trials.parquet (a committed one)."""
+    if (directory / "trials.jsonl").exists():
+        return load_rows(directory)[1]
+    return rows_from_parquet(directory / "trials.parquet")
 
 
 def main() -> None:
@@ -32,8 +40,12 @@ def main() -> None:
     ap.add_argument("--cache", type=Path, default=Path.home() / ".cache/ft-sitl/difficulty",
                     help="where the body paths are kept")
     ap.add_argument("--n-boot", type=int, default=envelope.N_BOOT)
+    ap.add_argument("--families", nargs="+", metavar="FAMILY",
+                    help="only these scenario families (e.g. the ones flown complete)")
     args = ap.parse_args()
-    df = to_frame([r for d in args.dirs for r in load_rows(d)[1]])
+    df = to_frame([r for d in args.dirs for r in _rows(d)])
+    if args.families:
+        df = df[df["family"].astype(str).isin(args.families)].reset_index(drop=True)
     print(f"{len(df)} rows from {len(args.dirs)} directories")
     bounds = envelope.time_bounds(df, cache_dir=args.cache)
     t = er.envelope_tables(df, n_boot=args.n_boot, bounds=bounds)
@@ -51,7 +63,8 @@ def main() -> None:
                             {"Date": None, "Creator": None})
                 (args.out / f"{name}.{ext}").write_bytes(buf.getvalue())
             print(f"{name}: {caption}")
-    counts = df.groupby(["algorithm", envelope.LEVEL_COLUMN], observed=True).size()
+    counts = df.groupby([df["algorithm"].astype(str), df[envelope.LEVEL_COLUMN].astype(str)]
+                        ).size()
     print(pd.DataFrame({"rows": counts}).to_string())
 
 
