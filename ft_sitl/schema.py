@@ -19,6 +19,7 @@ import math
 from collections.abc import Mapping
 from dataclasses import dataclass, field, replace
 
+from ft_sitl import markdown as md
 from ft_sitl.config import did_you_mean
 
 KINDS = ("float", "int", "bool", "str", "vector", "interval")
@@ -236,9 +237,6 @@ class Schema:
 
     def markdown(self) -> str:
         """The rows as a Markdown table (for the documentation)."""
-        lines = ["| parameter | default | unit | allowed | meaning |",
-                 "|---|---|---|---|---|"]
-        for r in self.rows():
-            cells = [f"`{r['name']}`", r["default"], r["unit"], r["range"], r["doc"]]
-            lines.append("| " + " | ".join(c.replace("|", "\\|") for c in cells) + " |")
-        return "\n".join(lines)
+        return md.table(["parameter", "default", "unit", "allowed", "meaning"],
+                     [[f"`{r['name']}`", r["default"], r["unit"], r["range"], r["doc"]]
+                      for r in self.rows()])

@@ -25,6 +25,7 @@ import ft_sitl  # noqa: F401  (first: the numeric pins before numpy loads)
 import pandas as pd
 from statsmodels.stats.contingency_tables import mcnemar
 
+from ft_sitl import markdown as md
 from ft_sitl.cli.missions import differences
 from ft_sitl.missions.scoring import wilson_interval
 
@@ -54,13 +55,13 @@ def paired(a: pd.Series, b: pd.Series) -> str:
 
 
 def table(both: pd.DataFrame, by: list[str]) -> list[str]:
-    out = [f"| {' | '.join(by)} | stored | re-flown under the pins | McNemar p |",
-           "|" + "---|" * len(by) + "---:|---:|---:|"]
+    rows = []
     for key, g in both.groupby(by, sort=True):
         key = key if isinstance(key, tuple) else (key,)
-        out.append(f"| {' | '.join(map(str, key))} | {rate(g.success_s)} | "
-                   f"{rate(g.success_n)} | {paired(g.success_s, g.success_n)} |")
-    return out
+        rows.append([*key, rate(g.success_s), rate(g.success_n),
+                     paired(g.success_s, g.success_n)])
+    return md.table([*by, "stored", "re-flown under the pins", "McNemar p"], rows,
+                    [""] * len(by) + ["r"] * 3).split("\n")
 
 
 def order(both: pd.DataFrame, col: str, family: str | None = None) -> list[str]:

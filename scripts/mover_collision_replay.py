@@ -28,6 +28,7 @@ import ft_sitl  # noqa: F401  (first: pins the BLAS settings before numpy loads)
 import numpy as np
 import pandas as pd
 
+from ft_sitl import markdown as md
 from ft_sitl.missions.results import rows_from_parquet
 from ft_sitl.missions.spec import TrialSpec
 from ft_sitl.missions.trial import run_trial
@@ -38,14 +39,12 @@ RANGE_M = 10.0
 
 
 def _markdown(df: pd.DataFrame, index: bool = True) -> str:
-    """A pipe table of df (no tabulate dependency for one table)."""
+    """A pipe table of df (NaN cells empty)."""
     if index:
         df = df.reset_index()
-    head = "| " + " | ".join(map(str, df.columns)) + " |"
-    rule = "|" + "---|" * len(df.columns)
-    body = ["| " + " | ".join("" if (isinstance(v, float) and math.isnan(v)) else str(v)
-                              for v in row) + " |" for row in df.itertuples(index=False)]
-    return "\n".join([head, rule] + body)
+    return md.table(list(df.columns), [
+        ["" if (isinstance(v, float) and math.isnan(v)) else v for v in row]
+        for row in df.itertuples(index=False)])
 
 
 def _rows(directory: Path) -> list[dict]:

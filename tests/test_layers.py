@@ -19,7 +19,7 @@ import pytest
 PKG = Path(__file__).resolve().parents[1] / "ft_sitl"
 #: modules directly under ft_sitl/ that every layer may use
 BASE = {"ft_sitl", "frames", "numeric_env", "jit_cache", "config", "schema", "rotations",
-        "provenance", "mover_kinds", "__version__", "G"}
+        "provenance", "mover_kinds", "markdown", "__version__", "G"}
 #: what each part of the package may import besides BASE and itself
 ALLOWED = {
     "physics": set(),

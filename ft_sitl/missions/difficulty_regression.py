@@ -54,6 +54,7 @@ import numpy as np
 import pandas as pd
 import statsmodels.api as sm
 
+from ft_sitl import markdown as md
 from ft_sitl.missions.regression import footprints, p_text, separated
 from ft_sitl.scenarios.families import FAMILIES
 
@@ -312,19 +313,18 @@ def markdown_coefficients(fits, model: str) -> str:
     its p-values (errors clustered by platform; by platform and configuration), then n
     and the pseudo-R^2; or why it is not estimable."""
     labels = [label for _, label in PREDICTORS]
-    lines = ["| algorithm | " + " | ".join(labels) + " | trials (successes) | "
-             "pseudo-R^2 |", "|---|" + "---|" * (len(labels) + 2)]
+    rows = []
     for f in fits:
         if f.model != model:
             continue
         if not f.fitted:
-            lines.append(f"| {f.algorithm} | {f.note} |" + " |" * (len(labels) + 1))
+            rows.append([f.algorithm, f.note] + [""] * (len(labels) + 1))
             continue
         cells = [f"{_signed(c['coef'])} ({p_text(c['p'])}; {p_text(c['p2'])})"
                  for c in f.coefficients]
-        lines.append(f"| {f.algorithm} | " + " | ".join(cells)
-                     + f" | {f.n_rows} ({f.n_successes}) | {f.pseudo_r2:.3f} |")
-    return "\n".join(lines)
+        rows.append([f.algorithm, *cells, f"{f.n_rows} ({f.n_successes})",
+                     f"{f.pseudo_r2:.3f}"])
+    return md.table(["algorithm", *labels, "trials (successes)", "pseudo-R^2"], rows)
 
 
 def markdown_left_out(fits, model: str) -> str:
@@ -337,28 +337,20 @@ def markdown_left_out(fits, model: str) -> str:
 def markdown_comparison(comparison: Mapping) -> str:
     """The pseudo-R^2 of the :data:`COMPARISON` models per algorithm."""
     names = list(COMPARISON)
-    lines = ["| algorithm | " + " | ".join(names) + " |", "|---|" + "---|" * len(names)]
-    for algo, r2 in comparison.items():
-        lines.append(f"| {algo} | " + " | ".join(
-            "-" if r2[n] is None else f"{r2[n]:.3f}" for n in names) + " |")
-    return "\n".join(lines)
+    return md.table(["algorithm", *names], [
+        [algo, *("-" if r2[n] is None else f"{r2[n]:.3f}" for n in names)]
+        for algo, r2 in comparison.items()])
 
 
 def markdown_success_correlations(corr: pd.DataFrame) -> str:
     """Each measure (rows) against each algorithm's success rate (columns)."""
     cols = list(corr.columns)
-    lines = ["| measure | " + " | ".join(cols) + " |", "|---|" + "---|" * len(cols)]
-    for row in corr.index:
-        lines.append(f"| {row} | " + " | ".join(f"{corr.loc[row, c]:+.2f}" for c in cols)
-                     + " |")
-    return "\n".join(lines)
+    return md.table(["measure", *cols], [
+        [row, *(f"{corr.loc[row, c]:+.2f}" for c in cols)] for row in corr.index])
 
 
 def markdown_correlations(corr: pd.DataFrame) -> str:
     """FlightBench's metrics (rows) against every measure (columns)."""
     cols = list(corr.columns)
-    lines = ["| | " + " | ".join(cols) + " |", "|---|" + "---|" * len(cols)]
-    for row in ("TO", "VO", "AOL"):
-        lines.append(f"| {row} | " + " | ".join(f"{corr.loc[row, c]:+.2f}" for c in cols)
-                     + " |")
-    return "\n".join(lines)
+    return md.table(["", *cols], [
+        [row, *(f"{corr.loc[row, c]:+.2f}" for c in cols)] for row in ("TO", "VO", "AOL")])

@@ -13,6 +13,7 @@ from dataclasses import dataclass
 
 import pandas as pd
 
+from ft_sitl import markdown as md
 from ft_sitl.missions import envelope as env
 
 #: the per-row metrics summarised per algorithm, level and sample
@@ -147,10 +148,7 @@ def markdown(t: EnvelopeTables) -> str:
         head, body = rows(t)
         if not body:
             continue
-        out += [f"### {title}", "", note, "", "| " + " | ".join(head) + " |",
-                "|" + "---|" * len(head)]
-        out += ["| " + " | ".join(str(c) for c in r) + " |" for r in body]
-        out.append("")
+        out += [f"### {title}", "", note, "", md.table(head, body), ""]
     return "\n".join(out)
 
 

@@ -53,6 +53,7 @@ import numpy as np
 import pandas as pd
 import yaml
 
+from ft_sitl import markdown as md
 from ft_sitl.missions import envelope, envelope_report, regression, scoring
 from ft_sitl.missions.results import REASONS
 from ft_sitl.scenarios.difficulty import default_cache_dir
@@ -924,16 +925,6 @@ def _html_table(head: Sequence[str] | None, rows: Sequence[Sequence[str]],
     return "".join(out)
 
 
-def _md_table(head: Sequence[str], rows: Sequence[Sequence[str]]) -> str:
-    def cell(s: str) -> str:
-        return str(s).replace("|", "\\|").replace("\n", "<br>")
-
-    lines = ["| " + " | ".join(cell(h) for h in head) + " |",
-             "|" + "---|" * len(head)]
-    lines += ["| " + " | ".join(cell(c) for c in r) + " |" for r in rows]
-    return "\n".join(lines)
-
-
 def _method_notes(t: _Tables) -> list[str]:
     a = t.scores.attrs
     sw = ", ".join(f"{k} {v:g}" for k, v in a["scenario_weight_table"].items())
@@ -1042,7 +1033,7 @@ def _envelope_markdown(t: _Tables) -> list[str]:
     for title, note, rows, _ in envelope_report.TABLES:
         head, body = rows(t.envelope)
         if body:
-            lines += [f"### {title}", "", note, "", _md_table(head, body), ""]
+            lines += [f"### {title}", "", note, "", md.table(head, body), ""]
     return lines
 
 
@@ -1050,29 +1041,29 @@ def _markdown(t: _Tables, facts, figures, spec_text: str, generated: str) -> str
     lines = ["# FLYINGTRUST benchmark report", "", f"Generated {generated}.", "", "## Run",
              ""]
     lines += [f"- **{k}**: {v}" for k, v in facts]
-    lines += ["", "## Composite score", "", _md_table(*_score_rows(t)), ""]
+    lines += ["", "## Composite score", "", md.table(*_score_rows(t)), ""]
     lines += [f"- {n}" for n in _method_notes(t)]
     lines += ["", "## Success per scenario family", "",
               "rate (successes/trials), 95 % percentile-bootstrap and Wilson intervals, "
               "pooled over platforms.", "",
-              _md_table(*_family_rows(t)), "",
+              md.table(*_family_rows(t)), "",
               "## Success against the indicators (logistic regression)", ""]
     lines += [f"- {n}" for n in _regression_notes()]
     lines += ["", "### Readings", ""]
     for algo, readings in _readings(t):
         lines.append(f"- **{algo}**")
         lines += [f"  - {x}" for x in readings]
-    lines += ["", "### Fits", "", _md_table(*_fit_rows(t)), "", "### Coefficients", "",
-              _md_table(*_coefficient_rows(t)), "",
+    lines += ["", "### Fits", "", md.table(*_fit_rows(t)), "", "### Coefficients", "",
+              md.table(*_coefficient_rows(t)), "",
               "### Collinearity of the predictors over the platforms", "",
               "Pearson correlations (one point per platform) and variance inflation factors.",
-              "", _md_table(*_collinearity_rows(t)), "",
+              "", md.table(*_collinearity_rows(t)), "",
               *_envelope_markdown(t),
               "## Exit reasons", "",
-              _md_table(*_failure_rows(t)), "",
+              md.table(*_failure_rows(t)), "",
               *([_absent_reasons_note(t), ""] if _absent_reasons_note(t) else []),
               "## Metrics of successful trials (median)", "",
-              _md_table(*_metric_rows(t)), "", "## Figures", ""]
+              md.table(*_metric_rows(t)), "", "## Figures", ""]
     for name, caption, _ in figures:
         lines += [f"![{name}]({name}.png)", "", f"*{name}*: {caption} "
                   f"([SVG]({name}.svg))", ""]
