@@ -69,6 +69,25 @@ class ParamSpec:
     def bounded_hi(self) -> bool:
         return self.hi < (INT32_MAX if self.is_int else math.inf)
 
+    def check(self, value) -> float:
+        """The value as stored (int for an integer parameter), or ParamError naming the
+        parameter, the value and the bounds: not a finite number, not an integer, out of
+        bounds. A FLOAT is compared in float32, as it travels: 0.6 sent over MAVLink
+        arrives as 0.6000000238 and must still pass a bound of 0.6."""
+        name = self.name
+        if isinstance(value, bool) or not isinstance(value, (int, float)):
+            raise ParamError(f"{name}: {value!r} is not a number")
+        if not math.isfinite(value):
+            raise ParamError(f"{name}: {value!r} is not finite")
+        if self.is_int and value != int(value):
+            raise ParamError(f"{name}: {value!r} must be an integer")
+        v, lo, hi = (value, self.lo, self.hi) if self.is_int else \
+            (_f32(value), _f32(self.lo), _f32(self.hi))
+        if not lo <= v <= hi:
+            unit = f" {self.unit}" if self.unit else ""
+            raise ParamError(f"{name}: {value!r}{unit} is outside {_bounds(self)}")
+        return int(value) if self.is_int else float(value)
+
 
 _SPECS = [
     # --- position / velocity control -------------------------------------------------
@@ -294,19 +313,23 @@ DEFAULT_GAINS: str = next(k for k, v in GAIN_MODES.items() if v == PARAMS["FT_GA
 
 
 class ParamSet:
-    """Current parameter values, with bounds checking on every set."""
+    """Current parameter values, with bounds checking on every set. ``table``: the
+    declarations (name -> ParamSpec) it holds, in PARAM_VALUE index order; a face with
+    other names (the ArduCopter face) subclasses it with its own table."""
+
+    table: dict[str, ParamSpec] = PARAMS
 
     def __init__(self, overrides: dict[str, float] | None = None):
-        self._values = {name: spec.default for name, spec in PARAMS.items()}
+        self._values = {name: spec.default for name, spec in self.table.items()}
         for name, value in (overrides or {}).items():
             self.set(name, value)
 
-    @staticmethod
-    def spec(name: str) -> ParamSpec:
+    @classmethod
+    def spec(cls, name: str) -> ParamSpec:
         try:
-            return PARAMS[name]
+            return cls.table[name]
         except KeyError:
-            hint = did_you_mean(name, PARAMS, n=2)
+            hint = did_you_mean(name, cls.table, n=2)
             raise ParamError(f"unknown parameter {name!r}{hint}") from None
 
     def get(self, name: str) -> float:
@@ -317,21 +340,7 @@ class ParamSet:
         return self.get(name)
 
     def set(self, name: str, value: float) -> float:
-        spec = self.spec(name)
-        if isinstance(value, bool) or not isinstance(value, (int, float)):
-            raise ParamError(f"{name}: {value!r} is not a number")
-        if not math.isfinite(value):
-            raise ParamError(f"{name}: {value!r} is not finite")
-        if spec.is_int and value != int(value):
-            raise ParamError(f"{name}: {value!r} must be an integer")
-        # a FLOAT is compared in float32, as it travels: 0.6 sent over MAVLink arrives as
-        # 0.6000000238 and must still pass a bound of 0.6
-        v, lo, hi = (value, spec.lo, spec.hi) if spec.is_int else \
-            (_f32(value), _f32(spec.lo), _f32(spec.hi))
-        if not lo <= v <= hi:
-            unit = f" {spec.unit}" if spec.unit else ""
-            raise ParamError(f"{name}: {value!r}{unit} is outside {_bounds(spec)}")
-        self._values[name] = int(value) if spec.is_int else float(value)
+        self._values[name] = self.spec(name).check(value)
         return self._values[name]
 
     def items(self):

@@ -23,7 +23,6 @@ from ft_sitl.mavlink.vehicle import Vehicle
 PARAM_STREAM_CHUNK = 40
 #: each parameter's PARAM_VALUE index (PARAMS order)
 PARAM_INDEX = {name: k for k, name in enumerate(PARAMS)}
-PARAM_NAMES = list(PARAMS)
 #: the PARAM_SET types whose float carries an integer's bits
 _INT_TYPES = (mav.MAV_PARAM_TYPE_INT32, mav.MAV_PARAM_TYPE_UINT32, mav.MAV_PARAM_TYPE_INT8,
               mav.MAV_PARAM_TYPE_UINT8, mav.MAV_PARAM_TYPE_INT16, mav.MAV_PARAM_TYPE_UINT16)
@@ -53,17 +52,42 @@ def param_name(raw) -> str:
 
 
 class Parameters:
-    """One vehicle's parameters on the wire (the fleet's ParamSet of it)."""
+    """One vehicle's parameters on the wire (the fleet's ParamSet of it), as PX4 answers.
+
+    A face with other parameters (the ArduCopter face) subclasses it with the differences
+    as hooks: :meth:`store` (the ParamSet it serves, whose ``table`` gives names and
+    indices), :meth:`value` (PARAM_VALUE's type and encoding), :meth:`decode` (PARAM_SET's
+    value, None: ignored without an answer), :meth:`unknown` and :meth:`refused` (what a
+    bad set is told)."""
 
     def __init__(self, vehicle: Vehicle):
         self.v = vehicle
+        self.names = list(self.store.table)
+        self.index = {n: k for k, n in enumerate(self.names)}
         # PARAM_REQUEST_LIST answers in progress: (link, peer) -> next index to send
         self._streams: dict[tuple, int] = {}
+
+    @property
+    def store(self):
+        """The ParamSet served: the flight controller's PX4-named parameters."""
+        return self.v.params
 
     def value(self, name: str) -> mav.MAVLink_param_value_message:
         return mav.MAVLink_param_value_message(
             name.encode("ascii"), _param_wire(name, self.v.params[name]), _param_type(name),
             len(PARAMS), PARAM_INDEX[name])
+
+    def decode(self, name: str, m) -> float | None:
+        """PARAM_SET's value for a known ``name`` (integers bytewise)."""
+        return _param_from_wire(name, m.param_value, m.param_type)
+
+    def unknown(self, name: str) -> None:
+        """A PARAM_SET of a name not served: PX4 says so and does not answer."""
+        self.v.cmd.text(cm.Severity.WARNING, f"Param {name[:16]} unknown: not set")
+
+    def refused(self, name: str, exc: ParamError) -> None:
+        """A PARAM_SET the declaration refuses (its value is echoed unchanged after)."""
+        self.v.cmd.text(cm.Severity.WARNING, str(exc)[:50])
 
     def on_request_list(self, m, link, peer, wall_us):
         # all of them, index 0..count-1, to the asker: the first chunk now, the rest from
@@ -75,9 +99,9 @@ class Parameters:
         """The next chunk of every list being streamed."""
         out = []
         for key, start in list(self._streams.items()):
-            stop = min(start + PARAM_STREAM_CHUNK, len(PARAM_NAMES))
-            out.extend(Outgoing(self.value(n), *key) for n in PARAM_NAMES[start:stop])
-            if stop >= len(PARAM_NAMES):
+            stop = min(start + PARAM_STREAM_CHUNK, len(self.names))
+            out.extend(Outgoing(self.value(n), *key) for n in self.names[start:stop])
+            if stop >= len(self.names):
                 del self._streams[key]
             else:
                 self._streams[key] = stop
@@ -85,41 +109,44 @@ class Parameters:
 
     def on_request_read(self, m, link, peer, wall_us):
         if m.param_index >= 0:
-            if m.param_index >= len(PARAM_NAMES):
+            if m.param_index >= len(self.names):
                 return []
-            name = PARAM_NAMES[m.param_index]
+            name = self.names[m.param_index]
         else:
             name = param_name(m.param_id)
-            if name not in PARAMS:
+            if name not in self.index:
                 return []
         return [Outgoing(self.value(name), link, peer)]
 
     def on_set(self, m, link, peer, wall_us):
         name = param_name(m.param_id)
-        if name not in PARAMS:
-            self.v.cmd.text(cm.Severity.WARNING, f"Param {name[:16]} unknown: not set")
+        if name not in self.index:
+            self.unknown(name)
             return []
-        value = _param_from_wire(name, m.param_value, m.param_type)
+        value = self.decode(name, m)
+        if value is None:
+            return []
         try:
             self.set(name, value)
         except ParamError as exc:
-            self.v.cmd.text(cm.Severity.WARNING, str(exc)[:50])
+            self.refused(name, exc)
         return [Outgoing(self.value(name))]
 
     def set(self, name: str, value) -> None:
         """Set one parameter (PARAM_SET, the shell); ParamError refuses it as a whole,
         nothing half-applied."""
-        old = self.v.params[name]
+        store = self.store
+        old = store[name]
         try:
-            self.v.params.set(name, value)
-            if PARAMS[name].honoured:  # a stored parameter changes nothing to rebuild
+            store.set(name, value)
+            if store.spec(name).honoured:  # a stored parameter changes nothing to rebuild
                 self.v.fleet.refresh_params()
         except ParamError:
-            self.v.params.set(name, old)
+            store.set(name, old)
             self.v.fleet.refresh_params()
             raise
 
     def file(self) -> bytes:
         """The parameter file FTP serves (QGroundControl's format)."""
         return files.params_file(self.v.sysid, COMPID, [
-            (n, self.v.params[n], _param_type(n)) for n in PARAM_NAMES])
+            (n, self.v.params[n], _param_type(n)) for n in self.names])

@@ -15,34 +15,33 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 
-from ft_sitl.autopilot.params import ParamError, ParamSet
-from ft_sitl.config import did_you_mean
+from ft_sitl.autopilot.params import ParamError, ParamSet, ParamSpec
 
 #: ArduPilot's parameter types (MAV_PARAM_TYPE) by name
 INT8, INT16, INT32, FLOAT = 2, 4, 6, 9
 
 
 @dataclass(frozen=True)
-class ApParam:
-    """One ArduCopter parameter; ``px4``/``scale``: the PX4-named parameter it sets, as
-    value * scale (None: stored, or honoured as a group)."""
+class ApParam(ParamSpec):
+    """One ArduCopter parameter: the flight controller's declaration (name, default,
+    bounds, unit, doc, is_int, honoured) with ArduPilot's wire type ``ptype`` and
+    ``px4``/``scale``: the PX4-named parameter it sets, as value * scale (None: stored, or
+    honoured as a group)."""
 
-    name: str
-    default: float
-    lo: float
-    hi: float
-    unit: str
-    doc: str
     ptype: int = FLOAT
     px4: str | None = None
     scale: float = 1.0
 
-    @property
-    def is_int(self) -> bool:
-        return self.ptype != FLOAT
+
+def _P(name: str, default: float, lo: float, hi: float, unit: str, doc: str,
+       ptype: int = FLOAT, *, px4: str | None = None, scale: float = 1.0) -> ApParam:
+    """One declaration: honoured when it sets a PX4 parameter or is one of the fence's
+    group (FENCE_*), stored otherwise."""
+    return ApParam(name, default, lo, hi, unit, doc, is_int=ptype != FLOAT,
+                   honoured=px4 is not None or name.startswith("FENCE_"), group="ArduCopter",
+                   ptype=ptype, px4=px4, scale=scale)
 
 
-_P = ApParam
 _SPECS = [
     # --- waypoint navigation (libraries/AC_WPNav/AC_WPNav.cpp) ------------------------
     _P("WPNAV_SPEED", 1000, 10, 2000, "cm/s", "horizontal speed of waypoints and GUIDED "
@@ -144,60 +143,39 @@ def fence_px4(v: dict[str, float]) -> dict[str, float]:
             "GF_ACTION": _FENCE_ACTIONS[int(v["FENCE_ACTION"])]}
 
 
-def _bounds(s: ApParam) -> str:
-    unit = f" {s.unit}" if s.unit else ""
-    return f"[{s.lo:g}, {s.hi:g}]{unit}"
-
-
-class ApParamSet:
+class ApParamSet(ParamSet):
     """One vehicle's ArduCopter parameters over its PX4-named ``px4`` ParamSet: the
     honoured ones are written through, so the controller flies what they say."""
 
+    table = AP_PARAMS
+
     def __init__(self, px4: ParamSet, sysid: int):
+        super().__init__()
         self.px4 = px4
         #: counts the sets (the streams re-read SRn_* when it moves)
         self.version = 0
-        self._values = {n: s.default for n, s in AP_PARAMS.items()}
         self._values["SYSID_THISMAV"] = sysid
         for name, s in AP_PARAMS.items():
             if s.px4 is not None:
                 self._write_px4({s.px4: s.default * s.scale}, name, s.default)
         self._write_px4(fence_px4(self._values), "FENCE_ENABLE", self._values["FENCE_ENABLE"])
 
-    @staticmethod
-    def spec(name: str) -> ApParam:
-        try:
-            return AP_PARAMS[name]
-        except KeyError:
-            raise ParamError(f"unknown parameter {name!r}"
-                             f"{did_you_mean(name, AP_PARAMS, n=2)}") from None
-
-    def __getitem__(self, name: str) -> float:
-        self.spec(name)
-        return self._values[name]
-
-    def honoured(self, name: str) -> bool:
-        return AP_PARAMS[name].px4 is not None or name.startswith("FENCE_")
-
     def set(self, name: str, value: float) -> float:
         """Set one parameter, writing through to the controller: ParamError (nothing
         changed) for an unknown name, a value outside the declared range or one the
-        controller's parameter refuses."""
+        controller's parameter refuses. An integer parameter's value is rounded first, as
+        ArduPilot stores it."""
         s = self.spec(name)
-        if isinstance(value, bool) or not isinstance(value, (int, float)) or \
-                not math.isfinite(value):
-            raise ParamError(f"{name}: {value!r} is not a finite number")
-        if s.is_int:
-            value = round(value)  # ArduPilot stores an integer parameter's float rounded
-        if not s.lo <= value <= s.hi:
-            raise ParamError(f"{name}: {value:g} is outside {_bounds(s)}")
+        if s.is_int and isinstance(value, float) and math.isfinite(value):
+            value = round(value)
+        value = s.check(value)
         if s.px4 is not None:
             self._write_px4({s.px4: value * s.scale}, name, value)
         elif name.startswith("FENCE_"):
             self._write_px4(fence_px4({**self._values, name: value}), name, value)
-        self._values[name] = int(value) if s.is_int else float(value)
+        self._values[name] = value
         self.version += 1
-        return self._values[name]
+        return value
 
     def _write_px4(self, values: dict[str, float], name: str, value: float) -> None:
         old = {k: self.px4[k] for k in values}
@@ -209,6 +187,3 @@ class ApParamSet:
                 self.px4.set(k, v)
             raise ParamError(f"{name}: {value:g} is outside what ft-sitl flies ({exc})") \
                 from None
-
-    def items(self):
-        return self._values.items()
