@@ -14,13 +14,15 @@ from __future__ import annotations
 
 import math
 
+import numpy as np
 from pymavlink.dialects.v20 import ardupilotmega as apm
 
 from ft_sitl.autopilot import commander as cm
 from ft_sitl.autopilot.commander import MissionItem, Result
 from ft_sitl.autopilot.mission import CMD_DO_JUMP, CMD_NAV_WAYPOINT
+from ft_sitl.mavlink.ardupilot import guided
 from ft_sitl.mavlink.mission import MissionProtocol
-from ft_sitl.mavlink.mission_items import MissionItems, deg_e7
+from ft_sitl.mavlink.mission_items import GLOBAL_FRAMES, MissionItems, deg_e7
 from ft_sitl.mavlink.outgoing import Outgoing
 
 _MISSION = apm.MAV_MISSION_TYPE_MISSION
@@ -75,6 +77,42 @@ class ArduCopterMission(MissionProtocol):
         """The mission as a download returns it (item 0: home now; only home when no
         mission is loaded)."""
         return self._download(_MISSION)
+
+    def _request_item(self, seq: int) -> Outgoing:
+        """ArduPilot asks for each uploaded item with MISSION_REQUEST (either item message
+        answers it; MissionItemProtocol::queued_request_send): DroneKit answers no other."""
+        out = super()._request_item(seq)
+        r = out.msg
+        return Outgoing(apm.MAVLink_mission_request_message(
+            r.target_system, r.target_component, r.seq, r.mission_type), out.link, out.peer)
+
+    def on_item(self, m, link, peer, wall_us):
+        if m.current not in (2, 3):
+            return super().on_item(m, link, peer, wall_us)
+        x, y = (deg_e7(m.x), deg_e7(m.y)) if m.frame in GLOBAL_FRAMES else (0, 0)
+        return [self._guided_request(apm.MAVLink_mission_item_int_message(
+            m.target_system, m.target_component, m.seq, m.frame, m.command, m.current,
+            m.autocontinue, m.param1, m.param2, m.param3, m.param4, x, y, m.z), m, link, peer)]
+
+    def on_item_int(self, m, link, peer, wall_us):
+        if m.current not in (2, 3):
+            return super().on_item_int(m, link, peer, wall_us)
+        return [self._guided_request(m, m, link, peer)]
+
+    def _guided_request(self, it, m, link, peer) -> Outgoing:
+        """A mission item with current 2 (go there) or 3 (change altitude) is GUIDED's
+        request, not an upload (GCS_MAVLINK::handle_mission_item): MISSION_ACK ACCEPTED,
+        or ERROR outside GUIDED or when the vehicle cannot go (:mod:`.guided`)."""
+        try:
+            pos = np.array(self.items.position(it), dtype=float)
+        except ValueError:
+            ok = False
+        else:
+            ok = guided.guided_destination(self.v, pos) if it.current == 2 else \
+                guided.guided_altitude(self.v, pos[2])
+        return Outgoing(apm.MAVLink_mission_ack_message(
+            m.get_srcSystem(), m.get_srcComponent(),
+            apm.MAV_MISSION_ACCEPTED if ok else apm.MAV_MISSION_ERROR, _MISSION), link, peer)
 
     def _current_seq(self) -> int:
         return self.v.cmd.mission_seq + 1 if self.v.cmd.mission else -1
