@@ -24,6 +24,16 @@ CAPABILITIES = (
 )
 #: the ArduCopter release this face answers as (flight_sw_version 4.5.7, official)
 VERSION = (4, 5, 7)
+#: EKF_STATUS_REPORT's flags of a healthy EKF3 with GPS: attitude, horizontal and vertical
+#: velocity, relative and absolute horizontal position, absolute vertical position, and
+#: the predicted horizontal positions (EKF_STATUS_FLAGS); DroneKit's is_armable reads
+#: EKF_PRED_POS_HORIZ_ABS
+EKF_HEALTHY = (apm.EKF_ATTITUDE | apm.EKF_VELOCITY_HORIZ | apm.EKF_VELOCITY_VERT
+               | apm.EKF_POS_HORIZ_REL | apm.EKF_POS_HORIZ_ABS | apm.EKF_POS_VERT_ABS
+               | apm.EKF_PRED_POS_HORIZ_REL | apm.EKF_PRED_POS_HORIZ_ABS)
+#: the innovation test ratios reported (0: perfect, 1: at the rejection gate): the
+#: estimator stage models no filter, so a small constant
+EKF_TEST_RATIO = 0.01
 
 
 class ArduCopterTelemetry(Telemetry):
@@ -55,6 +65,16 @@ class ArduCopterTelemetry(Telemetry):
         return apm.MAVLink_autopilot_version_message(
             CAPABILITIES, (major << 24) | (minor << 16) | (patch << 8) | 255, 0, 0, 0,
             [0] * 8, [0] * 8, [0] * 8, 0, 0, 0x46540000 + self.v.sysid, [0] * 18)
+
+    def build(self, msg_id: int):
+        if msg_id == apm.MAVLINK_MSG_ID_EKF_STATUS_REPORT:
+            return self.ekf_status_report()
+        return super().build(msg_id)
+
+    def ekf_status_report(self) -> apm.MAVLink_ekf_status_report_message:
+        """EKF_STATUS_REPORT as a healthy EKF3 sends it (AP_NavEKF3's send_status_report)."""
+        r = EKF_TEST_RATIO
+        return apm.MAVLink_ekf_status_report_message(EKF_HEALTHY, r, r, r, r, 0.0, 0.0)
 
     def item_reached(self, seq: int) -> apm.MAVLink_mission_item_reached_message:
         return apm.MAVLink_mission_item_reached_message(seq + 1)  # (home is item 0)
