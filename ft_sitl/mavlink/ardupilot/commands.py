@@ -1,7 +1,8 @@
 """The commands ArduCopter answers differently from PX4: arming (its force value, its
 "PreArm:" and "Arm:" texts, FAILED), DO_SET_MODE with ArduCopter's mode numbers,
 NAV_TAKEOFF in GUIDED (param7 above home), NAV_LAND / NAV_RETURN_TO_LAUNCH / MISSION_START
-as mode changes (ArduCopter/GCS_Mavlink.cpp). The rest is the PX4 face's table."""
+as mode changes, DO_CHANGE_SPEED, and GUIDED's heading (CONDITION_YAW, DO_SET_ROI:
+:mod:`.guided`) (ArduCopter/GCS_Mavlink.cpp). The rest is the PX4 face's table."""
 
 from __future__ import annotations
 
@@ -10,20 +11,14 @@ import math
 from pymavlink.dialects.v20 import ardupilotmega as apm
 
 from ft_sitl.autopilot import commander as cm
-from ft_sitl.autopilot.arming import arming_denial
 from ft_sitl.autopilot.commander import Result
 from ft_sitl.autopilot.params import ParamError
-from ft_sitl.mavlink.ardupilot import modes
+from ft_sitl.mavlink.ardupilot import guided, modes
+from ft_sitl.mavlink.ardupilot.prearm import refusals
 from ft_sitl.mavlink.commands import HANDLERS, CommandArgs, Commands
 
 #: ArduPilot's param2 values that force arming (AP_Arming) and disarming in flight
 FORCE_ARM, FORCE_DISARM = 2989, 21196
-
-
-def prearm_text(denial: str) -> str:
-    """A PX4-worded arming denial as ArduCopter words a failed pre-arm check."""
-    reason = denial.split(": ", 1)[-1]
-    return f"PreArm: {reason[:1].upper()}{reason[1:]}"
 
 
 class ArduCopterCommands(Commands):
@@ -40,13 +35,11 @@ class ArduCopterCommands(Commands):
         if c.armed:
             return Result.ACCEPTED, []
         force = math.isfinite(p[1]) and round(p[1]) == FORCE_ARM
-        if not force:
-            if self.v.modes.number not in modes.ARMABLE:
-                c.text(cm.Severity.CRITICAL, "Arm: Mode not armable")
-                return Result.FAILED, []
-            denial = arming_denial(c)
-            if denial:
-                c.text(cm.Severity.CRITICAL, prearm_text(denial))
+        if not force:  # ArduCopter's checks (.prearm), each failure's text
+            texts = refusals(self.v)
+            for text in texts:
+                c.text(cm.Severity.CRITICAL, text)
+            if texts:
                 return Result.FAILED, []
         c.arm(force=True)  # (checked above, ArduCopter's way)
         return Result.ACCEPTED, []
@@ -89,6 +82,32 @@ class ArduCopterCommands(Commands):
         self.v.fleet.refresh_params()
         return Result.ACCEPTED, []
 
+    def _change_speed(self, a: CommandArgs):
+        """MAV_CMD_DO_CHANGE_SPEED: param2 > 0 m/s sets the horizontal speed of GUIDED's
+        destinations and AUTO's legs (param1 0 air or 1 ground speed alike, as Copter
+        reads them); FAILED otherwise. param1 2/3 (climb/descent speed) are not modelled:
+        UNSUPPORTED."""
+        kind, speed = a.p[0], a.p[1]
+        if not (math.isfinite(speed) and speed > 0):
+            return Result.FAILED, []
+        if math.isfinite(kind) and kind > 1.9:
+            return Result.UNSUPPORTED, []
+        return self.v.cmd.change_speed(speed), []
+
+    def _condition_yaw(self, a: CommandArgs):
+        p = a.p
+        return guided.condition_yaw(self.v, p[0], p[2], p[3]), []
+
+    def _set_roi(self, a: CommandArgs):
+        """DO_SET_ROI / DO_SET_ROI_LOCATION: param5..7 the point (COMMAND_LONG's altitude
+        above home, as ArduPilot converts it); all three 0 clears it."""
+        lat, lon = a.lat_lon()
+        if lat == 0 and lon == 0 and a.p[6] == 0:
+            return guided.set_roi(self.v, None), []
+        if not (math.isfinite(lat) and math.isfinite(lon)):
+            return Result.FAILED, []
+        return guided.set_roi(self.v, self.v.geo.to_local(lat, lon, self.v.geo.alt_m)), []
+
     def _mission_start(self, a: CommandArgs):
         c, p = self.v.cmd, a.p
         if not c.mission:
@@ -107,4 +126,8 @@ ArduCopterCommands.handlers = {
     apm.MAV_CMD_NAV_RETURN_TO_LAUNCH: ArduCopterCommands._return_to_launch,
     apm.MAV_CMD_MISSION_START: ArduCopterCommands._mission_start,
     apm.MAV_CMD_DO_FENCE_ENABLE: ArduCopterCommands._fence_enable,
+    apm.MAV_CMD_DO_CHANGE_SPEED: ArduCopterCommands._change_speed,
+    apm.MAV_CMD_CONDITION_YAW: ArduCopterCommands._condition_yaw,
+    apm.MAV_CMD_DO_SET_ROI: ArduCopterCommands._set_roi,
+    apm.MAV_CMD_DO_SET_ROI_LOCATION: ArduCopterCommands._set_roi,
 }

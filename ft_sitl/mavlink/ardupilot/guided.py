@@ -16,6 +16,7 @@ from pymavlink.dialects.v20 import ardupilotmega as apm
 
 from ft_sitl import frames
 from ft_sitl.autopilot import commander as cm
+from ft_sitl.autopilot.commander import Result
 from ft_sitl.mavlink.offboard import Offboard
 from ft_sitl.mavlink.receiver import Receiver
 
@@ -122,3 +123,78 @@ class ArduCopterReceiver(Receiver):
             return []
         self.v.modes.set(int(m.custom_mode))
         return []
+
+
+
+def _holding(c: cm.Commander) -> bool:
+    """The commander flies GUIDED's hold or destination (not a take-off or setpoints)."""
+    return (c.main_mode, c.sub_mode) == (cm.MAIN_AUTO, cm.SUB_LOITER) and \
+        c.auto.nav.target is not None
+
+
+def _turn(v, yaw_enu: float) -> None:
+    """Hold or fly GUIDED's destination facing ``yaw_enu`` (ArduCopter's auto_yaw in a
+    fixed heading); nothing outside GUIDED's hold and destinations."""
+    c = v.cmd
+    if v.modes.in_guided and _holding(c):
+        c.auto.nav.yaw = math.atan2(math.sin(yaw_enu), math.cos(yaw_enu))
+
+
+def condition_yaw(v, heading_deg: float, direction: float, relative: float) -> Result:
+    """MAV_CMD_CONDITION_YAW as Copter takes it (GCS_Mavlink.cpp, AutoYaw::set_fixed_yaw):
+    param1 0..360 degrees, param4 0 (from north) or 1 (an offset from the heading held,
+    clockwise unless param3 is negative); anything else FAILED. It turns GUIDED's hold
+    or destination; a later GUIDED target without a yaw ends it (ModeGuided::set_yaw_state),
+    as in ArduCopter."""
+    if not (math.isfinite(heading_deg) and 0.0 <= heading_deg <= 360.0) or \
+            relative not in (0.0, 1.0):
+        return Result.FAILED
+    c = v.cmd
+    if relative:
+        held = c.auto.nav.yaw if _holding(c) and math.isfinite(c.auto.nav.yaw) \
+            else c.yaw_now()
+        sign = -1.0 if math.isfinite(direction) and direction < 0 else 1.0
+        yaw = held - sign * math.radians(heading_deg)  # (ENU yaw grows anticlockwise)
+    else:
+        yaw = frames.yaw_ned_to_enu(math.radians(heading_deg))
+    _turn(v, yaw)
+    return Result.ACCEPTED
+
+
+def set_roi(v, roi_enu: np.ndarray | None) -> Result:
+    """MAV_CMD_DO_SET_ROI / DO_SET_ROI_LOCATION (GCS_MAVLINK_Copter::
+    handle_command_do_set_roi): GUIDED's hold faces the point (horizontally); None (a ROI of
+    0, 0, 0) returns to the default heading, which a hold keeps as it is."""
+    if roi_enu is None:
+        return Result.ACCEPTED
+    if not np.all(np.isfinite(roi_enu[:2])):
+        return Result.FAILED
+    c = v.cmd
+    where = c.auto.nav.target if _holding(c) else c.position_now()
+    d = np.asarray(roi_enu, dtype=float)[:2] - where[:2]
+    if float(np.hypot(*d)) > 0.1:  # (right above it: any heading faces it)
+        _turn(v, math.atan2(d[1], d[0]))
+    return Result.ACCEPTED
+
+
+def guided_destination(v, target_enu: np.ndarray) -> bool:
+    """ArduCopter's guided request (a MISSION_ITEM with current 2, as DroneKit's simple_goto
+    and MAVProxy's 'guided' send it; GCS_MAVLINK::handle_guided_request): in GUIDED, fly to
+    the point and hold there (NaN altitude: the altitude now); False outside GUIDED or when
+    the vehicle cannot go (not flying)."""
+    if not v.modes.in_guided or not np.all(np.isfinite(target_enu[:2])):
+        return False
+    return v.cmd.reposition(np.asarray(target_enu, dtype=float)) == Result.ACCEPTED
+
+
+def guided_altitude(v, alt_local: float) -> bool:
+    """ArduCopter's change-altitude request (a MISSION_ITEM with current 3): in GUIDED,
+    the destination or hold keeps its position and heading and takes this altitude (local
+    z)."""
+    c = v.cmd
+    if not v.modes.in_guided or not math.isfinite(alt_local):
+        return False
+    target = c.auto.nav.target.copy() if _holding(c) else c.position_now()
+    target[2] = alt_local
+    return c.reposition(target, c.auto.nav.yaw if _holding(c) else math.nan) == \
+        Result.ACCEPTED
