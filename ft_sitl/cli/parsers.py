@@ -159,6 +159,11 @@ def build_parser() -> argparse.ArgumentParser:
     sitl.add_argument("--mission", type=Path, metavar="FILE",
                       help="with --autopilot ardupilot: load this QGC WPL 110 .waypoints "
                            "file into every vehicle at start, as an upload (item 0 home)")
+    sitl.add_argument("--defaults", metavar="FILE[,FILE]",
+                      help="with --autopilot ardupilot: set the parameters of these .parm "
+                           "files (NAME VALUE or NAME,VALUE lines, # comments; later files "
+                           "win) in every vehicle at start, as ArduPilot SITL's --defaults; "
+                           "an unknown name or out-of-range value is refused")
     sitl.add_argument("--mission-out", type=Path, metavar="FILE",
                       help="with --autopilot ardupilot: on stopping, write vehicle 1's "
                            "mission (as a download reads it, home at 0) as QGC WPL 110")
