@@ -22,7 +22,7 @@ from ft_sitl.cli.common import (
     wind_option,
 )
 from ft_sitl.frames import PX4_SITL_HOME, GeoReference, enu_to_ned, yaw_enu_to_ned
-from ft_sitl.mavlink.ardupilot import waypoints
+from ft_sitl.mavlink.ardupilot import parm, waypoints
 from ft_sitl.mavlink.ardupilot.server import (
     ArduPilotServer,
     parse_out,
@@ -174,8 +174,9 @@ def _serve(args, geo, loopback, p, scenario, spawn, fleet, wind, estimator, actu
         kwargs = {}
         if args.autopilot == "ardupilot":
             kwargs["outs"] = [parse_out(o) for o in args.out]
-        elif args.out or args.mission or args.mission_out:
-            what = "--out" if args.out else "--mission" if args.mission else "--mission-out"
+        elif args.out or args.mission or args.mission_out or args.defaults:
+            what = "--out" if args.out else "--mission" if args.mission else \
+                "--mission-out" if args.mission_out else "--defaults"
             raise ValueError(f"{what}: only with --autopilot ardupilot (the PX4 face "
                              f"takes missions over the mission protocol)")
         server_class = ArduPilotServer if args.autopilot == "ardupilot" else SitlServer
@@ -183,12 +184,18 @@ def _serve(args, geo, loopback, p, scenario, spawn, fleet, wind, estimator, actu
                               tlog=args.tlog, signing_key=args.signing_key,
                               base_instance=args.instance, pace=args.pace,
                               pace_span_s=args.pace_span, **kwargs)
+        if args.defaults is not None:  # (ArduPilot SITL's spelling: FILE[,FILE])
+            settings = parm.read_all(args.defaults)
+            for agent in server.agents:
+                parm.apply(settings, agent.parameters)
         if args.mission is not None:
             items = waypoints.read(args.mission)
             for agent in server.agents:
                 agent.mission.load(items)
     except waypoints.WaypointsError as exc:
         raise CliError(f"--mission: {exc}") from None
+    except parm.ParmError as exc:
+        raise CliError(f"--defaults: {exc}") from None
     except (ValueError, OSError) as exc:
         raise CliError(str(exc)) from None
     urls = server.urls()

@@ -14,6 +14,7 @@ from pymavlink.dialects.v20 import ardupilotmega as apm
 
 from ft_sitl.autopilot import commander as cm
 from ft_sitl.autopilot.params import ParamError
+from ft_sitl.mavlink.ardupilot import parm
 from ft_sitl.mavlink.ardupilot.params import AP_PARAMS, ApParamSet
 from ft_sitl.mavlink.parameters import Parameters
 
@@ -41,5 +42,5 @@ class ArduCopterParameters(Parameters):
         self.v.cmd.text(cm.Severity.INFO, str(exc))
 
     def file(self) -> bytes:
-        """The parameters as a MAVProxy/Mission Planner .parm file (NAME,VALUE lines)."""
-        return "".join(f"{n},{v:g}\n" for n, v in self.store.items()).encode()
+        """The parameters as a .parm file (:mod:`.parm`, MAVProxy's layout)."""
+        return parm.format_parm(self.store.items()).encode()
