@@ -10,6 +10,10 @@ change its mode.
 
 from __future__ import annotations
 
+from collections.abc import Callable
+
+import numpy as np
+
 from ft_sitl.autopilot import commander as cm
 from ft_sitl.autopilot.commander import Result
 
@@ -57,16 +61,22 @@ FROM_COMMANDER = {
 #: the modes arming is allowed in (ArduCopter's Mode::allows_arming: not AUTO, RTL, LAND,
 #: BRAKE, ...)
 ARMABLE = (STABILIZE, ACRO, ALT_HOLD, GUIDED, LOITER, POSHOLD)
+#: the modes that need a position estimate (Mode::requires_position)
+NEEDS_POSITION = (AUTO, GUIDED, LOITER, RTL, CIRCLE, POSHOLD, BRAKE, SMART_RTL)
+#: the modes whose throttle is the pilot's own (Mode::has_manual_throttle)
+MANUAL_THROTTLE = (STABILIZE, ACRO)
 #: the modes whose HEARTBEAT carries MAV_MODE_FLAG_GUIDED_ENABLED (ArduCopter's
 #: GCS_MAVLINK_Copter::base_mode)
 GUIDED_FLAG_MODES = (AUTO, GUIDED, LOITER, RTL, CIRCLE, POSHOLD, BRAKE, SMART_RTL)
 
 
 class FlightModes:
-    """The ArduCopter mode of one vehicle over its commander (``cmd``)."""
+    """The ArduCopter mode of one vehicle over its commander (``cmd``); ``velocity``
+    gives the vehicle's ENU velocity (m/s) now, for BRAKE's stopping point."""
 
-    def __init__(self, cmd: cm.Commander):
+    def __init__(self, cmd: cm.Commander, velocity: Callable[[], np.ndarray] | None = None):
         self.cmd = cmd
+        self.velocity = velocity
         self._chosen = FROM_COMMANDER.get((cmd.main_mode, cmd.sub_mode), LOITER)
 
     @property
@@ -101,8 +111,24 @@ class FlightModes:
         if (self.cmd.main_mode, self.cmd.sub_mode) == (main, sub) and \
                 (main, sub) == (_A, cm.SUB_LOITER):
             self.cmd.auto.hold_here()  # GUIDED/BRAKE entered from another hold: stop here
+        if number == BRAKE:
+            self._brake()
         self._chosen = number
         return Result.ACCEPTED
+
+    def _brake(self) -> None:
+        """BRAKE (mode_brake.cpp): stop as fast as the horizontal acceleration limit
+        allows and hold where the vehicle comes to rest (the point v|v| / 2a ahead), at
+        the altitude it had."""
+        nav = self.cmd.auto.nav
+        if self.velocity is None or nav.target is None:
+            return
+        v = np.asarray(self.velocity(), dtype=float)
+        acc = self.cmd.params["MPC_ACC_HOR_MAX"]
+        if not np.all(np.isfinite(v)) or acc <= 0:
+            return
+        nav.target = nav.target.copy()
+        nav.target[:2] += v[:2] * float(np.linalg.norm(v[:2])) / (2.0 * acc)
 
     def chose(self, number: int) -> None:
         """The commander was put in ``number``'s behaviour by a command (take-off, land)."""

@@ -127,6 +127,50 @@ _SPECS += [
     for n in range(STREAM_PORTS) for g in STREAM_GROUPS
 ]
 
+# --- RC input (libraries/RC_Channel: RCMAP_*, RC_OVERRIDE_TIME, RCn_*), read by .rc ---
+_SPECS += [
+    _P("RCMAP_ROLL", 1, 1, 16, "", "the roll channel", INT8),
+    _P("RCMAP_PITCH", 2, 1, 16, "", "the pitch channel", INT8),
+    _P("RCMAP_THROTTLE", 3, 1, 16, "", "the throttle channel", INT8),
+    _P("RCMAP_YAW", 4, 1, 16, "", "the yaw channel", INT8),
+    _P("RC_OVERRIDE_TIME", 3.0, -1.0, 120.0, "s", "RC_CHANNELS_OVERRIDE's timeout per "
+       "channel (0: overrides off, -1: never times out)"),
+]
+#: ArduCopter's default dead zones of the channels RCMAP points at (Copter::init_rc_in)
+_RC_DZ = {1: 20, 2: 20, 3: 30, 4: 20}
+for _n in range(1, 17):
+    _SPECS += [
+        _P(f"RC{_n}_MIN", 1100, 800, 2200, "PWM", f"channel {_n}'s lowest value", INT16),
+        _P(f"RC{_n}_TRIM", 1500, 800, 2200, "PWM", f"channel {_n}'s centre", INT16),
+        _P(f"RC{_n}_MAX", 1900, 800, 2200, "PWM", f"channel {_n}'s highest value", INT16),
+        _P(f"RC{_n}_DZ", _RC_DZ.get(_n, 0), 0, 200, "PWM", f"channel {_n}'s dead zone "
+           "around its trim (the throttle's: above its minimum)", INT16),
+    ]
+# --- failsafes (ArduCopter/Parameters.cpp, AP_BattMonitor_Params.cpp), read by .failsafe
+_SPECS += [
+    _P("FS_GCS_ENABLE", 0, 0, 7, "", "GCS failsafe action: 0 off, 1 RTL, 2 RTL (AUTO "
+       "continues), 3 SmartRTL or RTL, 4 SmartRTL or land, 5 land, 6 DO_LAND_START or RTL, "
+       "7 brake or land (ft-sitl: SmartRTL and DO_LAND_START fall back to RTL)", INT8),
+    _P("FS_GCS_TIMEOUT", 5.0, 2.0, 120.0, "s", "silence of the ground station (SYSID_MYGCS) "
+       "before the GCS failsafe"),
+    _P("FS_OPTIONS", 0, 0, 63, "", "failsafe options (bitmask): 2 GCS failsafe continues "
+       "AUTO, 8 any failsafe continues a landing, 16 GCS failsafe continues pilot modes",
+       INT32),
+    _P("BATT_CAPACITY", 3300, 0, 1000000, "mAh", "battery capacity (ft-sitl: the model's "
+       "charge fraction in these units)", INT32),
+    _P("BATT_LOW_VOLT", 10.5, 0.0, 100.0, "V", "low battery voltage (0: off), held for "
+       "BATT_LOW_TIMER"),
+    _P("BATT_LOW_TIMER", 10, 0, 120, "s", "time below a voltage threshold before its "
+       "failsafe", INT8),
+    _P("BATT_LOW_MAH", 0, 0, 1000000, "mAh", "low remaining capacity (0: off)", INT32),
+    _P("BATT_CRT_VOLT", 0.0, 0.0, 100.0, "V", "critical battery voltage (0: off)"),
+    _P("BATT_CRT_MAH", 0, 0, 1000000, "mAh", "critical remaining capacity (0: off)", INT32),
+    _P("BATT_FS_LOW_ACT", 0, 0, 7, "", "low battery action: 0 none, 1 land, 2 RTL, "
+       "3 SmartRTL or RTL, 4 SmartRTL or land, 5 terminate, 6 DO_LAND_START or RTL, 7 brake "
+       "or land", INT8),
+    _P("BATT_FS_CRT_ACT", 0, 0, 7, "", "critical battery action (as BATT_FS_LOW_ACT)", INT8),
+]
+
 #: every ArduCopter parameter this face serves, in PARAM_VALUE index order
 AP_PARAMS: dict[str, ApParam] = {s.name: s for s in _SPECS}
 #: FENCE_ACTION -> GF_ACTION (PX4: 1 warning, 2 hold, 3 return, 5 land)
