@@ -11,20 +11,14 @@ import math
 from pymavlink.dialects.v20 import ardupilotmega as apm
 
 from ft_sitl.autopilot import commander as cm
-from ft_sitl.autopilot.arming import arming_denial
 from ft_sitl.autopilot.commander import Result
 from ft_sitl.autopilot.params import ParamError
 from ft_sitl.mavlink.ardupilot import guided, modes
+from ft_sitl.mavlink.ardupilot.prearm import refusals
 from ft_sitl.mavlink.commands import HANDLERS, CommandArgs, Commands
 
 #: ArduPilot's param2 values that force arming (AP_Arming) and disarming in flight
 FORCE_ARM, FORCE_DISARM = 2989, 21196
-
-
-def prearm_text(denial: str) -> str:
-    """A PX4-worded arming denial as ArduCopter words a failed pre-arm check."""
-    reason = denial.split(": ", 1)[-1]
-    return f"PreArm: {reason[:1].upper()}{reason[1:]}"
 
 
 class ArduCopterCommands(Commands):
@@ -41,13 +35,11 @@ class ArduCopterCommands(Commands):
         if c.armed:
             return Result.ACCEPTED, []
         force = math.isfinite(p[1]) and round(p[1]) == FORCE_ARM
-        if not force:
-            if self.v.modes.number not in modes.ARMABLE:
-                c.text(cm.Severity.CRITICAL, "Arm: Mode not armable")
-                return Result.FAILED, []
-            denial = arming_denial(c)
-            if denial:
-                c.text(cm.Severity.CRITICAL, prearm_text(denial))
+        if not force:  # ArduCopter's checks (.prearm), each failure's text
+            texts = refusals(self.v)
+            for text in texts:
+                c.text(cm.Severity.CRITICAL, text)
+            if texts:
                 return Result.FAILED, []
         c.arm(force=True)  # (checked above, ArduCopter's way)
         return Result.ACCEPTED, []
