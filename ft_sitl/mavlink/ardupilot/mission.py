@@ -45,6 +45,21 @@ class ArduCopterMissionItems(MissionItems):
         return super().to_mission_item(it)
 
 
+def _as_float(it):
+    """A MISSION_ITEM_INT as the MISSION_ITEM carrying the same item (degrees; metres in
+    LOCAL_NED)."""
+    if it.frame in GLOBAL_FRAMES:
+        x, y = it.x * 1e-7, it.y * 1e-7
+    elif it.frame == apm.MAV_FRAME_LOCAL_NED:
+        x, y = it.x * 1e-4, it.y * 1e-4
+    else:
+        x, y = float(it.x), float(it.y)
+    return apm.MAVLink_mission_item_message(
+        it.target_system, it.target_component, it.seq, it.frame, it.command, it.current,
+        it.autocontinue, it.param1, it.param2, it.param3, it.param4, x, y, it.z,
+        it.mission_type)
+
+
 class ArduCopterMission(MissionProtocol):
     """One vehicle's mission protocol with home at sequence 0 of the mission list."""
 
@@ -85,6 +100,16 @@ class ArduCopterMission(MissionProtocol):
         r = out.msg
         return Outgoing(apm.MAVLink_mission_request_message(
             r.target_system, r.target_component, r.seq, r.mission_type), out.link, out.peer)
+
+    def on_request(self, m, link, peer, wall_us):
+        """A download's MISSION_REQUEST is answered with MISSION_ITEM (degrees as floats),
+        MISSION_REQUEST_INT with MISSION_ITEM_INT, as ArduPilot answers each
+        (GCS_MAVLINK::handle_mission_request): DroneKit reads what it asked for."""
+        out = super().on_request(m, link, peer, wall_us)
+        if m.get_type() != "MISSION_REQUEST":
+            return out
+        return [Outgoing(_as_float(o.msg), o.link, o.peer)
+                if o.msg.get_type() == "MISSION_ITEM_INT" else o for o in out]
 
     def on_item(self, m, link, peer, wall_us):
         if m.current not in (2, 3):
