@@ -16,6 +16,7 @@ from ft_sitl import numeric_env
 from ft_sitl.autopilot.params import DEFAULT_GAINS, GAIN_MODES
 from ft_sitl.bus.options import parse_broker_url
 from ft_sitl.cli.common import CliError, option_value
+from ft_sitl.mavlink.autopilots import DEFAULT_AUTOPILOT
 from ft_sitl.missions.campaign import (
     GRID_CACHE_DIR,
     DaskExecutor,
@@ -195,8 +196,12 @@ def cmd_campaign_run(args) -> int:
     executor = _executor(args)
     out = Path(args.out)
     try:
+        if args.autopilot != DEFAULT_AUTOPILOT and args.transport != "mavlink":
+            raise CliError(f"--autopilot {args.autopilot}: only with --transport mavlink "
+                           "(in-process trials have no MAVLink face)")
         transport = mavlink_transport(args.transport, args.speed_factor, args.mqtt,
-                                      lockstep=not args.free_running)
+                                      lockstep=not args.free_running,
+                                      autopilot=args.autopilot)
         if transport.kind == "mavlink":  # each trial's navigator flies as a MAVSDK client
             require_mavsdk()
     except (CampaignError, NavigateError) as exc:

@@ -14,6 +14,7 @@ from pathlib import Path
 from ft_sitl import __version__, numeric_env
 from ft_sitl.bridge import ARDUPILOT_DEFAULT_PORT
 from ft_sitl.cli.common import CliError, number
+from ft_sitl.mavlink.autopilots import AUTOPILOTS, DEFAULT_AUTOPILOT
 from ft_sitl.navigation.base import LIMITS  # numpy and the setpoint type: cheap too
 from ft_sitl.physics.platform import CATEGORIES  # loaded by cli.common anyway
 from ft_sitl.scenarios.render import DEFAULT_DPI  # numpy only: cheap at start-up
@@ -149,7 +150,7 @@ def build_parser() -> argparse.ArgumentParser:
                            "18570+I (default 0; I + instances <= 1000); auto: the lowest "
                            "free run of numbers in 20..59 whose ports are free (--json "
                            "says which)")
-    sitl.add_argument("--autopilot", choices=("px4", "ardupilot"), default="px4",
+    sitl.add_argument("--autopilot", choices=AUTOPILOTS, default=DEFAULT_AUTOPILOT,
                       help="the face on the wire: px4 (PX4 SITL's UDP ports, default) or "
                            "ardupilot (ArduCopter: TCP 5760+10*I for SERIAL0, 5762+10*I and "
                            "5763+10*I, ArduCopter's modes and parameters; docs/mavlink.md)")
@@ -299,6 +300,11 @@ def _add_missions(sub) -> None:
                          "(protocol 10 on; docs/wire.md, Lockstep)")
     cr.add_argument("--mqtt", metavar="URL", help="MQTT broker for the bus over MAVLink "
                     "(default: an embedded broker per worker)")
+    cr.add_argument("--autopilot", choices=AUTOPILOTS, default=DEFAULT_AUTOPILOT,
+                    help="over MAVLink, the face that serves each trial's vehicle, as ft-sitl "
+                         "sitl --autopilot: px4 (default; the navigator flies offboard) or "
+                         "ardupilot (ArduCopter; the navigator flies GUIDED); the vehicle "
+                         "keeps the trial's parameters either way (docs/wire.md, Autopilots)")
     cr.set_defaults(handler="missions:cmd_campaign_run")
     cc = csub.add_parser("check", help="validate a campaign and show its matrix")
     cc.add_argument("campaign", help="campaign file (.toml, .yaml) or preset: quick, paper, gains")

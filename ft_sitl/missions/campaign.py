@@ -82,6 +82,9 @@ class Transport:
     #: over MAVLink, registered navigators fly in lockstep (rows equal to in-process ones);
     #: False: free-running, paced against the wall clock (runs.json records which)
     lockstep: bool = True
+    #: over MAVLink, the autopilot whose face serves the vehicle, as ``wire`` was made for
+    #: it (ft_sitl.mavlink.autopilots; None: not said); runs.json records it
+    autopilot: str | None = None
 
     def __post_init__(self):
         if self.kind not in ("inprocess", "mavlink"):
@@ -316,7 +319,8 @@ def run_campaign(campaign: Campaign, out_dir: str | Path, *, workers: int = 1,
             "machine": machine_info(),
             "numeric": numeric_env.in_force(),
             "transport": transport.kind,
-            **({"lockstep": transport.lockstep} if transport.kind == "mavlink" else {}),
+            **({"lockstep": transport.lockstep, "autopilot": transport.autopilot}
+               if transport.kind == "mavlink" else {}),
             "code_version": __version__})
     if store.done:
         store.write_tables()

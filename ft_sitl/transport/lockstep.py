@@ -30,34 +30,23 @@ the in-process row column for column but the wall times (``wall_time_s``,
 from __future__ import annotations
 
 import json
-import os
-import subprocess
 import sys
-import tempfile
 import time
 from pathlib import Path
 
-from ft_sitl import frames
 from ft_sitl.autopilot.commander import MAIN_OFFBOARD
 from ft_sitl.bus.codec import EventType
-from ft_sitl.mavlink.instances import InstanceLock
 from ft_sitl.mavlink.server import SitlServer
 from ft_sitl.missions.campaign_file import COMMAND
-from ft_sitl.missions.plan import PERCEPTION_WIRE, plan_trial
-from ft_sitl.missions.protocol import (
-    APPROACH_TIMEOUT_S,
-    TrialFailure,
-    TrialOutcome,
-    TrialReferee,
-    trial_vehicle,
-)
+from ft_sitl.missions.protocol import APPROACH_TIMEOUT_S, TrialFailure, TrialOutcome
 from ft_sitl.missions.results import Outcome
 from ft_sitl.missions.spec import TrialSpec, TrialSpecError
 from ft_sitl.missions.trial import fly, replan_count
 from ft_sitl.missions.watchdog import WallWatchdog
 from ft_sitl.navigation.registry import create
-from ft_sitl.transport.mavlink_trial import client_result, stop_client, tail
+from ft_sitl.transport.faces import DEFAULT_AUTOPILOT
 from ft_sitl.transport.sitl_bus import SitlBus
+from ft_sitl.transport.wire_trial import WireTrial, client_result, tail
 from ft_sitl.wire.navigate import ClientResult, task_env
 from ft_sitl.wire.tick_observation import observation_tick
 
@@ -151,64 +140,41 @@ def lockstep_argv(plan, connect: str, mqtt: str, vehicle: str) -> tuple[list[str
 
 
 def run_trial_lockstep(spec: TrialSpec, *, mqtt: str, bus_factory, record: bool = False,
-                       instance: int | None = None, log_dir: Path | None = None
-                       ) -> TrialOutcome:
+                       instance: int | None = None, log_dir: Path | None = None,
+                       autopilot: str = DEFAULT_AUTOPILOT) -> TrialOutcome:
     """Fly one trial in lockstep with its navigator in another process (module
-    docstring). ``bus_factory`` makes the simulator's side of the bus (its camera is not
-    used: frames travel in the ticks)."""
-    if spec.perception is not None:
-        raise TrialSpecError(PERCEPTION_WIRE)
+    docstring), served by ``autopilot``'s face. ``bus_factory`` makes the simulator's side
+    of the bus (its camera is not used: frames travel in the ticks)."""
     if spec.algorithm == COMMAND:
         raise TrialSpecError("a command navigator cannot fly in lockstep (it does not answer "
                              "ticks): fly it free-running")
-    wall0 = time.perf_counter()
-    plan = plan_trial(spec)
-    nav = create(spec.algorithm, dict(plan.navigator_params))
-    guard, fleet = trial_vehicle(plan)
-    ref = TrialReferee(fleet, guard, plan, record=record)
-    vehicle = spec.trial_id
-    lock = InstanceLock() if instance is None else None
-    inst = lock.__enter__() if lock is not None else instance
-    proc = server = bus = None
-    logs = Path(log_dir or tempfile.mkdtemp(prefix="ft-sitl-nav-"))
-    logs.mkdir(parents=True, exist_ok=True)
-    out_path, err_path = logs / f"{spec.trial_id}.out", logs / f"{spec.trial_id}.err"
-    client: dict = {}
+    trial = WireTrial(spec, record=record, instance=instance, log_dir=log_dir,
+                      autopilot=autopilot)
+    plan, fleet, ref = trial.plan, trial.fleet, trial.ref
+    bus = None
     try:
-        server = SitlServer(fleet, frames.GeoReference(*frames.PX4_SITL_HOME),
-                            base_instance=inst)
-        server.open()
-        bus = bus_factory(server, fleet, plan, vehicle, camera=False)
+        nav = create(spec.algorithm, dict(plan.navigator_params))
+        server, connect = trial.serve(lockstep=True)
+        bus = bus_factory(server, fleet, plan, trial.vehicle, camera=False)
         ref.on_start = lambda: bus.event(EventType.TRIAL_START, trial=spec.trial_id)
-        connect = f"udpin://0.0.0.0:{server.links[0].default_remote[1]}"
-        argv, env = lockstep_argv(plan, connect, mqtt, vehicle)
-        with open(out_path, "wb") as out_fh, open(err_path, "wb") as err_fh:
-            try:
-                proc = subprocess.Popen(argv, stdout=out_fh, stderr=err_fh,
-                                        env={**os.environ, **env}, start_new_session=True)
-            except OSError as exc:
-                raise TrialFailure(Outcome.NAVIGATOR_ERROR,
-                                   f"cannot start {argv[0]}: {exc}") from None
-            pilot = LockstepPilot(nav, server, bus, proc, out_path, err_path)
-            server.service()
-            pilot.wait_ready()
-            # a ceiling against a hang only: the ticks wait as long as the client computes
-            budget = READY_TIMEOUT_S + 20.0 * (APPROACH_TIMEOUT_S + spec.limits.timeout_s
-                                               + spec.limits.hold_s)
-            fly(plan, fleet, ref, pilot, WallWatchdog(time.perf_counter(), budget))
+        argv, env = lockstep_argv(plan, connect, mqtt, trial.vehicle)
+        pilot = LockstepPilot(nav, server, bus, trial.start(argv, env), trial.out_path,
+                              trial.err_path)
+        server.service()
+        pilot.wait_ready()
+        # a ceiling against a hang only: the ticks wait as long as the client computes
+        budget = READY_TIMEOUT_S + 20.0 * (APPROACH_TIMEOUT_S + spec.limits.timeout_s
+                                           + spec.limits.hold_s)
+        fly(plan, fleet, ref, pilot, WallWatchdog(time.perf_counter(), budget))
     except TrialFailure as f:
         ref.end(f.reason, f.detail)
     finally:
-        if proc is not None:
-            stop_client(proc)
-            client = client_result(out_path)
+        trial.stop_client()
         if bus is not None:
             bus.event(EventType.TRIAL_END, trial=spec.trial_id,
                       outcome=ref.outcome.value if ref.outcome is not None else "?")
             bus.close()
-        if server is not None:
-            server.close()
-        if lock is not None:
-            lock.__exit__(None, None, None)
-    row = ref.finish(replans=replan_count(client.get("replans", -1)), wall0=wall0)
+        trial.close()
+    client = trial.client_summary() if trial.proc is not None else {}
+    row = ref.finish(replans=replan_count(client.get("replans", -1)), wall0=trial.wall0)
     return TrialOutcome(row, ref.trajectory(), plan.scenario)

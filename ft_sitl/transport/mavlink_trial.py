@@ -25,24 +25,18 @@ from __future__ import annotations
 
 import asyncio
 import json
-import os
 import shlex
-import signal
-import subprocess
 import sys
-import tempfile
 import time
 from pathlib import Path
 
-from ft_sitl import frames
 from ft_sitl.autopilot.commander import FENCE_ARM_DENIAL
 from ft_sitl.bus.broker import EmbeddedBroker
 from ft_sitl.bus.codec import EventType
 from ft_sitl.bus.publisher import BusPublisher
-from ft_sitl.mavlink.instances import InstanceLock
-from ft_sitl.mavlink.server import SitlServer
+from ft_sitl.mavlink.autopilots import DEFAULT_AUTOPILOT, PX4
 from ft_sitl.missions.campaign_file import COMMAND
-from ft_sitl.missions.plan import PERCEPTION_WIRE, TrialPlan, plan_trial
+from ft_sitl.missions.plan import TrialPlan
 from ft_sitl.missions.protocol import (
     APPROACH_TIMEOUT_S,
     Phase,
@@ -50,13 +44,14 @@ from ft_sitl.missions.protocol import (
     TrialOutcome,
     TrialReferee,
     arming_failure,
-    trial_vehicle,
 )
 from ft_sitl.missions.results import Outcome
 from ft_sitl.missions.spec import TrialSpec, TrialSpecError
 from ft_sitl.navigation.base import Task
 from ft_sitl.scenarios.camera import camera_config
+from ft_sitl.transport.faces import ARDUPILOT_LOCKSTEP_ONLY, check_autopilot
 from ft_sitl.transport.sitl_bus import SitlBus
+from ft_sitl.transport.wire_trial import WireTrial, client_result
 from ft_sitl.wire.navigate import ClientResult, task_env
 
 ARM_TIMEOUT_S = 90.0
@@ -65,10 +60,12 @@ ARM_TIMEOUT_S = 90.0
 _BROKER = None  # this process's embedded broker, started on first use
 
 
-def fly_over_mavlink(spec: TrialSpec, speed_factor: float, mqtt: str | None) -> dict:
+def fly_over_mavlink(spec: TrialSpec, speed_factor: float, mqtt: str | None, *,
+                     autopilot: str = DEFAULT_AUTOPILOT) -> dict:
     """One campaign trial over MAVLink, on the bus ``mqtt`` (None: this process's embedded
-    broker): its row. What :class:`~ft_sitl.missions.campaign.Transport` calls ``wire``."""
-    return run_trial_wire(spec, speed_factor=speed_factor, **worker_bus(mqtt)).row
+    broker), served by ``autopilot``'s face: its row."""
+    return run_trial_wire(spec, speed_factor=speed_factor, autopilot=autopilot,
+                          **worker_bus(mqtt)).row
 
 
 def worker_bus(mqtt: str | None) -> dict:
@@ -137,57 +134,38 @@ def navigator_argv(plan: TrialPlan, task: Task, connect: str, mqtt: str | None,
 def run_trial_wire(spec: TrialSpec, *, speed_factor: float = 2.0, mqtt: str | None = None,
                    record: bool = False, instance: int | None = None,
                    arm_timeout_s: float = ARM_TIMEOUT_S, log_dir: Path | None = None,
-                   bus_factory=None) -> TrialOutcome:
-    """Fly one trial with the navigator in another process (module docstring)."""
-
-    if spec.perception is not None:
-        raise TrialSpecError(PERCEPTION_WIRE)
-    wall0 = time.perf_counter()
-    plan = plan_trial(spec)
-    guard, fleet = trial_vehicle(plan)
-    ref = TrialReferee(fleet, guard, plan, record=record)
-    vehicle = spec.trial_id
-    lock = InstanceLock() if instance is None else None
-    inst = lock.__enter__() if lock is not None else instance
-    proc = None
+                   bus_factory=None, autopilot: str = DEFAULT_AUTOPILOT) -> TrialOutcome:
+    """Fly one trial with the navigator in another process (module docstring), served by
+    ``autopilot``'s face (the PX4 face only: :data:`~.faces.ARDUPILOT_LOCKSTEP_ONLY`)."""
+    if check_autopilot(autopilot) != PX4:
+        raise TrialSpecError(ARDUPILOT_LOCKSTEP_ONLY)
+    trial = WireTrial(spec, record=record, instance=instance, log_dir=log_dir,
+                      autopilot=autopilot)
+    plan, fleet, ref = trial.plan, trial.fleet, trial.ref
     client: dict = {}
     try:
-        server = SitlServer(fleet, frames.GeoReference(*frames.PX4_SITL_HOME),
-                            speed_factor=speed_factor, base_instance=inst)
-        bus = bus_factory(server, fleet, plan, vehicle) if bus_factory else None
+        server, connect = trial.serve(lockstep=False, speed_factor=speed_factor)
+        bus = bus_factory(server, fleet, plan, trial.vehicle) if bus_factory else None
         if bus is not None:
             ref.on_start = lambda: bus.event(EventType.TRIAL_START, trial=spec.trial_id)
-        connect = f"udpin://0.0.0.0:{server.links[0].default_remote[1]}"
         try:
-            argv, env = navigator_argv(plan, plan.task(wire=True), connect, mqtt, vehicle,
-                                       speed_factor)
+            argv, env = navigator_argv(plan, plan.task(wire=True), connect, mqtt,
+                                       trial.vehicle, speed_factor)
         except ValueError as exc:
             raise TrialFailure(Outcome.NAVIGATOR_ERROR, str(exc)) from None
-        logs = Path(log_dir or tempfile.mkdtemp(prefix="ft-sitl-nav-"))
-        logs.mkdir(parents=True, exist_ok=True)
-        out_path, err_path = logs / f"{spec.trial_id}.out", logs / f"{spec.trial_id}.err"
-        with open(out_path, "wb") as out_fh, open(err_path, "wb") as err_fh:
-            try:
-                proc = subprocess.Popen(argv, stdout=out_fh, stderr=err_fh,
-                                        env={**os.environ, **env}, start_new_session=True)
-            except OSError as exc:
-                raise TrialFailure(Outcome.NAVIGATOR_ERROR,
-                                   f"cannot start {argv[0]}: {exc}") from None
-            asyncio.run(_serve(server, fleet, ref, proc, spec, speed_factor, arm_timeout_s,
-                               bus, out_path))
-        client = client_result(out_path)
+        proc = trial.start(argv, env)
+        asyncio.run(_serve(server, fleet, ref, proc, spec, speed_factor, arm_timeout_s,
+                           bus, trial.out_path))
+        client = trial.client_summary()
         if ref.outcome == Outcome.NAVIGATOR_ERROR and not ref.detail:
-            ref.detail = tail(err_path)
+            ref.detail = trial.client_failed()
     except TrialFailure as f:
         ref.end(f.reason, f.detail)
     finally:
-        if proc is not None:
-            stop_client(proc)
-        if lock is not None:
-            lock.__exit__(None, None, None)
+        trial.close()
     # setpoints the client sent (unknown when the judge ended it first)
     ref.metrics.planner_calls = int(client["steps"]) if "steps" in client else -1
-    row = ref.finish(replans=-1, wall0=wall0)
+    row = ref.finish(replans=-1, wall0=trial.wall0)
     return TrialOutcome(row, ref.trajectory(), plan.scenario)
 
 
@@ -246,39 +224,3 @@ async def _serve(server, fleet, ref: TrialReferee, proc, spec, speed_factor: flo
                       outcome=ref.outcome.value if ref.outcome is not None else "?")
             bus.close()
 
-
-def client_result(path: Path) -> dict:
-    """The navigator process's JSON summary line (empty if it wrote none)."""
-    try:
-        lines = path.read_text(errors="replace").strip().splitlines()
-        return json.loads(lines[-1]) if lines else {}
-    except (OSError, json.JSONDecodeError):
-        return {}
-
-
-def tail(path: Path, n: int = 300) -> str:
-    """The last line of a navigator process's stderr (for a failed trial's detail)."""
-    try:
-        lines = [ln for ln in path.read_text(errors="replace").splitlines() if ln.strip()]
-    except OSError:
-        return ""
-    return lines[-1][-n:] if lines else "the navigator process failed (no output)"
-
-
-def stop_client(proc) -> None:
-    """SIGTERM to the navigator process's group (``ft-sitl navigate`` prints its summary),
-    then SIGKILL after 5 s."""
-    if proc.poll() is not None:
-        return
-    try:
-        os.killpg(proc.pid, signal.SIGTERM)
-    except (ProcessLookupError, PermissionError):
-        pass
-    try:
-        proc.wait(5.0)
-    except subprocess.TimeoutExpired:
-        try:
-            os.killpg(proc.pid, signal.SIGKILL)
-        except (ProcessLookupError, PermissionError):
-            pass
-        proc.wait(5.0)

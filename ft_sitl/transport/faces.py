@@ -1,0 +1,140 @@
+"""Which autopilot's MAVLink face serves a wire trial (``--autopilot``): PX4's (the default,
+:class:`~ft_sitl.mavlink.server.SitlServer`) or ArduCopter's
+(:class:`~ft_sitl.mavlink.ardupilot.server.ArduPilotServer`), and where its navigator
+client connects.
+
+The face is the protocol only; the vehicle is the trial's. The ArduCopter face writes
+ArduCopter's defaults (WPNAV_*, PSC_*, ANGLE_MAX, FENCE_*, ...) into the flight
+controller's parameters when it starts, which would fly another tuning than the trial's
+spec names (a 30 degree lean limit instead of PX4's 45, other gains): a wire trial puts
+the trial's parameters back (:func:`serve`), so the vehicle flies as in-process and only
+what crosses the wire changes (docs/wire.md, "Autopilots").
+
+A lockstep trial serves the links between its own physics steps, without an event loop
+(:meth:`SitlServer.open`, :meth:`SitlServer.pump`). The ArduCopter face has no such mode
+of its own (it serves TCP under asyncio); :class:`LockstepArduPilotServer` serves it as
+ArduPilot SITL forwards to a ground station with MAVProxy's ``--out``: SERIAL0's
+messages go to the client's UDP port (the instance's client port, as the PX4 face's),
+and what the client sends from there is answered on SERIAL0.
+"""
+
+from __future__ import annotations
+
+import select
+import socket
+import time
+
+from ft_sitl import frames
+from ft_sitl.mavlink.ardupilot.framing import FrameSplitter
+from ft_sitl.mavlink.ardupilot.server import ArduPilotServer
+from ft_sitl.mavlink.autopilots import AUTOPILOTS, DEFAULT_AUTOPILOT, PX4
+from ft_sitl.mavlink.outgoing import Outgoing
+from ft_sitl.mavlink.server import API_REMOTE_BASE, HEARTBEAT_TOP_UP_S, SitlServer
+
+__all__ = ["ARDUPILOT_LOCKSTEP_ONLY", "AUTOPILOTS", "DEFAULT_AUTOPILOT",
+           "LockstepArduPilotServer", "check_autopilot", "client_port", "serve"]
+
+
+#: why a free-running trial (a command navigator's, or --free-running) cannot have the
+#: ArduCopter face (docs/wire.md, "Autopilots")
+ARDUPILOT_LOCKSTEP_ONLY = ("--autopilot ardupilot: the ArduCopter face serves lockstep wire "
+                           "trials only (registered navigators, without --free-running); "
+                           "free-running trials and command navigators fly the PX4 face")
+
+
+def check_autopilot(name) -> str:
+    """``name`` if it is a face (ValueError naming the allowed ones)."""
+    if name not in AUTOPILOTS:
+        raise ValueError(f"--autopilot: {name!r} is not one of {', '.join(AUTOPILOTS)}")
+    return name
+
+
+class _UdpOut:
+    """SERIAL0's transport in lockstep: one UDP socket; a message for every client goes to
+    the ``--out`` targets, a reply to the peer that asked."""
+
+    def __init__(self, sock: socket.socket, targets: list[tuple[str, int]]):
+        self.sock, self.targets = sock, targets
+
+    def sendto(self, data: bytes, dest) -> None:
+        for addr in (self.targets if dest is None else [dest]):
+            try:
+                self.sock.sendto(data, addr)
+            except (BlockingIOError, ConnectionRefusedError):
+                pass  # as a lost datagram (the client not listening yet)
+
+    def close(self) -> None:
+        self.sock.close()
+
+
+class LockstepArduPilotServer(ArduPilotServer):
+    """The ArduCopter face served without an event loop (module docstring): SERIAL0 on a
+    UDP socket sending to ``outs``; SERIAL1 not served."""
+
+    def open(self) -> None:
+        for link in self.links:
+            if link.index != 0:
+                continue
+            sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+            try:
+                sock.setblocking(False)
+                sock.bind((self.bind, 0))
+            except OSError:
+                sock.close()
+                self.close()
+                raise
+            link.transport = _UdpOut(sock, list(self.outs))
+
+    def pump(self, timeout_s: float) -> None:
+        """Handle every datagram that has arrived (each cut into its frames), waiting up to
+        ``timeout_s`` wall seconds for the first; then the vehicles' wall-clock duties."""
+        socks = {link.transport.sock: link for link in self.links if link.transport}
+        ready, _, _ = select.select(list(socks), [], [], timeout_s)
+        for sock in ready:
+            while True:
+                try:
+                    data, addr = sock.recvfrom(65535)
+                except (BlockingIOError, InterruptedError):
+                    break
+                except OSError:  # ICMP port unreachable of an earlier send: no datagram
+                    continue
+                for frame in FrameSplitter().feed(data):
+                    self.on_datagram(socks[sock], frame, addr)
+        wall_us = int(time.monotonic() * 1e6)
+        for a in self.agents:
+            self.send_all(a.i, a.poll(wall_us))
+            if time.monotonic() - self._last_hb_wall[a.i] >= HEARTBEAT_TOP_UP_S:
+                self._last_hb_wall[a.i] = time.monotonic()
+                self.send_all(a.i, [Outgoing(a.heartbeat())])
+
+
+def client_port(instance: int) -> int:
+    """The UDP port a navigator client listens on for instance ``instance`` (the one the
+    instance lock reserves for it: PX4 SITL's 14540 + i)."""
+    return API_REMOTE_BASE + instance
+
+
+def serve(autopilot: str, fleet, instance: int, *, lockstep: bool,
+          speed_factor: float = 1.0) -> tuple[SitlServer, str]:
+    """The face ``autopilot`` serving ``fleet`` as ``instance`` (bound: :meth:`open` in
+    lockstep; started later under an event loop otherwise), the trial's parameters kept,
+    and the MAVSDK URL its client connects with. ValueError for the ArduCopter face
+    free-running (:data:`ARDUPILOT_LOCKSTEP_ONLY`)."""
+    geo = frames.GeoReference(*frames.PX4_SITL_HOME)
+    port = client_port(instance)
+    if check_autopilot(autopilot) == PX4:
+        server = SitlServer(fleet, geo, speed_factor=speed_factor, base_instance=instance)
+    elif not lockstep:
+        raise ValueError(ARDUPILOT_LOCKSTEP_ONLY)
+    else:
+        trial_params = [p.as_dict() for p in fleet.params]
+        server = LockstepArduPilotServer(fleet, geo, base_instance=instance,
+                                         outs=[("127.0.0.1", port)])
+        for params, values in zip(fleet.params, trial_params, strict=True):
+            for name, value in values.items():
+                if params[name] != value:
+                    params.set(name, value)
+        fleet.refresh_params()
+    if lockstep:
+        server.open()
+    return server, f"udpin://0.0.0.0:{port}"
