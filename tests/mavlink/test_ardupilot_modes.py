@@ -243,6 +243,13 @@ def test_arming_checks_answer_arducopter_texts_and_force_arm_bypasses():
         assert gcs.arm() == failed
         gcs.text("Arm: Mode not armable")
 
+        # no GPS (SITL's SIM_GPS_DISABLE): a mode that needs a position is refused
+        gcs.mode("GUIDED")
+        gcs.param("SIM_GPS_DISABLE", 1)
+        assert gcs.arm() == failed
+        gcs.text("PreArm: Need Position Estimate")
+        gcs.param("SIM_GPS_DISABLE", 0)
+
         # throttle up in a manual-throttle mode
         gcs.mode("STABILIZE")
         gcs.rc = [1500, 1500, 1600, 1500, 65535, 65535, 65535, 65535]

@@ -169,6 +169,9 @@ _SPECS += [
        "3 SmartRTL or RTL, 4 SmartRTL or land, 5 terminate, 6 DO_LAND_START or RTL, 7 brake "
        "or land", INT8),
     _P("BATT_FS_CRT_ACT", 0, 0, 7, "", "critical battery action (as BATT_FS_LOW_ACT)", INT8),
+    # --- ArduPilot SITL's simulated sensors (libraries/SITL/SITL.cpp), read by .copter ---
+    _P("SIM_GPS_DISABLE", 0, 0, 1, "", "the simulated GPS off (ft-sitl: the GPS failure "
+       "MAV_CMD_INJECT_FAILURE injects: no position estimate)", INT8),
 ]
 
 #: every ArduCopter parameter this face serves, in PARAM_VALUE index order
