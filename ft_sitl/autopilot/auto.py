@@ -20,7 +20,6 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
-from ft_sitl.autopilot.geofence import nearest_safe_point
 from ft_sitl.autopilot.modes import (
     MAIN_AUTO,
     SUB_FOLLOW_TARGET,
@@ -128,8 +127,8 @@ class AutoFlight:
     def start_rtl(self) -> None:
         c = self.cmdr
         p = c.position_now()
-        # PX4: the nearest safe point, home or a rally point
-        self.rtl_dest = nearest_safe_point(p, c.home, c.rally)
+        # PX4: the nearest safe point, home or a rally point (the commander's rally_rule)
+        self.rtl_dest = c.rally_rule(p, c.home, c.rally)
         climb = max(p[2], c.home[2] + c.params["RTL_RETURN_ALT"])
         self.nav = NavTarget(target=np.array([p[0], p[1], climb]), yaw=c.yaw_now(),
                              phase="rtl_climb", t_phase_us=c.time_us)

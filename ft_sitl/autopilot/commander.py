@@ -30,6 +30,7 @@ from __future__ import annotations
 
 import math
 from collections import deque
+from collections.abc import Callable
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -40,7 +41,7 @@ from ft_sitl.autopilot.auto import AutoFlight
 from ft_sitl.autopilot.battery import Battery
 from ft_sitl.autopilot.failsafe import Failsafes
 from ft_sitl.autopilot.follow import FollowMode, TargetEstimator
-from ft_sitl.autopilot.geofence import GF_ACTIONS, Fence
+from ft_sitl.autopilot.geofence import GF_ACTIONS, Fence, nearest_safe_point
 from ft_sitl.autopilot.land_detector import LandDetector
 from ft_sitl.autopilot.manual import NAV_RCL_ACTIONS, ManualControl
 from ft_sitl.autopilot.mission import (
@@ -125,6 +126,9 @@ class Commander:
     #: the geofence (MAV_MISSION_TYPE_FENCE) and rally points (local ENU), see geofence.py
     fence: Fence = field(default_factory=Fence)
     rally: list = field(default_factory=list)
+    #: where a return goes, from (position, home, rally points): PX4's nearest of home and
+    #: the rally points; a face with another rule (ArduCopter's RALLY_*) sets its own
+    rally_rule: Callable = nearest_safe_point
     #: every breach: (time_us, reason, action taken)
     fence_events: list = field(default_factory=list)
     #: injected failures in force: unit name -> (type name, instance) (autopilot.failures)

@@ -7,7 +7,9 @@ the wire (MISSION_CURRENT, MISSION_ITEM_REACHED, MISSION_SET_CURRENT, MISSION_ST
 first item, DO_JUMP's target) is the commander's plus one. ArduCopter's commands map onto
 the executor's (:mod:`ft_sitl.autopilot.mission`): NAV_LOITER_TIME is a waypoint held
 param1 seconds, NAV_SPLINE_WAYPOINT a waypoint flown straight, DO_JUMP jumps param2
-times (-1: for ever). Fences and rally points are the PX4 face's lists, unchanged.
+times (-1: for ever). Fences and rally points are the PX4 face's lists; an uploaded fence
+is kept and flown as FENCE_ENABLE/FENCE_TYPE say (:mod:`.fence`), RTL picks among the rally
+points by RALLY_* (:mod:`.rally`).
 """
 
 from __future__ import annotations
@@ -64,12 +66,23 @@ class ArduCopterMission(MissionProtocol):
     """One vehicle's mission protocol with home at sequence 0 of the mission list."""
 
     def _apply_upload(self, mtype: int, items: list) -> None:
+        if mtype == apm.MAV_MISSION_TYPE_FENCE:  # kept; flown as FENCE_ENABLE/TYPE say
+            self.v.fence.upload(self.items.to_fence(items))
+            self._stored[mtype] = list(items)
+            return
         if mtype != _MISSION:
             super()._apply_upload(mtype, items)
             return
         # item 0 is home's placeholder: the vehicle flies items 1..n
         self.v.cmd.set_mission([self.items.to_mission_item(it) for it in items[1:]])
         self._stored[mtype] = list(items)
+
+    def _fence_download(self) -> list:
+        """The fence items as uploaded, whether the fence is on or not (a fence the
+        controller got otherwise, a trial's: made from it, as the PX4 face does)."""
+        if self.v.fence.owns(self.v.cmd.fence):
+            return self._stored[apm.MAV_MISSION_TYPE_FENCE]
+        return super()._fence_download()
 
     def _download(self, mtype: int) -> list | None:
         if mtype != _MISSION:

@@ -109,6 +109,19 @@ _SPECS = [
     _P("FENCE_ALT_MAX", 100.0, 10.0, 1000.0, "m", "fence's maximum altitude above home"),
     _P("FENCE_RADIUS", 300.0, 30.0, 10000.0, "m", "fence's circle radius around home"),
     _P("FENCE_MARGIN", 2.0, 1.0, 10.0, "m", "distance inside the fence a return aims for"),
+    _P("FENCE_ALT_MIN", -10.0, -100.0, 100.0, "m", "fence's minimum altitude above home "
+       "(FENCE_TYPE 8; ft-sitl: stored, not enforced)"),
+    # --- rally points (libraries/AP_Rally/AP_Rally.cpp): read by .rally ---------------
+    _P("RALLY_LIMIT_KM", 0.3, 0.0, 1000.0, "km", "a rally point farther than this is not "
+       "returned to, home is (0: no limit)"),
+    _P("RALLY_INCL_HOME", 1, 0, 1, "", "RTL may return home when it is nearer than every "
+       "rally point (0: the nearest rally point whatever home's distance)", INT8),
+    # --- motor outputs (libraries/SRV_Channel): read by SERVO_OUTPUT_RAW ----------------
+    *(_P(f"SERVO{n}_{end}", pwm, 800, 2200, "PWM", f"motor {n}'s output at {what} rotor "
+         "speed command (ArduCopter's SERVOn default 1100/1900; ft-sitl 1000/2000, the "
+         "range ArduCopter's motors use with MOT_PWM_MIN/MAX 1000/2000)", INT16)
+      for n in range(1, 5) for end, pwm, what in (("MIN", 1000, "zero"),
+                                                   ("MAX", 2000, "full"))),
     # --- identity and arming (ArduCopter/Parameters.cpp, AP_Arming) --------------------
     _P("SYSID_THISMAV", 1, 1, 255, "", "this vehicle's MAVLink system id (ft-sitl: vehicle "
        "i is i+1 whatever is set)", INT16),
@@ -201,6 +214,8 @@ class ApParamSet(ParamSet):
         self.px4 = px4
         #: counts the sets (the streams re-read SRn_* when it moves)
         self.version = 0
+        #: called after every FENCE_* set (the face's fence re-applies its areas)
+        self.on_fence = lambda: None
         self._values["SYSID_THISMAV"] = sysid
         for name, s in AP_PARAMS.items():
             if s.px4 is not None:
@@ -222,6 +237,8 @@ class ApParamSet(ParamSet):
             self._write_px4(fence_px4({**self._values, name: value}), name, value)
         self._values[name] = value
         self.version += 1
+        if name.startswith("FENCE_"):
+            self.on_fence()
         return value
 
     def _write_px4(self, values: dict[str, float], name: str, value: float) -> None:

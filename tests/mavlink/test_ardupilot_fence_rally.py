@@ -1,0 +1,211 @@
+"""ArduCopter's fence and rally points on the face.
+
+A MAVProxy session, unmodified (as tests/mavlink/test_ardupilot_mavproxy.py runs it): with
+the fence off MAVProxy reports the fence present (FENCE_TYPE's kinds) and no breach;
+`fence load FILE` uploads an inclusion polygon and an exclusion circle over the mission
+protocol's FENCE list, stored but not flown while FENCE_ENABLE is 0; `fence list` reads
+them back; `fence enable` puts them in force; a GUIDED flight out of the polygon breaches
+it, FENCE_ACTION 1 returns the vehicle and MAVProxy says "fence breach".
+
+Rally points uploaded with pymavlink (MAV_MISSION_TYPE_RALLY) and RTL's choice among them
+and home by RALLY_INCL_HOME / RALLY_LIMIT_KM (AP_Rally's rule)."""
+
+import math
+import os
+import subprocess
+import sys
+import time
+
+import numpy as np
+import pytest
+
+os.environ.setdefault("MAVLINK20", "1")
+from pymavlink import mavutil  # noqa: E402
+
+from ft_sitl.autopilot import commander as cm  # noqa: E402
+from ft_sitl.autopilot.params import ParamSet  # noqa: E402
+from ft_sitl.mavlink.ardupilot.params import ApParamSet  # noqa: E402
+from ft_sitl.mavlink.ardupilot.rally import RallyRule  # noqa: E402
+from ft_sitl.mavlink.ardupilot.server import ArduPilotServer, tcp_port_free, tcp_ports  # noqa: E402,E501
+from ft_sitl.mavlink.instances import free_instances  # noqa: E402
+
+from .sitl_harness import _running_sitl  # noqa: E402
+from .test_ardupilot_mavproxy import MAVPROXY, _until  # noqa: E402
+
+_m = mavutil.mavlink
+
+
+def _free(k: int) -> bool:
+    return all(tcp_port_free("127.0.0.1", p) for p in tcp_ports(k))
+
+
+def _wait(conn, what, timeout_s=60.0, **match):
+    deadline = time.time() + timeout_s
+    while time.time() < deadline:
+        m = conn.recv_match(blocking=True, timeout=1.0, **match)
+        if m is not None and what(m):
+            return m
+    raise AssertionError(f"timed out waiting for {match}")
+
+
+def _ack(conn, command):
+    return _wait(conn, lambda m: m.command == command, 10.0, type="COMMAND_ACK")
+
+
+def test_rally_rule_is_ap_rallys():
+    ap = ApParamSet(ParamSet(), sysid=1)
+    rule = RallyRule(ap)
+    home = np.zeros(3)
+    near, far = np.array([0.0, 60.0, 5.0]), np.array([0.0, 500.0, 5.0])
+    assert np.array_equal(rule([0, 50, 10], home, []), home)  # none: home
+    assert np.array_equal(rule([0, 50, 10], home, [near, far]), near)  # nearest
+    assert np.array_equal(rule([0, 20, 10], home, [near]), home)  # home nearer (INCL_HOME)
+    ap.set("RALLY_INCL_HOME", 0)
+    assert np.array_equal(rule([0, 20, 10], home, [near]), near)  # the rally point anyway
+    assert np.array_equal(rule([0, 450, 10], home, [far]), far)  # 50 m: within 0.3 km
+    assert np.array_equal(rule([0, -350, 10], home, [far]), home)  # 850 m: past the limit
+    ap.set("RALLY_LIMIT_KM", 0)
+    assert np.array_equal(rule([0, -350, 10], home, [far]), far)  # no limit
+
+
+@pytest.mark.e2e  # (tests/lanes.py: a MAVProxy process, TCP)
+def test_mavproxy_fence_load_list_enable_and_a_breach_returns(tmp_path):
+    with free_instances(1, _free) as k, \
+            _running_sitl(1, speed_factor=4.0, server_class=ArduPilotServer,
+                          base_instance=k) as server:
+        agent = server.agents[0]
+        v, c, geo = agent.vehicle, agent.cmd, agent.geo
+        home = c.home.copy()
+
+        def latlon(east, north):
+            lat, lon, _ = geo.to_global((home[0] + east, home[1] + north, home[2]))
+            return f"{lat:.8f}\t{lon:.8f}"
+
+        square = [(-30, -30), (30, -30), (30, 30), (-30, 30)]
+        fence_file = tmp_path / "fence.waypoints"
+        fence_file.write_text("QGC WPL 110\n" + "".join(
+            f"{i}\t0\t0\t5001\t4\t0\t0\t0\t{latlon(e, n)}\t0\t1\n"
+            for i, (e, n) in enumerate(square))
+            + f"4\t0\t0\t5004\t5\t0\t0\t0\t{latlon(15, 0)}\t0\t1\n")
+        log = tmp_path / "mavproxy.out"
+        with open(log, "w") as out:
+            proc = subprocess.Popen(
+                [sys.executable, str(MAVPROXY), f"--master=tcp:127.0.0.1:{tcp_ports(k)[0]}",
+                 f"--state-basedir={tmp_path}", "--logfile", str(tmp_path / "mav.tlog")],
+                stdin=subprocess.PIPE, stdout=out, stderr=subprocess.STDOUT, text=True,
+                cwd=tmp_path)
+        try:
+            def type_(line: str) -> None:
+                proc.stdin.write(line + "\n")
+                proc.stdin.flush()
+
+            _until(lambda: "Received" in log.read_text(), 60, "MAVProxy's parameter fetch",
+                   log)
+            # FENCE_TYPE 7 configures the altitude and circle kinds: present, not enabled,
+            # healthy (MAVProxy printed "fence breach" when the health bit was missing)
+            _until(lambda: "fence present" in log.read_text(), 30, "fence present", log)
+            assert "fence breach" not in log.read_text()
+
+            type_(f"fence load {fence_file}")
+            _until(lambda: len(v.fence.uploaded.areas) == 2, 30, "the fence uploaded", log)
+            assert c.fence.empty  # FENCE_ENABLE 0: stored, not flown
+            type_("fence list")
+            _until(lambda: log.read_text().count("\n5001 ") == 4, 30, "fence list", log)
+            assert log.read_text().count("\n5004 0 ") == 1
+
+            type_("fence enable")
+            _until(lambda: c.fence is v.fence.uploaded, 30, "the fence in force", log)
+            _until(lambda: "fence enabled" in log.read_text(), 30, "fence enabled", log)
+
+            type_("mode guided")
+            _until(lambda: agent.mode_name == "GUIDED", 30, "GUIDED", log)
+            type_("arm throttle")
+            _until(lambda: c.armed, 30, "armed", log)
+            type_("takeoff 10")
+            _until(lambda: c.position_now()[2] - home[2] > 9.5, 60, "10 m up", log)
+            assert not c.fence_events
+            lat, lon = latlon(0, 45).split("\t")
+            type_(f"guided {lat} {lon} 10")
+            _until(lambda: c.fence_events, 60, "the breach", log)
+            assert c.fence_events[0][1:] == ("outside the fence", "return")
+            assert (c.main_mode, c.sub_mode) == (cm.MAIN_AUTO, cm.SUB_RTL)
+            _until(lambda: "fence breach" in log.read_text(), 30, "MAVProxy's breach", log)
+            st = agent.telemetry.build(_m.MAVLINK_MSG_ID_FENCE_STATUS)
+            assert st.breach_count == 1 and st.breach_type == _m.FENCE_BREACH_BOUNDARY
+            p = c.position_now()
+            assert 30 < p[1] - home[1] < 45  # (turned back where it crossed)
+        finally:
+            proc.kill()
+            proc.wait(10)
+
+
+def _upload_rally(conn, points) -> int:
+    """The mission protocol's RALLY upload as a ground station drives it."""
+    conn.mav.mission_count_send(conn.target_system, conn.target_component, len(points),
+                                _m.MAV_MISSION_TYPE_RALLY)
+    while True:
+        m = _wait(conn, lambda m: getattr(m, "mission_type", 0) == _m.MAV_MISSION_TYPE_RALLY,
+                  10.0, type=["MISSION_REQUEST", "MISSION_REQUEST_INT", "MISSION_ACK"])
+        if m.get_type() == "MISSION_ACK":
+            return m.type
+        lat, lon, alt = points[m.seq]
+        conn.mav.mission_item_int_send(
+            conn.target_system, conn.target_component, m.seq,
+            _m.MAV_FRAME_GLOBAL_RELATIVE_ALT, _m.MAV_CMD_NAV_RALLY_POINT, 0, 1, 0, 0, 0, 0,
+            int(round(lat * 1e7)), int(round(lon * 1e7)), alt, _m.MAV_MISSION_TYPE_RALLY)
+
+
+@pytest.mark.e2e  # (tests/lanes.py: TCP)
+def test_rtl_returns_to_the_rally_point_or_home_as_rally_params_say():
+    mavutil.set_dialect("ardupilotmega")
+    with free_instances(1, _free) as k, \
+            _running_sitl(1, speed_factor=4.0, server_class=ArduPilotServer,
+                          base_instance=k) as server:
+        agent = server.agents[0]
+        c, geo = agent.cmd, agent.geo
+        home = c.home.copy()
+        conn = mavutil.mavlink_connection(f"tcp:127.0.0.1:{tcp_ports(k)[0]}",
+                                          source_system=250)
+        try:
+            conn.wait_heartbeat(timeout=30)
+            rally = geo.to_global((home[0], home[1] + 50.0, home[2]))
+            assert _upload_rally(conn, [(rally[0], rally[1], 15.0)]) == \
+                _m.MAV_MISSION_ACCEPTED
+            assert len(c.rally) == 1
+
+            conn.set_mode("GUIDED")
+            _wait(conn, lambda m: m.custom_mode == 4, 10.0, type="HEARTBEAT")
+            conn.arducopter_arm()
+            conn.motors_armed_wait()
+            conn.mav.command_long_send(conn.target_system, conn.target_component,
+                                       _m.MAV_CMD_NAV_TAKEOFF, 0, 0, 0, 0, 0, 0, 0, 10)
+            assert _ack(conn, 22).result == _m.MAV_RESULT_ACCEPTED
+            conn.mav.request_data_stream_send(conn.target_system, conn.target_component,
+                                              _m.MAV_DATA_STREAM_POSITION, 10, 1)
+            _wait(conn, lambda m: m.relative_alt > 9500, 60.0, type="GLOBAL_POSITION_INT")
+            conn.mav.set_position_target_local_ned_send(
+                0, conn.target_system, conn.target_component, _m.MAV_FRAME_LOCAL_NED, 3576,
+                35.0, 0.0, -10.0, 0, 0, 0, 0, 0, 0, 0, 0)
+            _wait(conn, lambda m: abs(m.x - 35) < 1.0 and abs(m.z + 10) < 1.0, 60.0,
+                  type="LOCAL_POSITION_NED")
+
+            def rtl_dest():
+                conn.set_mode("RTL")
+                _wait(conn, lambda m: m.custom_mode == 6, 10.0, type="HEARTBEAT")
+                dest = c.auto.rtl_dest.copy()
+                conn.set_mode("GUIDED")
+                _wait(conn, lambda m: m.custom_mode == 4, 10.0, type="HEARTBEAT")
+                return dest
+
+            # 35 m north: the rally point (15 m away) is nearer than home (35 m)
+            dest = rtl_dest()
+            assert math.hypot(dest[0] - home[0], dest[1] - home[1] - 50.0) < 0.1
+            # RALLY_LIMIT_KM 0.01: the rally point is beyond 10 m, home it is
+            conn.param_set_send("RALLY_LIMIT_KM", 0.01)
+            _wait(conn, lambda m: m.param_id == "RALLY_LIMIT_KM", 10.0, type="PARAM_VALUE")
+            dest = rtl_dest()
+            assert math.hypot(dest[0] - home[0], dest[1] - home[1]) < 0.1
+            conn.set_mode("LAND")
+            conn.motors_disarmed_wait()
+        finally:
+            conn.close()
