@@ -81,7 +81,7 @@ from ft_sitl.missions.spec import (
 from ft_sitl.navigation.base import LIMITS, Limits
 from ft_sitl.navigation.registry import NavigatorError, available, create
 from ft_sitl.physics.catalog import PlatformRegistry
-from ft_sitl.physics.platform import PlatformError
+from ft_sitl.physics.platform import CATEGORIES, PlatformError
 from ft_sitl.scenarios.families import CATEGORY, FAMILIES, REGISTRY, resolve_family
 from ft_sitl.scenarios.io import load_scenario
 from ft_sitl.scenarios.scenario import ScenarioError
@@ -521,8 +521,8 @@ def _platforms(t: Table, base: Path) -> list:
                                 f"category, got {item!r}")
         if item == "all":
             picked = everything
-        elif item in ("real", "virtual", "user"):
-            picked = [p for p in everything if p.category == item]
+        elif item in CATEGORIES:
+            picked = reg.category(item)
             if not picked:
                 raise CampaignError(f"{where}: platforms: no {item} platforms "
                                     f"(user platforms come from platform_files)")

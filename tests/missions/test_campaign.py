@@ -235,6 +235,12 @@ def test_trial_specs_cover_the_matrix(tmp_path):
     assert len(specs) == 2 * len(names) * 2 * 5
     assert len({s.trial_id for s in specs}) == len(specs)
     assert len({s.seed for s in specs}) == len(specs)
+    # the controlled series is a category too, which "all" leaves out
+    series = load_campaign(campaign_file(tmp_path, "s.toml", MATRIX.replace(
+        'platforms = ["1.00kg-SunnySky", "virtual", "0.55kg-UAV 1"]',
+        'platforms = "series"'))).platforms
+    assert [p.category for p in series] == ["series"] * 33
+    assert series[0].name.startswith("series-")
     for s in specs:
         indices = (1, 2, 3) if s.family == "narrow_gap" else (4, 6)
         assert s.scenario_index == indices[s.trial % len(indices)]
