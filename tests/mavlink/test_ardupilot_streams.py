@@ -1,6 +1,7 @@
 """The ArduCopter face's streams as ArduPilot sends them, asked for with pymavlink's
 REQUEST_DATA_STREAM and SET_MESSAGE_INTERVAL over SERIAL0's TCP port: AHRS2 (EXTRA1),
-NAV_CONTROLLER_OUTPUT and SYS_STATUS (EXTENDED_STATUS), SERVO_OUTPUT_RAW (RC_CHANNELS),
+NAV_CONTROLLER_OUTPUT and SYS_STATUS (EXTENDED_STATUS), SERVO_OUTPUT_RAW and RC_CHANNELS
+(RC_CHANNELS, with RC_CHANNELS_OVERRIDE),
 EKF_STATUS_REPORT (EXTRA3); their content checked against the vehicle's state (presence
 only, no timing)."""
 
@@ -50,6 +51,7 @@ def test_the_groups_hold_ardupilots_messages():
     assert where[_m.MAVLINK_MSG_ID_NAV_CONTROLLER_OUTPUT] == "EXT_STAT"
     assert where[_m.MAVLINK_MSG_ID_FENCE_STATUS] == "EXT_STAT"
     assert where[_m.MAVLINK_MSG_ID_SERVO_OUTPUT_RAW] == "RC_CHAN"
+    assert where[_m.MAVLINK_MSG_ID_RC_CHANNELS] == "RC_CHAN"
     assert where[_m.MAVLINK_MSG_ID_EKF_STATUS_REPORT] == "EXTRA3"
 
 
@@ -93,6 +95,23 @@ def test_streams_carry_ahrs2_ekf_servo_outputs_and_nav_controller_output():
             m = _wait(conn, lambda m: True, 30.0, type="SERVO_OUTPUT_RAW")
             assert [m.servo1_raw, m.servo2_raw, m.servo3_raw, m.servo4_raw] == [1000] * 4
             assert m.servo5_raw == 0
+            # RC_CHANNELS: ArduPilot SITL's radio (1500, throttle at RC3_MIN), then the
+            # channels overridden
+            m = _wait(conn, lambda m: True, 30.0, type="RC_CHANNELS")
+            assert m.chancount == 16 and (m.chan1_raw, m.chan3_raw, m.chan16_raw) == \
+                (1500, 1100, 1500)
+            conn.param_set_send("SYSID_MYGCS", 250)  # (overrides only from the GCS)
+            _wait(conn, lambda m: m.param_id == "SYSID_MYGCS" and m.param_value == 250, 10.0,
+                  type="PARAM_VALUE")
+            conn.mav.rc_channels_override_send(conn.target_system, conn.target_component,
+                                               1600, 65535, 1300, 65535, 65535, 65535, 65535,
+                                               1700)
+            m = _wait(conn, lambda m: m.chan1_raw == 1600, 30.0, type="RC_CHANNELS")
+            assert (m.chan2_raw, m.chan3_raw, m.chan8_raw) == (1500, 1300, 1700)
+            conn.mav.rc_channels_override_send(conn.target_system, conn.target_component,
+                                               0, 65535, 0, 65535, 65535, 65535, 65535, 0)
+            _wait(conn, lambda m: (m.chan1_raw, m.chan3_raw, m.chan8_raw) ==
+                  (1500, 1100, 1500), 30.0, type="RC_CHANNELS")
             m = _wait(conn, lambda m: True, 30.0, type="NAV_CONTROLLER_OUTPUT")
             assert m.wp_dist == 0 and m.target_bearing == 0  # (no target disarmed)
             m = _wait(conn, lambda m: True, 30.0, type="SYS_STATUS")

@@ -1,6 +1,6 @@
 """HEARTBEAT, AUTOPILOT_VERSION, SYS_STATUS's geofence bits and the messages only
 ArduPilot sends (AHRS2, EKF_STATUS_REPORT, NAV_CONTROLLER_OUTPUT, SERVO_OUTPUT_RAW,
-FENCE_STATUS) as ArduCopter fills them; every other message is the PX4 face's
+RC_CHANNELS, FENCE_STATUS) as ArduCopter fills them; every other message is the PX4 face's
 (:class:`~ft_sitl.mavlink.telemetry.Telemetry`): the same state, the same encoding."""
 
 from __future__ import annotations
@@ -12,6 +12,7 @@ from pymavlink.dialects.v20 import ardupilotmega as apm
 
 from ft_sitl.autopilot import commander as cm
 from ft_sitl.mavlink.ardupilot.modes import AUTO, GUIDED, GUIDED_FLAG_MODES, RTL
+from ft_sitl.mavlink.ardupilot.rc import RC_CHANNELS
 from ft_sitl.mavlink.telemetry import Telemetry
 from ft_sitl.physics.quaternion import qto_euler
 
@@ -150,6 +151,14 @@ class ArduCopterTelemetry(Telemetry):
             pwm[k] = int(round(lo + (hi - lo) * frac))
         return apm.MAVLink_servo_output_raw_message(v.fleet.time_us & 0xFFFFFFFF, 0, *pwm)
 
+    def rc_channels(self) -> apm.MAVLink_rc_channels_message:
+        """RC_CHANNELS (GCS_MAVLINK::send_rc_channels): the 16 channels the vehicle reads
+        now, overrides included (:mod:`.rc`: an override, else the simulated radio's
+        value); channels 17 and 18 unused (0); RSSI unknown (255)."""
+        pwm = [self.v.rc.pwm(ch) for ch in range(1, RC_CHANNELS + 1)] + [0, 0]
+        return apm.MAVLink_rc_channels_message(self._boot_ms() & 0xFFFFFFFF, RC_CHANNELS,
+                                               *pwm, 255)
+
     def fence_status(self) -> apm.MAVLink_fence_status_message | None:
         return self.v.fence.status()
 
@@ -177,4 +186,5 @@ _AP_BUILDERS = {
     apm.MAVLINK_MSG_ID_NAV_CONTROLLER_OUTPUT: ArduCopterTelemetry.nav_controller_output,
     apm.MAVLINK_MSG_ID_SERVO_OUTPUT_RAW: ArduCopterTelemetry.servo_output_raw,
     apm.MAVLINK_MSG_ID_FENCE_STATUS: ArduCopterTelemetry.fence_status,
+    apm.MAVLINK_MSG_ID_RC_CHANNELS: ArduCopterTelemetry.rc_channels,
 }
