@@ -92,6 +92,12 @@ def test_streams_carry_ahrs2_ekf_servo_outputs_and_nav_controller_output():
             m = _wait(conn, lambda m: True, 30.0, type="EKF_STATUS_REPORT")
             assert m.flags == EKF_HEALTHY
             assert 0 <= m.velocity_variance < 1 and 0 <= m.pos_horiz_variance < 1
+            conn.param_set_send("SIM_GPS_DISABLE", 1)  # no GPS: no horizontal position
+            _wait(conn, lambda m: m.flags == _m.EKF_ATTITUDE | _m.EKF_VELOCITY_VERT
+                  | _m.EKF_POS_VERT_ABS | _m.EKF_CONST_POS_MODE, 30.0,
+                  type="EKF_STATUS_REPORT")
+            conn.param_set_send("SIM_GPS_DISABLE", 0)
+            _wait(conn, lambda m: m.flags == EKF_HEALTHY, 30.0, type="EKF_STATUS_REPORT")
             m = _wait(conn, lambda m: True, 30.0, type="SERVO_OUTPUT_RAW")
             assert [m.servo1_raw, m.servo2_raw, m.servo3_raw, m.servo4_raw] == [1000] * 4
             assert m.servo5_raw == 0

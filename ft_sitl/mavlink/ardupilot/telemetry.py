@@ -42,6 +42,10 @@ VERSION = (4, 5, 7)
 EKF_HEALTHY = (apm.EKF_ATTITUDE | apm.EKF_VELOCITY_HORIZ | apm.EKF_VELOCITY_VERT
                | apm.EKF_POS_HORIZ_REL | apm.EKF_POS_HORIZ_ABS | apm.EKF_POS_VERT_ABS
                | apm.EKF_PRED_POS_HORIZ_REL | apm.EKF_PRED_POS_HORIZ_ABS)
+#: EKF_STATUS_REPORT's flags without GPS: no horizontal position or velocity, the
+#: constant-position mode EKF3 falls back to
+EKF_NO_GPS = (apm.EKF_ATTITUDE | apm.EKF_VELOCITY_VERT | apm.EKF_POS_VERT_ABS
+              | apm.EKF_CONST_POS_MODE)
 #: the innovation test ratios reported (0: perfect, 1: at the rejection gate): the
 #: estimator stage models no filter, so a small constant
 EKF_TEST_RATIO = 0.01
@@ -163,9 +167,12 @@ class ArduCopterTelemetry(Telemetry):
         return self.v.fence.status()
 
     def ekf_status_report(self) -> apm.MAVLink_ekf_status_report_message:
-        """EKF_STATUS_REPORT as a healthy EKF3 sends it (AP_NavEKF3's send_status_report)."""
+        """EKF_STATUS_REPORT as EKF3 sends it (AP_NavEKF3's send_status_report): healthy,
+        or without GPS (SIM_GPS_DISABLE, an injected GPS failure) attitude, vertical
+        velocity and height only, in constant-position mode."""
         r = EKF_TEST_RATIO
-        return apm.MAVLink_ekf_status_report_message(EKF_HEALTHY, r, r, r, r, 0.0, 0.0)
+        flags = EKF_HEALTHY if self.v.cmd.sensor_ok("gps") else EKF_NO_GPS
+        return apm.MAVLink_ekf_status_report_message(flags, r, r, r, r, 0.0, 0.0)
 
     def item_reached(self, seq: int) -> apm.MAVLink_mission_item_reached_message:
         return apm.MAVLink_mission_item_reached_message(seq + 1)  # (home is item 0)
