@@ -115,15 +115,19 @@ def client_port(instance: int) -> int:
 
 
 def serve(autopilot: str, fleet, instance: int, *, lockstep: bool,
-          speed_factor: float = 1.0) -> tuple[SitlServer, str]:
+          speed_factor: float = 1.0,
+          pace_span_s: float | None = None) -> tuple[SitlServer, str]:
     """The face ``autopilot`` serving ``fleet`` as ``instance`` (bound: :meth:`open` in
     lockstep; started later under an event loop otherwise), the trial's parameters kept,
-    and the MAVSDK URL its client connects with. ValueError for the ArduCopter face
+    and the MAVSDK URL its client connects with; free-running with ``pace_span_s``,
+    client-paced (SitlServer ``pace="client"``). ValueError for the ArduCopter face
     free-running (:data:`ARDUPILOT_LOCKSTEP_ONLY`)."""
     geo = frames.GeoReference(*frames.PX4_SITL_HOME)
     port = client_port(instance)
     if check_autopilot(autopilot) == PX4:
-        server = SitlServer(fleet, geo, speed_factor=speed_factor, base_instance=instance)
+        server = SitlServer(fleet, geo, speed_factor=speed_factor, base_instance=instance,
+                            pace="wall" if pace_span_s is None else "client",
+                            pace_span_s=pace_span_s)
     elif not lockstep:
         raise ValueError(ARDUPILOT_LOCKSTEP_ONLY)
     else:

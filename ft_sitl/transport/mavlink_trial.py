@@ -134,9 +134,13 @@ def navigator_argv(plan: TrialPlan, task: Task, connect: str, mqtt: str | None,
 def run_trial_wire(spec: TrialSpec, *, speed_factor: float = 2.0, mqtt: str | None = None,
                    record: bool = False, instance: int | None = None,
                    arm_timeout_s: float = ARM_TIMEOUT_S, log_dir: Path | None = None,
-                   bus_factory=None, autopilot: str = DEFAULT_AUTOPILOT) -> TrialOutcome:
+                   bus_factory=None, autopilot: str = DEFAULT_AUTOPILOT,
+                   pace_span_s: float | None = None) -> TrialOutcome:
     """Fly one trial with the navigator in another process (module docstring), served by
-    ``autopilot``'s face (the PX4 face only: :data:`~.faces.ARDUPILOT_LOCKSTEP_ONLY`)."""
+    ``autopilot``'s face (the PX4 face only: :data:`~.faces.ARDUPILOT_LOCKSTEP_ONLY`);
+    with ``pace_span_s``, client-paced: the simulated clock never runs more than that past
+    the navigator's last message (a starved navigator sees a slower world), the speed
+    factor its ceiling (docs/mavlink.md, Pacing)."""
     if check_autopilot(autopilot) != PX4:
         raise TrialSpecError(ARDUPILOT_LOCKSTEP_ONLY)
     trial = WireTrial(spec, record=record, instance=instance, log_dir=log_dir,
@@ -144,7 +148,8 @@ def run_trial_wire(spec: TrialSpec, *, speed_factor: float = 2.0, mqtt: str | No
     plan, fleet, ref = trial.plan, trial.fleet, trial.ref
     client: dict = {}
     try:
-        server, connect = trial.serve(lockstep=False, speed_factor=speed_factor)
+        server, connect = trial.serve(lockstep=False, speed_factor=speed_factor,
+                                      pace_span_s=pace_span_s)
         bus = bus_factory(server, fleet, plan, trial.vehicle) if bus_factory else None
         if bus is not None:
             ref.on_start = lambda: bus.event(EventType.TRIAL_START, trial=spec.trial_id)

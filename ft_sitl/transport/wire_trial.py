@@ -48,10 +48,13 @@ class WireTrial:
         self._lock = InstanceLock() if instance is None else None
         self.instance = self._lock.__enter__() if self._lock is not None else instance
 
-    def serve(self, *, lockstep: bool, speed_factor: float = 1.0):
-        """The vehicle served by the face; (server, the client's connection URL)."""
+    def serve(self, *, lockstep: bool, speed_factor: float = 1.0,
+              pace_span_s: float | None = None):
+        """The vehicle served by the face (client-paced with ``pace_span_s``); (server, the
+        client's connection URL)."""
         self.server, connect = serve(self.autopilot, self.fleet, self.instance,
-                                     lockstep=lockstep, speed_factor=speed_factor)
+                                     lockstep=lockstep, speed_factor=speed_factor,
+                                     pace_span_s=pace_span_s)
         return self.server, connect
 
     def start(self, argv: list[str], env: dict) -> subprocess.Popen:

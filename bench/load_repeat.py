@@ -1,0 +1,200 @@
+"""Run a selection of the test suite again and again while other processes keep every core
+busy (issue 45's acceptance: the MAVLink trial tests and the MAVSDK example tests pass 30 of
+30 consecutive runs with both cores loaded the whole time).
+
+    FT_SITL_NAVRL_CHECKPOINT=/path/to/navrl_checkpoint.pt \\
+        .venv/bin/python bench/load_repeat.py --runs 30 --log docs/results/load-repeat/run.log
+
+Starts ``--burners`` CPU burners (default one per core: each a process spinning in a loop
+at this script's own priority, as another job of the machine would) before the first run
+and stops them after the last, then runs ``pytest -p no:cacheprovider -n 0 -q`` on the
+selection ``--runs`` times in a row. Each run's line in the log: its number, start (UTC),
+duration, passed/failed/error/skipped counts from pytest's summary, the load averages at
+its start and end, pytest's exit status; a failed run's last lines of output follow it.
+The log ends with the summary line "N of K runs passed"; the exit status is 1 when any run
+failed. Nothing is timed or asserted on speed: the durations are for the record.
+
+The runs use a snapshot of a commit (``--commit``, default HEAD; ``git archive`` into a
+temporary directory, put first on every process's PYTHONPATH, the tests run from there), so
+edits to the working tree while the runs go on (other people's, a checkout) reach none of
+them: a change under a running test would fail it for a reason that is not a flake
+(a Dask worker's code digest would differ from the campaign's). ``--live`` runs the
+working tree as it is instead.
+"""
+
+from __future__ import annotations
+
+import argparse
+import datetime
+import os
+import re
+import shutil
+import signal
+import subprocess
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+REPO = Path(__file__).resolve().parents[1]
+#: the tests the acceptance names: the MAVLink trial tests and the MAVSDK example tests
+DEFAULT_TESTS = ("tests/wire/test_wire_trials.py", "tests/wire/test_movers_wire.py",
+                 "tests/mavlink/test_examples.py")
+#: the lines of a failed run's output kept in the log
+FAILED_TAIL = 60
+#: a burner: a process that spins until it is killed
+BURN = "while True:\n    pass\n"
+
+
+def utc_now() -> str:
+    return datetime.datetime.now(datetime.UTC).strftime("%Y-%m-%dT%H:%M:%SZ")
+
+
+def counts(output: str) -> dict[str, int]:
+    """pytest's summary counts (``3 passed, 1 failed in 12.3s``) from a ``-q`` run's output."""
+    found = {"passed": 0, "failed": 0, "error": 0, "skipped": 0}
+    for line in reversed(output.splitlines()):
+        pairs = re.findall(r"(\d+) (passed|failed|errors?|skipped|xfailed|xpassed)", line)
+        if pairs and re.search(r" in [\d.]+s", line):
+            for n, word in pairs:
+                key = "error" if word.startswith("error") else word
+                found[key] = found.get(key, 0) + int(n)
+            break
+    return found
+
+
+def start_burners(n: int) -> list[subprocess.Popen]:
+    """``n`` spinning processes at this process's priority (they inherit its niceness)."""
+    return [subprocess.Popen([sys.executable, "-c", BURN], stdin=subprocess.DEVNULL,
+                             stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+            for _ in range(n)]
+
+
+def stop_burners(burners: list[subprocess.Popen]) -> None:
+    for p in burners:
+        if p.poll() is None:
+            p.kill()
+    for p in burners:
+        p.wait()
+
+
+def load() -> str:
+    return "/".join(f"{x:.2f}" for x in os.getloadavg())
+
+
+def snapshot(commit: str) -> Path:
+    """The files of ``commit`` in a new temporary directory (``git archive``)."""
+    root = Path(tempfile.mkdtemp(prefix="ft-sitl-load-repeat-"))
+    archive = subprocess.run(["git", "archive", commit], cwd=REPO, capture_output=True,
+                             check=True).stdout
+    subprocess.run(["tar", "-x", "-C", str(root)], input=archive, check=True)
+    return root
+
+
+def one_run(k: int, runs: int, tests: list[str], extra: list[str],
+            burners: list[subprocess.Popen], log, tree: Path, env: dict) -> bool:
+    """Run pytest once; its line (and a failure's tail) in the log. True when it passed."""
+    alive = sum(p.poll() is None for p in burners)
+    started, load0, t0 = utc_now(), load(), time.monotonic()
+    # its own process group: stopping this script stops the run's processes too
+    proc = subprocess.Popen([sys.executable, "-m", "pytest", "-p", "no:cacheprovider", "-n",
+                             "0", "-q", *extra, *tests], cwd=tree, env=env,
+                            stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True,
+                            start_new_session=True)
+    try:
+        out, _ = proc.communicate()
+    except BaseException:
+        os.killpg(proc.pid, signal.SIGTERM)
+        proc.wait()
+        raise
+    duration = time.monotonic() - t0
+    c = counts(out)
+    ok = proc.returncode == 0 and c["failed"] == 0 and c["error"] == 0 and c["passed"] > 0
+    line = (f"run {k:2d}/{runs}  start {started}  {duration:7.1f} s  passed {c['passed']:3d}"
+            f"  failed {c['failed']}  error {c['error']}  skipped {c['skipped']}"
+            f"  load {load0} -> {load()}  burners {alive}/{len(burners)}"
+            f"  exit {proc.returncode}  {'PASS' if ok else 'FAIL'}")
+    print(line, flush=True)
+    log.write(line + "\n")
+    if not ok:
+        for tail_line in out.splitlines()[-FAILED_TAIL:]:
+            log.write(f"    | {tail_line}\n")
+    log.flush()
+    return ok
+
+
+def main(argv: list[str] | None = None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    ap.add_argument("--runs", type=int, default=30, help="consecutive runs (default 30)")
+    ap.add_argument("--burners", type=int, default=os.cpu_count() or 1,
+                    help="CPU burners kept running for the whole run (default: one per "
+                         "core, here %(default)s)")
+    ap.add_argument("--tests", nargs="+", default=list(DEFAULT_TESTS), metavar="PATH",
+                    help="the test selection, as pytest takes it (default: "
+                         + " ".join(DEFAULT_TESTS) + ")")
+    ap.add_argument("--pytest-arg", action="append", default=[], metavar="ARG",
+                    help="a further pytest argument (repeatable), e.g. --pytest-arg=-x")
+    ap.add_argument("--commit", default="HEAD",
+                    help="the commit whose snapshot the runs use (default HEAD)")
+    ap.add_argument("--live", action="store_true",
+                    help="run the working tree as it is, not a snapshot of --commit")
+    ap.add_argument("--log", type=Path, default=REPO / "docs" / "results" / "load-repeat"
+                    / "load_repeat.log", help="the log file (appended to; default %(default)s)")
+    args = ap.parse_args(argv)
+    if args.runs < 1:
+        ap.error(f"--runs: {args.runs} must be at least 1")
+    if args.burners < 0:
+        ap.error(f"--burners: {args.burners} must be 0 or more")
+    args.log.parent.mkdir(parents=True, exist_ok=True)
+
+    def stop(signum, _frame):  # a kill or a closed terminal: stop burners and run cleanly
+        raise SystemExit(f"stopped by signal {signum}")
+
+    signal.signal(signal.SIGTERM, stop)
+    signal.signal(signal.SIGHUP, stop)
+    rev = subprocess.run(["git", "rev-parse", "--short", "HEAD" if args.live else args.commit],
+                         cwd=REPO, capture_output=True, text=True)
+    if rev.returncode != 0:
+        ap.error(f"--commit: {args.commit!r} is not a commit of {REPO}")
+    commit = rev.stdout.strip()
+    env = dict(os.environ)
+    if args.live:
+        tree = REPO
+        dirty = subprocess.run(["git", "status", "--porcelain"], cwd=REPO,
+                               capture_output=True, text=True).stdout.strip()
+        source = f"the working tree at {commit}{' with uncommitted changes' if dirty else ''}"
+    else:
+        tree = snapshot(commit)
+        env["PYTHONPATH"] = os.pathsep.join([str(tree)] + (
+            [env["PYTHONPATH"]] if env.get("PYTHONPATH") else []))
+        source = f"a snapshot of commit {commit}"
+    passed = done = 0
+    with open(args.log, "a") as log:
+        head = (f"# load_repeat {utc_now()}: {args.runs} runs of pytest -p no:cacheprovider "
+                f"-n 0 -q {' '.join(args.pytest_arg + args.tests)}; {args.burners} CPU "
+                f"burners on {os.cpu_count()} cores (nice {os.nice(0)}); {source}; "
+                f"host {os.uname().nodename}")
+        print(head, flush=True)
+        log.write(head + "\n")
+        burners = start_burners(args.burners)
+        t0 = time.monotonic()
+        try:
+            for k in range(1, args.runs + 1):
+                passed += one_run(k, args.runs, args.tests, args.pytest_arg, burners, log,
+                                  tree, env)
+                done = k
+        finally:
+            alive = sum(p.poll() is None for p in burners)
+            stop_burners(burners)
+            early = "" if done == args.runs else f"; stopped after {done} runs"
+            summary = (f"{passed} of {args.runs} runs passed ({time.monotonic() - t0:.0f} s; "
+                       f"burners alive at the end: {alive}/{len(burners)}{early})")
+            print(summary, flush=True)
+            log.write(summary + "\n")
+            if tree != REPO:
+                shutil.rmtree(tree, ignore_errors=True)
+    return 0 if passed == args.runs else 1
+
+
+if __name__ == "__main__":
+    sys.exit(main())
