@@ -19,7 +19,6 @@ from __future__ import annotations
 
 from dataclasses import dataclass, replace
 
-from ft_sitl.autopilot.params import ParamError, ParamSet
 from ft_sitl.config import Table, did_you_mean
 from ft_sitl.missions.spec import PROTOCOL_VERSION, PROTOCOLS, TrialSpecError
 from ft_sitl.navigation.base import LIMITS, Limits
@@ -108,11 +107,6 @@ def level_of(value, owner: str) -> Level:
             param.check(value[key], owner)
         except ValueError as exc:
             raise TrialSpecError(str(exc)) from None
-    try:
-        ParamSet({"MPC_XY_VEL_MAX": value["max_speed_m_s"]})
-    except ParamError as exc:
-        raise t.fail("max_speed_m_s", f"more than the flight controller's speed cap "
-                                      f"takes ({exc})") from None
     level = Level(name, float(value["max_speed_m_s"]), float(value["max_acc_m_s2"]))
     known = LEVELS.get(name)
     if known is not None and known.as_dict() != level.as_dict():

@@ -34,6 +34,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from ft_sitl.autopilot.params import PARAMS
 from ft_sitl.autopilot.setpoints import Setpoint
 from ft_sitl.schema import Param, Schema
 
@@ -55,7 +56,8 @@ class GiveUp(Exception):  # noqa: N818 - a signal, not an error
 #: ``ft-sitl navigate``. Which version of the trial protocol changed which limit is in
 #: ``ft_sitl.missions.spec.PROTOCOLS`` (the acceleration limit came with version 3).
 LIMITS = Schema((
-    Param("max_speed_m_s", 4.0, "m/s", (0.1, 40.0),
+    # its range ends where the flight controller's MPC_XY_VEL_MAX does
+    Param("max_speed_m_s", 4.0, "m/s", (0.1, PARAMS["MPC_XY_VEL_MAX"].hi),
           doc="the speed cap: planners plan with it, the flight controller enforces it "
               "(PX4's MPC_XY_VEL_MAX)"),
     Param("timeout_s", 90.0, "s", (0.1, 3600.0),

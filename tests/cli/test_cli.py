@@ -215,7 +215,7 @@ BAD_NUMBERS = [
     (["navigate", "--algorithm", "straight", "--speed-factor", "nan"],
      "--speed-factor: nan is not a finite number"),
     (["navigate", "--algorithm", "straight", "--max-speed", "0"],
-     "--max-speed: 0 must be within 0.1..40"),
+     "--max-speed: 0 must be within 0.1..20"),
     (["navigate", "--algorithm", "straight", "--timeout", "inf"],
      "--timeout: inf is not a finite number"),
     (["navigate", "--algorithm", "straight", "--connect-timeout", "-1"],

@@ -230,14 +230,13 @@ BASE = f'algorithms = ["straight"]\nplatforms = ["{PLATFORM}"]\n'
      "6 m/s^2), aggressive (8 m/s, 10 m/s^2); or a table with name, max_speed_m_s, "
      "max_acc_m_s2)"),
     ('aggressiveness = ["paper", {name = "x", max_speed_m_s = -2, max_acc_m_s2 = 3}]',
-     "c.toml: aggressiveness[1]: max_speed_m_s: must be a number 0.1..40 (m/s), got -2"),
+     "c.toml: aggressiveness[1]: max_speed_m_s: must be a number 0.1..20 (m/s), got -2"),
     ('aggressiveness = {name = "x", max_speed_m_s = 2, max_acc_m_s2 = 300}',
      "c.toml: aggressiveness: max_acc_m_s2: must be a number 0.1..100 (m/s^2), got 300"),
     ('aggressiveness = [{name = "x", max_speed_m_s = 2, max_acc_m_s2 = 0}]',
      "c.toml: aggressiveness[0]: max_acc_m_s2: must be a number 0.1..100 (m/s^2), got 0"),
     ('aggressiveness = [{name = "x", max_speed_m_s = 30, max_acc_m_s2 = 3}]',
-     "c.toml: aggressiveness[0]: max_speed_m_s: more than the flight controller's speed "
-     "cap takes (MPC_XY_VEL_MAX: 30 m/s is outside [0, 20] m/s)"),
+     "c.toml: aggressiveness[0]: max_speed_m_s: must be a number 0.1..20 (m/s), got 30"),
     ('aggressiveness = [{name = "x", max_speed_m_s = 2, max_acc_m_s2 = 3, max_jerk = 4}]',
      "c.toml: aggressiveness[0]: unknown key(s) 'max_jerk'; allowed: name, max_speed_m_s, "
      "max_acc_m_s2"),
