@@ -49,10 +49,13 @@ class ArduCopterAgent(VehicleAgent):
     receiver_class = ArduCopterReceiver
     mission_class = ArduCopterMission
     mission_items_class = ArduCopterMissionItems
+    #: SETUP_SIGNING over the vehicle's links (.signing; the server gives it)
+    signing = None
 
     def _dispatch_table(self) -> dict:
         table = super()._dispatch_table()
         table["REQUEST_DATA_STREAM"] = self._on_request_data_stream
+        table["SETUP_SIGNING"] = lambda m, *a: self.signing.setup(m) if self.signing else []
         table["RC_CHANNELS_OVERRIDE"] = self._on_rc_override
         table["HEARTBEAT"] = self._on_heartbeat
         manual = table["MANUAL_CONTROL"]

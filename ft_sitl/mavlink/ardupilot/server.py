@@ -15,6 +15,7 @@ from pymavlink.dialects.v20 import ardupilotmega as apm
 
 from ft_sitl.mavlink.ardupilot.agent import ArduCopterAgent
 from ft_sitl.mavlink.ardupilot.framing import FrameSplitter
+from ft_sitl.mavlink.ardupilot.signing import VehicleSigning, accept_unsigned
 from ft_sitl.mavlink.server import Link, SitlServer
 
 #: SERIAL0's TCP port of instance 0, and the step between instances (ArduPilot SITL)
@@ -64,7 +65,7 @@ class SerialLink(Link):
             for m in (self.parser, self.encoder):
                 m.signing.secret_key = secret
                 m.signing.link_id = self.index
-                m.signing.allow_unsigned_callback = lambda _mav, _msgid: False
+                m.signing.allow_unsigned_callback = accept_unsigned
             self.encoder.signing.sign_outgoing = True
 
     def destinations(self, now: float) -> list:
@@ -112,8 +113,10 @@ class _Udp(asyncio.DatagramProtocol):
         self.server, self.link = server, link
 
     def datagram_received(self, data: bytes, addr) -> None:
-        for frame in FrameSplitter().feed(data):
+        frames = FrameSplitter()
+        for frame in frames.feed(data):
             self.server.on_datagram(self.link, frame, addr)
+        self.server.bad_packets += frames.pop_rejected()
 
     def error_received(self, exc) -> None:  # a target not listening yet
         pass
@@ -131,6 +134,7 @@ class ArduPilotServer(SitlServer):
         links = [SerialLink(i, 0, (bind, tcp_ports(k)[0]), None, i + 1, self.secret),
                  SerialLink(i, 1, (bind, tcp_ports(k)[1]), None, i + 1, self.secret)]
         agent = ArduCopterAgent(self.fleet, i, self.geo, 2, ["serial0", "serial1"], logs)
+        agent.signing = VehicleSigning(links, agent.cmd)
         return links, agent
 
     def urls(self) -> list[dict]:
@@ -174,6 +178,7 @@ class ArduPilotServer(SitlServer):
                     break
                 for frame in frames.feed(data):
                     self.on_datagram(link, frame, peer)
+                self.bad_packets += frames.pop_rejected()  # (corrupt or garbage)
         except (ConnectionError, OSError):
             pass
         finally:
