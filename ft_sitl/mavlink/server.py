@@ -412,9 +412,13 @@ class SitlServer:
 
 
 def _fresh_parser(link: Link) -> mav.MAVLink:
-    p = mav.MAVLink(None, 0, 0)
+    """A parser in place of one corrupt input broke: the link's dialect, its signing."""
+    old = link.parser.signing
+    p = type(link.parser)(None, 0, 0)
     p.robust_parsing = True
     if link.secret is not None:
         p.signing.secret_key = link.secret
-        p.signing.allow_unsigned_callback = lambda _mav, _msgid: False
+        p.signing.link_id = old.link_id
+        p.signing.allow_unsigned_callback = old.allow_unsigned_callback or \
+            (lambda _mav, _msgid: False)
     return p
