@@ -11,16 +11,11 @@ import pytest
 os.environ.setdefault("MAVLINK20", "1")
 from pymavlink import mavutil  # noqa: E402
 
-from ft_sitl.mavlink.ardupilot.server import ArduPilotServer, tcp_port_free, tcp_ports  # noqa: E402,E501
-from ft_sitl.mavlink.instances import free_instances  # noqa: E402
+from ft_sitl.mavlink.ardupilot.server import tcp_ports  # noqa: E402
 
-from .sitl_harness import _running_sitl  # noqa: E402
+from .ardupilot_harness import free_ardupilot_sitl, wait_armed, wait_disarmed  # noqa: E402
 
 pytestmark = pytest.mark.e2e  # (tests/lanes.py)
-
-
-def _free(k: int) -> bool:
-    return all(tcp_port_free("127.0.0.1", p) for p in tcp_ports(k))
 
 
 def _wait(conn, what, timeout_s=60.0, **match):
@@ -38,9 +33,7 @@ def _ack(conn, command):
 
 def test_pymavlink_arducopter_helpers_fly_guided_takeoff_goto_land():
     mavutil.set_dialect("ardupilotmega")
-    with free_instances(1, _free) as k, \
-            _running_sitl(1, speed_factor=4.0, server_class=ArduPilotServer,
-                          base_instance=k) as server:
+    with free_ardupilot_sitl(speed_factor=4.0) as (server, k):
         conn = mavutil.mavlink_connection(f"tcp:127.0.0.1:{tcp_ports(k)[0]}",
                                           source_system=250)
         try:
@@ -66,7 +59,7 @@ def test_pymavlink_arducopter_helpers_fly_guided_takeoff_goto_land():
             assert _ack(conn, 176).result == mavutil.mavlink.MAV_RESULT_ACCEPTED
             _wait(conn, lambda m: m.custom_mode == 4, 10.0, type="HEARTBEAT")
             conn.arducopter_arm()
-            conn.motors_armed_wait()
+            wait_armed(conn)
             conn.mav.command_long_send(conn.target_system, conn.target_component,
                                        mavutil.mavlink.MAV_CMD_NAV_TAKEOFF, 0, 0, 0, 0, 0, 0,
                                        0, 10)
@@ -84,7 +77,7 @@ def test_pymavlink_arducopter_helpers_fly_guided_takeoff_goto_land():
             assert abs(m.z + 10) < 1.0
 
             conn.set_mode("LAND")
-            conn.motors_disarmed_wait()
+            wait_disarmed(conn)
             m = _wait(conn, lambda m: True, 10.0, type="GLOBAL_POSITION_INT")
             assert m.relative_alt < 300
             assert server.agents[0].mode_name == "LAND"
@@ -94,8 +87,7 @@ def test_pymavlink_arducopter_helpers_fly_guided_takeoff_goto_land():
 
 def test_parameters_by_arducopter_names_honoured_and_refused():
     mavutil.set_dialect("ardupilotmega")
-    with free_instances(1, _free) as k, \
-            _running_sitl(1, server_class=ArduPilotServer, base_instance=k) as server:
+    with free_ardupilot_sitl() as (server, k):
         conn = mavutil.mavlink_connection(f"tcp:127.0.0.1:{tcp_ports(k)[0]}",
                                           source_system=250)
         try:
@@ -140,9 +132,7 @@ def test_auto_mission_with_home_at_zero_flies_to_the_land_and_disarms():
 
     mavutil.set_dialect("ardupilotmega")
     mav = mavutil.mavlink
-    with free_instances(1, _free) as k, \
-            _running_sitl(1, speed_factor=4.0, server_class=ArduPilotServer,
-                          base_instance=k) as server:
+    with free_ardupilot_sitl(speed_factor=4.0) as (server, k):
         conn = mavutil.mavlink_connection(f"tcp:127.0.0.1:{tcp_ports(k)[0]}",
                                           source_system=250)
         try:
@@ -184,7 +174,7 @@ def test_auto_mission_with_home_at_zero_flies_to_the_land_and_disarms():
                           type=["MISSION_ITEM", "MISSION_ITEM_INT"])
                 if seq == 0:
                     x = m.x if m.get_type() == "MISSION_ITEM" else m.x * 1e-7
-                    assert abs(x - lat0) < 1e-6 and m.command == mav.MAV_CMD_NAV_WAYPOINT
+                    assert abs(x - lat0) < 1e-5 and m.command == mav.MAV_CMD_NAV_WAYPOINT
                 else:
                     assert m.command == mav.MAV_CMD_DO_JUMP and m.param1 == 3
             conn.mav.mission_ack_send(conn.target_system, conn.target_component, 0)
@@ -192,7 +182,7 @@ def test_auto_mission_with_home_at_zero_flies_to_the_land_and_disarms():
             conn.set_mode("GUIDED")
             _wait(conn, lambda m: m.custom_mode == 4, 10.0, type="HEARTBEAT")
             conn.arducopter_arm()
-            conn.motors_armed_wait()
+            wait_armed(conn)
             conn.set_mode("AUTO")
             _wait(conn, lambda m: m.custom_mode == 3, 10.0, type="HEARTBEAT")
             reached = []
@@ -226,9 +216,7 @@ def test_auto_mission_return_to_launch_item_lands_at_home_and_disarms():
 
     mavutil.set_dialect("ardupilotmega")
     mav = mavutil.mavlink
-    with free_instances(1, _free) as k, \
-            _running_sitl(1, speed_factor=4.0, server_class=ArduPilotServer,
-                          base_instance=k) as server:
+    with free_ardupilot_sitl(speed_factor=4.0) as (server, k):
         conn = mavutil.mavlink_connection(f"tcp:127.0.0.1:{tcp_ports(k)[0]}",
                                           source_system=250)
         try:
@@ -254,12 +242,12 @@ def test_auto_mission_return_to_launch_item_lands_at_home_and_disarms():
             assert mc.seq == 1 and mc.total == 4
             conn.set_mode("GUIDED")
             conn.arducopter_arm()
-            conn.motors_armed_wait()
+            wait_armed(conn)
             conn.set_mode("AUTO")
             _wait(conn, lambda m: m.seq == 2, 120.0, type="MISSION_ITEM_REACHED")
             far = _wait(conn, lambda m: True, 10.0, type="LOCAL_POSITION_NED")
             assert far.y > 15  # out east before returning
-            conn.motors_disarmed_wait()
+            wait_disarmed(conn)
             c = server.agents[0].cmd
             p = c.position_now()
             assert abs(p[0] - c.home[0]) < 2.0 and abs(p[1] - c.home[1]) < 2.0

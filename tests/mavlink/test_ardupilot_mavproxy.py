@@ -14,18 +14,13 @@ from pathlib import Path
 import pytest
 
 from ft_sitl.mavlink.ardupilot import waypoints
-from ft_sitl.mavlink.ardupilot.server import ArduPilotServer, tcp_port_free, tcp_ports
-from ft_sitl.mavlink.instances import free_instances
+from ft_sitl.mavlink.ardupilot.server import tcp_ports
 
-from .sitl_harness import _running_sitl
+from .ardupilot_harness import free_ardupilot_sitl
 
 pytestmark = pytest.mark.e2e  # (tests/lanes.py: a MAVProxy process, TCP)
 
 MAVPROXY = Path(sys.executable).parent / "mavproxy.py"  # (pyproject's test extra)
-
-
-def _free(k: int) -> bool:
-    return all(tcp_port_free("127.0.0.1", p) for p in tcp_ports(k))
 
 
 def _until(what, timeout_s: float, describe: str, log: Path):
@@ -39,9 +34,7 @@ def _until(what, timeout_s: float, describe: str, log: Path):
 
 
 def test_mavproxy_session_flies_guided_a_waypoints_file_in_auto_and_rtl(tmp_path):
-    with free_instances(1, _free) as k, \
-            _running_sitl(1, speed_factor=4.0, server_class=ArduPilotServer,
-                          base_instance=k) as server:
+    with free_ardupilot_sitl(speed_factor=4.0) as (server, k):
         agent = server.agents[0]
         c = agent.cmd
         geo = agent.geo

@@ -1,0 +1,110 @@
+"""The ArduCopter face for the tests, on free instance numbers only (their lock files held,
+their TCP ports free), so tests never collide with each other or with a SITL or trial of
+this machine: in this process (:func:`free_ardupilot_sitl`) or as ``ft-sitl sitl
+--autopilot ardupilot --instance auto`` in a process of its own
+(:func:`ardupilot_sitl_process`, for clients that run their own threads: DroneKit, MAVSDK).
+Waits with deadlines that fail naming what was awaited (pymavlink's own
+``motors_disarmed_wait`` waits for ever)."""
+
+from __future__ import annotations
+
+import json
+import os
+import subprocess
+import sys
+import time
+from contextlib import contextmanager
+
+os.environ.setdefault("MAVLINK20", "1")
+from pymavlink import mavutil  # noqa: E402
+
+from ft_sitl.mavlink.ardupilot.server import ArduPilotServer, tcp_port_free, tcp_ports  # noqa: E402,E501
+from ft_sitl.mavlink.instances import free_instances  # noqa: E402
+
+from .sitl_harness import _running_sitl  # noqa: E402
+
+#: the seconds a started process may take to print where it serves (a cold numba cache)
+START_TIMEOUT_S = 300.0
+
+
+def serial_ports_free(k: int) -> bool:
+    """Whether instance k's three TCP serial ports are free on the loopback."""
+    return all(tcp_port_free("127.0.0.1", p) for p in tcp_ports(k))
+
+
+@contextmanager
+def free_ardupilot_sitl(**kwargs):
+    """An ArduCopter face in this process on a free instance number (held meanwhile);
+    yields ``(server, k)``: SERIAL0 is ``tcp:127.0.0.1:{tcp_ports(k)[0]}``."""
+    with free_instances(1, serial_ports_free) as k, \
+            _running_sitl(1, server_class=ArduPilotServer, base_instance=k, **kwargs) as s:
+        yield s, k
+
+
+@contextmanager
+def ardupilot_sitl_process(*args: str):
+    """``ft-sitl sitl --autopilot ardupilot --instance auto --json --no-mqtt *args`` in a
+    process of its own; yields the vehicles' description it prints (``vehicles[0]
+    ["serial"][0]`` is SERIAL0's tcp:HOST:PORT). The process is stopped at the end."""
+    proc = subprocess.Popen(
+        [sys.executable, "-m", "ft_sitl", "sitl", "--autopilot", "ardupilot", "--instance",
+         "auto", "--json", "--no-mqtt", *args],
+        stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    try:
+        text, line, deadline = "", "", time.monotonic() + START_TIMEOUT_S
+        while line.rstrip("\n") != "}":  # (the closing brace of the top level)
+            line = proc.stdout.readline()
+            if not line or time.monotonic() > deadline:
+                proc.kill()
+                raise AssertionError(f"ft-sitl sitl did not start: {proc.stderr.read()}")
+            text += line
+        yield json.loads(text)
+    finally:
+        if proc.poll() is None:
+            proc.terminate()
+            try:
+                proc.wait(30)
+            except subprocess.TimeoutExpired:
+                proc.kill()
+                proc.wait()
+        proc.stdout.close()
+        proc.stderr.close()
+
+
+def wait_msg(conn, types, what=lambda m: True, timeout_s: float = 60.0, describe: str = ""):
+    """The first message of ``types`` for which ``what`` holds, within ``timeout_s`` wall
+    seconds (AssertionError naming what was awaited)."""
+    deadline = time.monotonic() + timeout_s
+    while time.monotonic() < deadline:
+        m = conn.recv_match(type=types, blocking=True, timeout=1.0)
+        if m is not None and what(m):
+            return m
+    raise AssertionError(f"no {types} {describe or 'matching'} within {timeout_s:g} s")
+
+
+def wait_disarmed(conn, timeout_s: float = 180.0):
+    """pymavlink's motors_disarmed_wait with a deadline: the vehicle's HEARTBEAT without
+    the armed flag."""
+    armed = mavutil.mavlink.MAV_MODE_FLAG_SAFETY_ARMED
+    return wait_msg(conn, "HEARTBEAT",
+                    lambda m: m.get_srcSystem() == conn.target_system and
+                    not m.base_mode & armed, timeout_s, "saying disarmed")
+
+
+def wait_armed(conn, timeout_s: float = 30.0):
+    """pymavlink's motors_armed_wait with a deadline."""
+    armed = mavutil.mavlink.MAV_MODE_FLAG_SAFETY_ARMED
+    return wait_msg(conn, "HEARTBEAT",
+                    lambda m: m.get_srcSystem() == conn.target_system and
+                    bool(m.base_mode & armed), timeout_s, "saying armed")
+
+
+def until(what, timeout_s: float, describe: str, poll_s: float = 0.1):
+    """Poll ``what()`` until it is true, within ``timeout_s`` wall seconds (a liveness
+    deadline, not a timing assertion: AssertionError naming what was awaited)."""
+    deadline = time.monotonic() + timeout_s
+    while time.monotonic() < deadline:
+        if what():
+            return
+        time.sleep(poll_s)
+    raise AssertionError(f"timed out after {timeout_s:g} s waiting for {describe}")
