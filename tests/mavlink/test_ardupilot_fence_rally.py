@@ -4,8 +4,9 @@ A MAVProxy session, unmodified (as tests/mavlink/test_ardupilot_mavproxy.py runs
 the fence off MAVProxy reports the fence present (FENCE_TYPE's kinds) and no breach;
 `fence load FILE` uploads an inclusion polygon and an exclusion circle over the mission
 protocol's FENCE list, stored but not flown while FENCE_ENABLE is 0; `fence list` reads
-them back; `fence enable` puts them in force; a GUIDED flight out of the polygon breaches
-it, FENCE_ACTION 1 returns the vehicle and MAVProxy says "fence breach".
+them back; `fence enable` puts them in force; `rally load FILE` / `rally list` a rally point; a
+GUIDED flight out of the polygon breaches it, FENCE_ACTION 1 returns the vehicle (to the
+rally point, nearer than home) and MAVProxy says "fence breach".
 
 Rally points uploaded with pymavlink (MAV_MISSION_TYPE_RALLY) and RTL's choice among them
 and home by RALLY_INCL_HOME / RALLY_LIMIT_KM (AP_Rally's rule)."""
@@ -113,6 +114,16 @@ def test_mavproxy_fence_load_list_enable_and_a_breach_returns(tmp_path):
             _until(lambda: log.read_text().count("\n5001 ") == 4, 30, "fence list", log)
             assert log.read_text().count("\n5004 0 ") == 1
 
+            # a rally point 20 m north, loaded and listed with MAVProxy's rally module
+            rally_file = tmp_path / "rally.waypoints"
+            rally_file.write_text("QGC WPL 110\n"
+                                  f"0\t0\t3\t5100\t0\t0\t0\t0\t{latlon(0, 20)}\t15\t1\n")
+            type_(f"rally load {rally_file}")
+            _until(lambda: len(c.rally) == 1, 30, "the rally point uploaded", log)
+            assert abs(c.rally[0][1] - home[1] - 20) < 0.1
+            type_("rally list")
+            _until(lambda: "\n5100 3 " in log.read_text(), 30, "rally list", log)
+
             type_("fence enable")
             _until(lambda: c.fence is v.fence.uploaded, 30, "the fence in force", log)
             _until(lambda: "fence enabled" in log.read_text(), 30, "fence enabled", log)
@@ -129,6 +140,8 @@ def test_mavproxy_fence_load_list_enable_and_a_breach_returns(tmp_path):
             _until(lambda: c.fence_events, 60, "the breach", log)
             assert c.fence_events[0][1:] == ("outside the fence", "return")
             assert (c.main_mode, c.sub_mode) == (cm.MAIN_AUTO, cm.SUB_RTL)
+            # RTL returns to the rally point, nearer than home (RALLY_INCL_HOME 1)
+            assert math.hypot(*(c.auto.rtl_dest[:2] - c.rally[0][:2])) < 1e-6
             _until(lambda: "fence breach" in log.read_text(), 30, "MAVProxy's breach", log)
             st = agent.telemetry.build(_m.MAVLINK_MSG_ID_FENCE_STATUS)
             assert st.breach_count == 1 and st.breach_type == _m.FENCE_BREACH_BOUNDARY
