@@ -160,7 +160,9 @@ def test_rc_overrides_fly_alt_hold_and_loiter_and_time_out():
         along = (moved.x - start.x) * math.cos(yaw) + (moved.y - start.y) * math.sin(yaw)
         assert along > 10.0, (along, yaw)
         assert abs(moved.z - start.z) < 2.0
-        gcs.rc[1] = 1500  # centred: it stops and holds
+        # pitch released (0: back to the radio, centred), the others left as they are
+        # (UINT16_MAX: ignored, the throttle's override stands): it stops and holds
+        gcs.rc = [65535, 0, 65535, 65535, 65535, 65535, 65535, 65535]
         gcs.wait(lambda m: math.hypot(m.vx, m.vy) < 0.2, type="LOCAL_POSITION_NED")
         assert gcs.conn.messages["HEARTBEAT"].custom_mode == 5
 

@@ -55,7 +55,8 @@ def prearm_failures(v: ArduCopterVehicle) -> list[str]:
         denial = arming_denial(c)  # (the flight controller's own: no ArduCopter text)
         reason = denial.split(": ", 1)[-1]
         out.append(f"PreArm: {reason[:1].upper()}{reason[1:]}")
-    if mode in modes.NEEDS_POSITION and not c.sensor_ok("gps"):
+    no_gps = not c.sensor_ok("gps") or v.ap_params["SIM_GPS_DISABLE"]  # (set this chunk)
+    if mode in modes.NEEDS_POSITION and no_gps:
         out.append("PreArm: Need Position Estimate")
     mask = int(v.ap_params["ARMING_CHECK"])
     if mask == 0:
