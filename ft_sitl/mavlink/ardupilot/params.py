@@ -119,7 +119,8 @@ _SPECS = [
     # --- motor outputs (libraries/SRV_Channel): read by SERVO_OUTPUT_RAW ----------------
     *(_P(f"SERVO{n}_{end}", pwm, 800, 2200, "PWM", f"motor {n}'s output at {what} rotor "
          "speed command (ArduCopter's SERVOn default 1100/1900; ft-sitl 1000/2000, the "
-         "range ArduCopter's motors use with MOT_PWM_MIN/MAX 1000/2000)", INT16)
+         "range ArduCopter SITL's motors span: MOT_PWM_MIN/MAX 0 take RC3_MIN/MAX, "
+         "1000/2000 in its copter.parm)", INT16)
       for n in range(1, 5) for end, pwm, what in (("MIN", 1000, "zero"),
                                                    ("MAX", 2000, "full"))),
     # --- identity and arming (ArduCopter/Parameters.cpp, AP_Arming) --------------------
