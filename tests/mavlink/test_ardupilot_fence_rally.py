@@ -23,14 +23,19 @@ import pytest
 os.environ.setdefault("MAVLINK20", "1")
 from pymavlink import mavutil  # noqa: E402
 
+from ft_sitl import frames  # noqa: E402
 from ft_sitl.autopilot import commander as cm  # noqa: E402
+from ft_sitl.autopilot.geofence import Fence, polygon  # noqa: E402
 from ft_sitl.autopilot.params import ParamSet  # noqa: E402
+from ft_sitl.mavlink.ardupilot.agent import ArduCopterVehicle  # noqa: E402
 from ft_sitl.mavlink.ardupilot.params import ApParamSet  # noqa: E402
 from ft_sitl.mavlink.ardupilot.rally import RallyRule  # noqa: E402
 from ft_sitl.mavlink.ardupilot.server import ArduPilotServer, tcp_port_free, tcp_ports  # noqa: E402,E501
 from ft_sitl.mavlink.instances import free_instances  # noqa: E402
+from ft_sitl.physics.catalog import get_platform  # noqa: E402
+from ft_sitl.sim.fleet import Fleet  # noqa: E402
 
-from .sitl_harness import _running_sitl  # noqa: E402
+from .sitl_harness import PLATFORM, _running_sitl  # noqa: E402
 from .test_ardupilot_mavproxy import MAVPROXY, _until  # noqa: E402
 
 _m = mavutil.mavlink
@@ -67,6 +72,37 @@ def test_rally_rule_is_ap_rallys():
     assert np.array_equal(rule([0, -350, 10], home, [far]), home)  # 850 m: past the limit
     ap.set("RALLY_LIMIT_KM", 0)
     assert np.array_equal(rule([0, -350, 10], home, [far]), far)  # no limit
+
+
+def _bits(v):
+    g = _m.MAV_SYS_STATUS_GEOFENCE
+    p, e, h = v.fence.sys_status_bits(0, 0, 0)
+    return bool(p & g), bool(e & g), bool(h & g)
+
+
+def test_fence_kinds_gate_the_uploaded_areas_and_set_ac_fences_sys_status_bits():
+    fleet = Fleet([get_platform(PLATFORM)])
+    v = ArduCopterVehicle(fleet, 0, frames.GeoReference(*frames.PX4_SITL_HOME))
+    ap, c = v.ap_params, v.cmd
+    assert _bits(v) == (True, False, True)  # FENCE_TYPE 7: altitude, circle; off; healthy
+    ap.set("FENCE_TYPE", 4)
+    assert _bits(v) == (False, False, True)  # polygons, none uploaded: absent, healthy
+    area = Fence([polygon([(-30, -30), (30, -30), (30, 30), (-30, 30)], True, "test")])
+    v.fence.upload(area)
+    assert _bits(v) == (True, False, True) and c.fence.empty  # stored, not flown
+    ap.set("FENCE_ENABLE", 1)
+    assert _bits(v) == (True, True, True) and c.fence is area  # in force
+    assert fleet.params[0]["GF_MAX_HOR_DIST"] == 0  # (no circle kind)
+    ap.set("FENCE_ACTION", 0)
+    assert _bits(v) == (True, False, True)  # report only: not "enabled"
+    c.failsafes.fence_breached = True
+    assert _bits(v) == (True, False, False)  # breached: unhealthy
+    st = v.fence.status()
+    assert st.breach_status == 1
+    ap.set("FENCE_TYPE", 2)
+    assert c.fence.empty and fleet.params[0]["GF_MAX_HOR_DIST"] == ap["FENCE_RADIUS"]
+    ap.set("FENCE_TYPE", 0)
+    assert _bits(v)[0] is False and _bits(v)[2] is True and v.fence.status() is None
 
 
 @pytest.mark.e2e  # (tests/lanes.py: a MAVProxy process, TCP)
