@@ -300,9 +300,9 @@ def test_arming_checks_answer_arducopter_texts_and_force_arm_bypasses():
 
 def test_gcs_failsafe_lands_and_clears_and_battery_failsafe_returns_then_lands():
     def flight(gcs: Gcs, server):
-        gcs.param("FS_GCS_TIMEOUT", 2)
-        gcs.param("FS_GCS_ENABLE", 5)  # land
         gcs.takeoff(8)
+        gcs.param("FS_GCS_TIMEOUT", 5)  # (ArduCopter's default: a stalled client is not silence)
+        gcs.param("FS_GCS_ENABLE", 5)  # land
         gcs.heartbeat = False  # the ground station falls silent
         gcs.text("GCS Failsafe", 60.0)
         gcs.wait(lambda m: m.custom_mode == 9, 30.0, type="HEARTBEAT")
