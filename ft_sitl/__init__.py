@@ -9,7 +9,7 @@ G = 9.80665
 from ft_sitl import numeric_env  # noqa: E402
 
 try:
-    numeric_env.pin()
+    numeric_env.warn_if_too_late(numeric_env.pin())
 except numeric_env.NumericEnvError as _exc:  # a bad FT_SITL_ISA: one line, not a traceback
     raise SystemExit(f"ft-sitl: {_exc}") from None
 

@@ -69,7 +69,7 @@ import functools
 import os
 import sys
 import warnings
-from collections.abc import MutableMapping
+from collections.abc import Iterable, Mapping, MutableMapping
 from importlib import metadata
 
 THREAD_VARS = ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS")
@@ -158,6 +158,24 @@ def pin(environ: MutableMapping[str, str] | None = None,
     a parent ft_sitl process set (:data:`MARK_VAR`) count as unset, so a child asked for
     ``host`` drops the parent's pins."""
     return _pin(os.environ if environ is None else environ, flags)
+
+
+#: the variables numpy (and the OpenBLAS it loads) reads once, when it is imported
+NUMPY_VARS = (CORETYPE_VAR, "NPY_DISABLE_CPU_FEATURES")
+
+
+def warn_if_too_late(done: Mapping[str, str], loaded: Iterable[str] | None = None) -> bool:
+    """Warn (RuntimeWarning) when :func:`pin` had to set numpy's variables (``done``)
+    but numpy was already loaded (``loaded``: the modules loaded before ft_sitl), so they
+    are not in force: the rows say ``isa`` host. True when it warned."""
+    loaded = _IMPORTED_BEFORE if loaded is None else set(loaded)
+    late = sorted(set(done) & set(NUMPY_VARS)) if "numpy" in loaded else []
+    if late:
+        warnings.warn(f"numpy was imported before ft_sitl, so {', '.join(late)} came too "
+                      f"late: numpy computes at this host's level, rows say isa 'host' and "
+                      f"need not re-fly elsewhere; import ft_sitl before numpy (or set "
+                      f"FT_SITL_ISA=host to mean it)", RuntimeWarning, stacklevel=3)
+    return bool(late)
 
 
 def _marked(environ: MutableMapping[str, str]) -> set[str]:

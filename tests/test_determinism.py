@@ -61,6 +61,30 @@ def test_a_child_asked_for_host_drops_the_pins_its_parent_set():
     assert again == parent
 
 
+def test_numpy_loaded_before_ft_sitl_is_said_not_silently_lost():
+    done = numeric_env.pin({}, flags=V3_HOST)
+    with pytest.warns(RuntimeWarning, match=r"numpy was imported before ft_sitl, so "
+                      r"NPY_DISABLE_CPU_FEATURES, OPENBLAS_CORETYPE came too late"):
+        assert numeric_env.warn_if_too_late(done, loaded={"numpy"})
+    # numpy loaded after, or its variables already set by the parent: nothing to say
+    assert not numeric_env.warn_if_too_late(done, loaded=set())
+    assert not numeric_env.warn_if_too_late({"OMP_NUM_THREADS": "1"}, loaded={"numpy"})
+
+
+@pytest.mark.e2e  # fresh interpreters
+def test_a_fresh_interpreter_that_loaded_numpy_first_is_warned():
+    # with none of the pins in its environment
+    ours = set(numeric_env.v3_settings()) | set(numeric_env.THREAD_VARS) | {
+        numeric_env.MARK_VAR}
+    env = {k: v for k, v in os.environ.items() if k not in ours}
+    late, first = (subprocess.run([sys.executable, "-c", code], env=env, capture_output=True,
+                                  text=True, timeout=120)
+                   for code in ("import numpy, ft_sitl", "import ft_sitl, numpy"))
+    assert late.returncode == first.returncode == 0, late.stderr + first.stderr
+    assert "RuntimeWarning: numpy was imported before ft_sitl" in late.stderr
+    assert "RuntimeWarning" not in first.stderr
+
+
 @pytest.mark.e2e  # `python -m ft_sitl` in a child
 def test_a_bad_level_is_refused_by_name(tmp_path):
     with pytest.raises(numeric_env.NumericEnvError, match=r"FT_SITL_ISA='v4' is not a level"):
