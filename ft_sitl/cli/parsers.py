@@ -148,8 +148,8 @@ def build_parser() -> argparse.ArgumentParser:
     sitl.add_argument("--instance", type=_instance_number, default=0, metavar="I|auto",
                       help="first instance number, as PX4's -i: ports 14580+I, 14540+I, "
                            "18570+I (default 0; I + instances <= 1000); auto: the lowest "
-                           "free run of numbers in 20..59 whose ports are free (--json "
-                           "says which)")
+                           "free run of numbers in 20..39, 80..99 whose ports are free "
+                           "(--json says which)")
     sitl.add_argument("--autopilot", choices=AUTOPILOTS, default=DEFAULT_AUTOPILOT,
                       help="the face on the wire: px4 (PX4 SITL's UDP ports, default) or "
                            "ardupilot (ArduCopter: TCP 5760+10*I for SERIAL0, 5762+10*I and "
