@@ -95,9 +95,10 @@ def plan_trial(spec: TrialSpec, *, navigator=None,
     platform = platform_for(spec)
     scenario = resources.scenario(spec)
     radius, body = vehicle_collision(rules, platform)
-    nav_params = navigator_params(spec)
+    cls = available().get(spec.algorithm)  # (the entry points scanned once a plan)
+    nav_params = navigator_params(spec, cls)
     cam = (getattr(navigator, "camera", None) if navigator is not None
-           else navigator_camera(spec.algorithm, nav_params))
+           else navigator_camera(spec.algorithm, nav_params, cls))
     seen = cam
     if cam is not None and spec.perception is not None:
         seen = Perception(spec.perception).camera_config(cam)
@@ -114,10 +115,15 @@ def plan_trial(spec: TrialSpec, *, navigator=None,
         else legacy_wire_streams(streams, spec.seed, spec.trial))
 
 
-def navigator_camera(algorithm: str, params: dict):
+_LOOK_UP = object()
+
+
+def navigator_camera(algorithm: str, params: dict, cls=_LOOK_UP):
     """The depth camera the registered navigator ``algorithm`` asks for with ``params``
-    (None: none, or a navigator this process cannot load)."""
-    cls = available().get(algorithm)
+    (None: none, or a navigator this process cannot load). ``cls``: the registry's entry
+    for ``algorithm`` when the caller has it (else looked up)."""
+    if cls is _LOOK_UP:
+        cls = available().get(algorithm)
     if not isinstance(cls, type):
         return None
     return cls.camera_for(cls.schema.resolve(dict(params), f"navigator {algorithm!r}"))
@@ -131,14 +137,15 @@ def footprint_m(rules: ProtocolRules, spec: TrialSpec, platform: Platform) -> fl
     return None
 
 
-def navigator_params(spec: TrialSpec) -> dict:
+def navigator_params(spec: TrialSpec, cls=_LOOK_UP) -> dict:
     """The navigator's parameters in this trial: the spec's, plus what the trial's protocol
     version fixed that the navigator's defaults have changed since (versions 1 and 2 flew
     the benchmark camera at 15 Hz; before 7 NavRL saw no moving obstacles; before 8 its
-    shield clustered within 0.2 m)."""
+    shield clustered within 0.2 m). ``cls`` as for :func:`navigator_camera`."""
     params = dict(spec.algorithm_params)
     rules = PROTOCOLS[spec.protocol]
-    cls = available().get(spec.algorithm)
+    if cls is _LOOK_UP:
+        cls = available().get(spec.algorithm)
     names = () if isinstance(cls, (str, type(None))) else cls.schema.names()
     rate = rules.benchmark_camera_hz
     if rate is not None and "camera_rate_hz" in names and "camera_rate_hz" not in params \
