@@ -30,19 +30,15 @@ from ft_sitl.autopilot.params import ParamSet  # noqa: E402
 from ft_sitl.mavlink.ardupilot.agent import ArduCopterVehicle  # noqa: E402
 from ft_sitl.mavlink.ardupilot.params import ApParamSet  # noqa: E402
 from ft_sitl.mavlink.ardupilot.rally import RallyRule  # noqa: E402
-from ft_sitl.mavlink.ardupilot.server import ArduPilotServer, tcp_port_free, tcp_ports  # noqa: E402,E501
-from ft_sitl.mavlink.instances import free_instances  # noqa: E402
+from ft_sitl.mavlink.ardupilot.server import tcp_ports  # noqa: E402
 from ft_sitl.physics.catalog import get_platform  # noqa: E402
 from ft_sitl.sim.fleet import Fleet  # noqa: E402
 
-from .sitl_harness import PLATFORM, _running_sitl  # noqa: E402
+from .ardupilot_harness import free_ardupilot_sitl, wait_armed, wait_disarmed  # noqa: E402
+from .sitl_harness import PLATFORM  # noqa: E402
 from .test_ardupilot_mavproxy import MAVPROXY, _until  # noqa: E402
 
 _m = mavutil.mavlink
-
-
-def _free(k: int) -> bool:
-    return all(tcp_port_free("127.0.0.1", p) for p in tcp_ports(k))
 
 
 def _wait(conn, what, timeout_s=60.0, **match):
@@ -107,9 +103,7 @@ def test_fence_kinds_gate_the_uploaded_areas_and_set_ac_fences_sys_status_bits()
 
 @pytest.mark.e2e  # (tests/lanes.py: a MAVProxy process, TCP)
 def test_mavproxy_fence_load_list_enable_and_a_breach_returns(tmp_path):
-    with free_instances(1, _free) as k, \
-            _running_sitl(1, speed_factor=4.0, server_class=ArduPilotServer,
-                          base_instance=k) as server:
+    with free_ardupilot_sitl(speed_factor=4.0) as (server, k):
         agent = server.agents[0]
         v, c, geo = agent.vehicle, agent.cmd, agent.geo
         home = c.home.copy()
@@ -207,9 +201,7 @@ def _upload_rally(conn, points) -> int:
 @pytest.mark.e2e  # (tests/lanes.py: TCP)
 def test_rtl_returns_to_the_rally_point_or_home_as_rally_params_say():
     mavutil.set_dialect("ardupilotmega")
-    with free_instances(1, _free) as k, \
-            _running_sitl(1, speed_factor=4.0, server_class=ArduPilotServer,
-                          base_instance=k) as server:
+    with free_ardupilot_sitl(speed_factor=4.0) as (server, k):
         agent = server.agents[0]
         c, geo = agent.cmd, agent.geo
         home = c.home.copy()
@@ -225,7 +217,7 @@ def test_rtl_returns_to_the_rally_point_or_home_as_rally_params_say():
             conn.set_mode("GUIDED")
             _wait(conn, lambda m: m.custom_mode == 4, 10.0, type="HEARTBEAT")
             conn.arducopter_arm()
-            conn.motors_armed_wait()
+            wait_armed(conn)
             conn.mav.command_long_send(conn.target_system, conn.target_component,
                                        _m.MAV_CMD_NAV_TAKEOFF, 0, 0, 0, 0, 0, 0, 0, 10)
             assert _ack(conn, 22).result == _m.MAV_RESULT_ACCEPTED
@@ -255,6 +247,6 @@ def test_rtl_returns_to_the_rally_point_or_home_as_rally_params_say():
             dest = rtl_dest()
             assert math.hypot(dest[0] - home[0], dest[1] - home[1]) < 0.1
             conn.set_mode("LAND")
-            conn.motors_disarmed_wait()
+            wait_disarmed(conn)
         finally:
             conn.close()

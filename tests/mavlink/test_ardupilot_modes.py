@@ -13,19 +13,14 @@ import pytest
 os.environ.setdefault("MAVLINK20", "1")
 from pymavlink import mavutil  # noqa: E402
 
-from ft_sitl.mavlink.ardupilot.server import ArduPilotServer, tcp_port_free, tcp_ports  # noqa: E402,E501
-from ft_sitl.mavlink.instances import free_instances  # noqa: E402
+from ft_sitl.mavlink.ardupilot.server import tcp_ports  # noqa: E402
 
-from .sitl_harness import _running_sitl  # noqa: E402
+from .ardupilot_harness import free_ardupilot_sitl  # noqa: E402
 
 pytestmark = pytest.mark.e2e  # (tests/lanes.py)
 
 GCS = 255  # ArduCopter's SYSID_MYGCS
 ARMED = mavutil.mavlink.MAV_MODE_FLAG_SAFETY_ARMED
-
-
-def _free(k: int) -> bool:
-    return all(tcp_port_free("127.0.0.1", p) for p in tcp_ports(k))
 
 
 class Gcs:
@@ -116,9 +111,7 @@ class Gcs:
 
 def _session(test):
     """Run ``test(gcs, server)`` against a fresh face at speed factor 4."""
-    with free_instances(1, _free) as k, \
-            _running_sitl(1, speed_factor=4.0, server_class=ArduPilotServer,
-                          base_instance=k) as server:
+    with free_ardupilot_sitl(speed_factor=4.0) as (server, k):
         gcs = Gcs(tcp_ports(k)[0])
         try:
             gcs.conn.wait_heartbeat(timeout=30)

@@ -15,10 +15,9 @@ from pymavlink import mavutil
 from ft_sitl.autopilot.params import ParamSet
 from ft_sitl.mavlink.ardupilot import parm
 from ft_sitl.mavlink.ardupilot.params import ApParamSet
-from ft_sitl.mavlink.ardupilot.server import ArduPilotServer, tcp_port_free, tcp_ports
-from ft_sitl.mavlink.instances import free_instances
+from ft_sitl.mavlink.ardupilot.server import tcp_ports
 
-from .sitl_harness import _running_sitl
+from .ardupilot_harness import free_ardupilot_sitl
 from .test_ardupilot_mavproxy import MAVPROXY, _until
 
 
@@ -62,10 +61,6 @@ def test_written_parameters_read_back_identical(tmp_path):
     parm.write(f, ap)
     back = {n: v for n, v, _ in parm.read(f)}
     assert back == dict(ap.items())
-
-
-def _free(k: int) -> bool:
-    return all(tcp_port_free("127.0.0.1", p) for p in tcp_ports(k))
 
 
 def _param(conn, name: str) -> float:
@@ -140,8 +135,7 @@ def test_a_value_the_controller_cannot_fly_names_where_it_came_from(tmp_path):
 
 @pytest.mark.e2e  # (a MAVProxy process, TCP)
 def test_mavproxy_param_save_writes_a_file_defaults_reads_back(tmp_path):
-    with free_instances(1, _free) as k, \
-            _running_sitl(1, server_class=ArduPilotServer, base_instance=k) as server:
+    with free_ardupilot_sitl() as (server, k):
         agent = server.agents[0]
         ap = agent.vehicle.ap_params
         agent.parameters.set("WPNAV_SPEED", 640)

@@ -14,18 +14,13 @@ import pytest
 os.environ.setdefault("MAVLINK20", "1")
 from pymavlink import mavutil  # noqa: E402
 
-from ft_sitl.mavlink.ardupilot.server import ArduPilotServer, tcp_port_free, tcp_ports  # noqa: E402,E501
+from ft_sitl.mavlink.ardupilot.server import tcp_ports  # noqa: E402
 from ft_sitl.mavlink.ardupilot.streams import GROUP_MESSAGES  # noqa: E402
-from ft_sitl.mavlink.instances import free_instances  # noqa: E402
 
-from .sitl_harness import _running_sitl  # noqa: E402
+from .ardupilot_harness import free_ardupilot_sitl, wait_armed, wait_disarmed  # noqa: E402
 
 pytestmark = pytest.mark.e2e  # (tests/lanes.py)
 _m = mavutil.mavlink
-
-
-def _free(k: int) -> bool:
-    return all(tcp_port_free("127.0.0.1", p) for p in tcp_ports(k))
 
 
 def _wait(conn, what, timeout_s=60.0, **match):
@@ -71,9 +66,7 @@ def _stream(conn, stream_id, hz=5, start=1):
 
 def test_streams_carry_ahrs2_ekf_servo_outputs_and_nav_controller_output():
     mavutil.set_dialect("ardupilotmega")
-    with free_instances(1, _free) as k, \
-            _running_sitl(1, speed_factor=4.0, server_class=ArduPilotServer,
-                          base_instance=k) as server:
+    with free_ardupilot_sitl(speed_factor=4.0) as (server, k):
         agent = server.agents[0]
         geo, home = agent.geo, agent.cmd.home.copy()
         conn = mavutil.mavlink_connection(f"tcp:127.0.0.1:{tcp_ports(k)[0]}",
@@ -130,7 +123,7 @@ def test_streams_carry_ahrs2_ekf_servo_outputs_and_nav_controller_output():
             conn.set_mode("GUIDED")
             _wait(conn, lambda m: m.custom_mode == 4, 10.0, type="HEARTBEAT")
             conn.arducopter_arm()
-            conn.motors_armed_wait()
+            wait_armed(conn)
             conn.mav.command_long_send(conn.target_system, conn.target_component,
                                        _m.MAV_CMD_NAV_TAKEOFF, 0, 0, 0, 0, 0, 0, 0, 10)
             assert _ack(conn, 22).result == _m.MAV_RESULT_ACCEPTED
@@ -167,6 +160,6 @@ def test_streams_carry_ahrs2_ekf_servo_outputs_and_nav_controller_output():
             _wait(conn, lambda m: True, 10.0, type="AHRS2")
 
             conn.set_mode("LAND")
-            conn.motors_disarmed_wait()
+            wait_disarmed(conn)
         finally:
             conn.close()
