@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import json
 import os
+import socket
 import subprocess
 import sys
 import time
@@ -58,7 +59,11 @@ def ardupilot_sitl_process(*args: str):
                 proc.kill()
                 raise AssertionError(f"ft-sitl sitl did not start: {proc.stderr.read()}")
             text += line
-        yield json.loads(text)
+        info = json.loads(text)
+        host, port = info["vehicles"][0]["serial"][0].split(":")[1:]
+        until(lambda: _accepts(host, int(port)), START_TIMEOUT_S,
+              f"ft-sitl sitl to listen on {host}:{port}")
+        yield info
     finally:
         if proc.poll() is None:
             proc.terminate()
@@ -69,6 +74,15 @@ def ardupilot_sitl_process(*args: str):
                 proc.wait()
         proc.stdout.close()
         proc.stderr.close()
+
+
+def _accepts(host: str, port: int) -> bool:
+    """Whether a TCP connection to host:port is accepted now (then closed)."""
+    try:
+        socket.create_connection((host, port), timeout=1.0).close()
+    except OSError:
+        return False
+    return True
 
 
 def wait_msg(conn, types, what=lambda m: True, timeout_s: float = 60.0, describe: str = ""):

@@ -51,7 +51,7 @@ def test_pymavlink_set_mode_arm_takeoff_land():
         wait_msg(c, "HEARTBEAT", lambda m: m.custom_mode == (4 << 16 | 3 << 24))
         c.arducopter_arm()
         assert ack_of(c, mav.MAV_CMD_COMPONENT_ARM_DISARM).result == mav.MAV_RESULT_ACCEPTED
-        c.motors_armed_wait()
+        wait_msg(c, "HEARTBEAT", lambda m: m.base_mode & mav.MAV_MODE_FLAG_SAFETY_ARMED)
         c.mav.command_long_send(1, 1, mav.MAV_CMD_NAV_TAKEOFF, 0, 0, 0, 0, math.nan,
                                 math.nan, math.nan, 488.0 + 4.0)
         assert ack_of(c, mav.MAV_CMD_NAV_TAKEOFF).result == mav.MAV_RESULT_ACCEPTED
@@ -62,7 +62,8 @@ def test_pymavlink_set_mode_arm_takeoff_land():
         c.set_mode_rtl()  # MAV_CMD_NAV_RETURN_TO_LAUNCH
         c.mav.command_long_send(1, 1, mav.MAV_CMD_NAV_LAND, 0, 0, 0, 0, 0, 0, 0, 0)
         assert ack_of(c, mav.MAV_CMD_NAV_LAND).result == mav.MAV_RESULT_ACCEPTED
-        c.motors_disarmed_wait()
+        wait_msg(c, "HEARTBEAT", lambda m: not m.base_mode & mav.MAV_MODE_FLAG_SAFETY_ARMED,
+                 timeout=120)  # (pymavlink's motors_disarmed_wait has no deadline)
         # unknown commands are answered, not ignored
         c.mav.command_long_send(1, 1, 31999, 0, 0, 0, 0, 0, 0, 0, 0)
         assert ack_of(c, 31999).result == mav.MAV_RESULT_UNSUPPORTED
