@@ -89,17 +89,11 @@ class Limits:
     max_acc_m_s2: float | None = LIMITS["max_acc_m_s2"].default
 
     def __post_init__(self):
-        for param in LIMITS:
-            name, v = param.name, getattr(self, param.name)
-            if v is None and param.nullable:
-                continue
-            if isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v) \
-                    or v <= 0:
-                raise ValueError(f"limits.{name}: must be a positive number, got {v!r}")
-            if not param.range[0] <= v <= param.range[1]:
-                raise ValueError(f"limits.{name}: must be {param.allowed()} "
-                                 f"({param.unit}), got {v!r}")
-            object.__setattr__(self, name, float(v))
+        for param in LIMITS:  # (SchemaError, a ValueError, naming the limit and its range)
+            v = getattr(self, param.name)
+            param.check(v, "limits")
+            if v is not None:
+                object.__setattr__(self, param.name, float(v))
 
     def as_dict(self) -> dict:
         """The limits as data (``max_acc_m_s2`` left out when None, so the specs of trials
