@@ -17,7 +17,7 @@ from mavsdk.asyncio.plugins.telemetry import TelemetryAsync
 
 from ft_sitl.mavlink.ardupilot.server import tcp_ports
 
-from .ardupilot_harness import free_ardupilot_sitl
+from .ardupilot_harness import free_ardupilot_sitl, until
 from .mavsdk_util import first
 
 pytestmark = pytest.mark.e2e  # (tests/lanes.py: TCP)
@@ -72,6 +72,8 @@ def test_telemetry_takeoff_goto_rtl():
         assert agent.mode_name == "GUIDED"
         mode = await first(tel.subscribe_flight_mode(), timeout=30)
         assert mode.name in ("OFFBOARD", "HOLD")  # (MAVSDK's names for GUIDED)
+        await action.hold()  # (out of GUIDED: goto_location's CHANGE_MODE flag brings it back)
+        until(lambda: agent.mode_name != "GUIDED", 30, "a mode other than GUIDED")
         lat = HOME[0] + 15.0 / 111195.0
         await action.goto_location(lat, HOME[1], HOME[2] + 10.0, 0.0)
         await first(tel.subscribe_position(), lambda p: abs(p.latitude_deg - lat) < 3e-6

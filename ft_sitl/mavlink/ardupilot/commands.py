@@ -1,8 +1,9 @@
 """The commands ArduCopter answers differently from PX4: arming (its force value, its
 "PreArm:" and "Arm:" texts, FAILED), DO_SET_MODE with ArduCopter's mode numbers,
 NAV_TAKEOFF in GUIDED (param7 above home), NAV_LAND / NAV_RETURN_TO_LAUNCH / MISSION_START
-as mode changes, DO_CHANGE_SPEED, and GUIDED's heading (CONDITION_YAW, DO_SET_ROI:
-:mod:`.guided`) (ArduCopter/GCS_Mavlink.cpp). The rest is the PX4 face's table."""
+as mode changes, DO_CHANGE_SPEED, DO_REPOSITION into GUIDED, and GUIDED's heading
+(CONDITION_YAW, DO_SET_ROI: :mod:`.guided`) (ArduCopter/GCS_Mavlink.cpp). The rest is the
+PX4 face's table."""
 
 from __future__ import annotations
 
@@ -94,6 +95,28 @@ class ArduCopterCommands(Commands):
             return Result.UNSUPPORTED, []
         return self.v.cmd.change_speed(speed), []
 
+    def _reposition(self, a: CommandArgs):
+        """MAV_CMD_DO_REPOSITION as Copter takes it (GCS_Mavlink.cpp,
+        handle_command_int_do_reposition; COMMAND_INT only, as MAVSDK's goto_location
+        sends it): a GUIDED destination at x/y and z in the command's frame (NaN z: the
+        altitude now); outside GUIDED only with param2's CHANGE_MODE bit, which switches to
+        GUIDED, else DENIED; no position DENIED. Speed (param1) and yaw (param4) are not
+        used, as in Copter."""
+        p = a.p
+        if not a.is_int:
+            return Result.UNSUPPORTED, []
+        change = math.isfinite(p[1]) and \
+            int(p[1]) & apm.MAV_DO_REPOSITION_FLAGS_CHANGE_MODE
+        lat, lon = a.lat_lon()
+        if (not self.v.modes.in_guided and not change) or (lat == 0 and lon == 0):
+            return Result.DENIED, []
+        target = self.v.geo.to_local(lat, lon, self.v.geo.alt_m)
+        target[2] = self.v.alt_to_local(p[6], a.frame) if math.isfinite(p[6]) else math.nan
+        if not self.v.modes.in_guided and self.v.modes.set(modes.GUIDED) != Result.ACCEPTED:
+            return Result.FAILED, []
+        ok = guided.guided_destination(self.v, target)
+        return (Result.ACCEPTED if ok else Result.FAILED), []
+
     def _condition_yaw(self, a: CommandArgs):
         p = a.p
         return guided.condition_yaw(self.v, p[0], p[2], p[3]), []
@@ -127,6 +150,7 @@ ArduCopterCommands.handlers = {
     apm.MAV_CMD_MISSION_START: ArduCopterCommands._mission_start,
     apm.MAV_CMD_DO_FENCE_ENABLE: ArduCopterCommands._fence_enable,
     apm.MAV_CMD_DO_CHANGE_SPEED: ArduCopterCommands._change_speed,
+    apm.MAV_CMD_DO_REPOSITION: ArduCopterCommands._reposition,
     apm.MAV_CMD_CONDITION_YAW: ArduCopterCommands._condition_yaw,
     apm.MAV_CMD_DO_SET_ROI: ArduCopterCommands._set_roi,
     apm.MAV_CMD_DO_SET_ROI_LOCATION: ArduCopterCommands._set_roi,
