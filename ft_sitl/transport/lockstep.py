@@ -7,14 +7,16 @@ judge calls, the same camera frames from the same noise stream) and answers the 
 navigator calls through :class:`LockstepPilot`, from ``ft-sitl navigate --lockstep`` in
 another process:
 
-1. the vehicle is served on MAVLink (:class:`~ft_sitl.mavlink.server.SitlServer`, its links
-   read only while the clock stands) and on the bus; the client connects with MAVSDK,
-   subscribes to the bus's ``tick`` topic and says it is ready with a TIMESYNC;
+1. the vehicle is served on MAVLink (by the PX4 face, or with ``autopilot="ardupilot"``
+   the ArduCopter face: :mod:`ft_sitl.transport.faces`; its links read only while the
+   clock stands) and on the bus; the client connects with MAVSDK, subscribes to the bus's
+   ``tick`` topic and says it is ready with a TIMESYNC;
 2. wherever the in-process driver would call ``observe`` (a camera frame during the
    approach) or ``step`` (a navigation tick), the simulator publishes the observation,
    bit for bit, as a tick (:mod:`ft_sitl.bus.tick`) and holds its clock;
 3. the client calls its navigator, sends a step's setpoint with MAVSDK Offboard (the first
-   one: setpoint, offboard mode, setpoint, as the in-process driver does), then
+   one: setpoint, offboard mode, setpoint, as the in-process driver does; on ArduPilot
+   MAVSDK's offboard mode is GUIDED), then
    acknowledges the tick on the same MAVLink connection: a TIMESYNC whose ``tc1`` is the
    tick's simulated time in nanoseconds (the client's clock is the simulator's) and whose
    ``ts1`` is the tick's number; the flight controller takes the setpoint as it arrives;
