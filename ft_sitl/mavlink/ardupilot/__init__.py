@@ -9,7 +9,8 @@ behaviours), :mod:`.params` (ArduCopter's parameter names, declared once each),
 controller's geofence, SYS_STATUS's fence bits), :mod:`.rally` (RTL's return point by
 RALLY_*), :mod:`.parm` (.parm files, ``--defaults``), :mod:`.commands` (arming, modes,
 take-off as ArduCopter answers them), :mod:`.guided` (GUIDED's position targets with
-ArduPilot's type-mask reading), :mod:`.agent` (the router), :mod:`.framing` and
+ArduPilot's type-mask reading, its heading and go-to requests), :mod:`.signing`
+(SETUP_SIGNING over all the links), :mod:`.agent` (the router), :mod:`.framing` and
 :mod:`.server` (ArduPilot SITL's TCP serial ports and ``--out`` UDP targets). What differs
 from ArduCopter, and why: docs/mavlink.md, "ArduCopter face".
 """
