@@ -237,3 +237,45 @@ def test_bad_parameter_sets_answered_as_arducopter():
             assert ap["RTL_ALT"] == 2001
         finally:
             conn.close()
+
+
+def test_guided_commands_refused_as_copter_refuses_them():
+    """CONDITION_YAW outside 0..360 or with param4 not 0/1, DO_CHANGE_SPEED without a
+    positive speed: FAILED; a climb speed: UNSUPPORTED; DO_REPOSITION by COMMAND_LONG:
+    UNSUPPORTED, by COMMAND_INT outside GUIDED without CHANGE_MODE: DENIED; a guided
+    go-to (MISSION_ITEM current 2) outside GUIDED: MISSION_ACK ERROR."""
+    with free_ardupilot_sitl() as (server, k):
+        conn = _connect(tcp_ports(k)[0])
+        try:
+            def result(command, *p):
+                conn.mav.command_long_send(1, 1, command, 0, *p)
+                return wait_msg(conn, "COMMAND_ACK", lambda m: m.command == command, 30).result
+
+            assert result(MAV.MAV_CMD_CONDITION_YAW, 400, 0, 1, 0, 0, 0, 0) == \
+                MAV.MAV_RESULT_FAILED
+            assert result(MAV.MAV_CMD_CONDITION_YAW, 90, 0, 1, 2, 0, 0, 0) == \
+                MAV.MAV_RESULT_FAILED
+            assert result(MAV.MAV_CMD_DO_CHANGE_SPEED, 1, 0, -1, 0, 0, 0, 0) == \
+                MAV.MAV_RESULT_FAILED
+            assert result(MAV.MAV_CMD_DO_CHANGE_SPEED, 2, 3, -1, 0, 0, 0, 0) == \
+                MAV.MAV_RESULT_UNSUPPORTED
+            assert result(MAV.MAV_CMD_DO_CHANGE_SPEED, 1, 3, -1, 0, 0, 0, 0) == \
+                MAV.MAV_RESULT_ACCEPTED
+            assert server.agents[0].cmd.cruise_speed == 3
+            assert result(MAV.MAV_CMD_DO_REPOSITION, -1, 1, 0, 0, 47.4, 8.5, 10) == \
+                MAV.MAV_RESULT_UNSUPPORTED
+            assert server.agents[0].mode_name != "GUIDED"
+            conn.mav.command_int_send(1, 1, MAV.MAV_FRAME_GLOBAL_RELATIVE_ALT_INT,
+                                      MAV.MAV_CMD_DO_REPOSITION, 0, 0, -1, 0, 0, 0,
+                                      474000000, 85000000, 10)
+            ack = wait_msg(conn, "COMMAND_ACK",
+                           lambda m: m.command == MAV.MAV_CMD_DO_REPOSITION, 30)
+            assert ack.result == MAV.MAV_RESULT_DENIED
+            conn.mav.mission_item_send(1, 1, 0, MAV.MAV_FRAME_GLOBAL_RELATIVE_ALT,
+                                       MAV.MAV_CMD_NAV_WAYPOINT, 2, 0, 0, 0, 0, 0,
+                                       47.3978, 8.5456, 10)
+            ack = wait_msg(conn, "MISSION_ACK", timeout_s=30)
+            assert ack.type == MAV.MAV_MISSION_ERROR
+            assert server.agents[0].cmd.mission == []  # (a request, not an upload)
+        finally:
+            conn.close()
