@@ -41,7 +41,7 @@ from ft_sitl.bus.codec import (
     Status,
     Telemetry,
 )
-from ft_sitl.bus.options import BrokerOptions, TlsOptions, parse_broker_url
+from ft_sitl.bus.options import SOCKET_OPTIONS, BrokerOptions, TlsOptions, parse_broker_url
 from ft_sitl.bus.publisher import QOS, close_socket, mqtt_log
 from ft_sitl.bus.tick import decode_tick
 from ft_sitl.bus.topics import PUBLISHED_KINDS, check_vehicle, parse_topic, topic, topic_filter
@@ -125,7 +125,8 @@ class BusClient:
             identifier=self.client_id, timeout=self._timeout_s,
             tls_context=o.tls.ssl_context() if o.tls is not None else None,
             tls_insecure=True if o.tls is not None and o.tls.insecure else None,
-            max_queued_incoming_messages=self._queue_size, logger=mqtt_log)
+            max_queued_incoming_messages=self._queue_size, logger=mqtt_log,
+            socket_options=SOCKET_OPTIONS)
         try:
             await client.__aenter__()
         except BaseException:

@@ -10,15 +10,23 @@ options on a plain ``mqtt://`` URL).
 
 from __future__ import annotations
 
+import socket
 import ssl
 from dataclasses import dataclass
 from pathlib import Path
 from urllib.parse import unquote, urlsplit
 
-__all__ = ["DEFAULT_PORTS", "BrokerOptions", "TlsOptions", "parse_broker_url"]
+__all__ = ["DEFAULT_PORTS", "SOCKET_OPTIONS", "BrokerOptions", "TlsOptions",
+           "parse_broker_url"]
 
 #: Default port per scheme.
 DEFAULT_PORTS = {"mqtt": 1883, "mqtts": 8883}
+
+#: Options of every connection to the broker (aiomqtt's ``socket_options``). TCP_NODELAY:
+#: paho-mqtt leaves Nagle's algorithm on, so a small message written while the one before
+#: is unacknowledged waited for the broker's delayed ACK (40 ms on Linux): a lockstep tick
+#: took 40 ms to reach the navigator (docs/wire.md, "Lockstep"; docs/benchmarks.md).
+SOCKET_OPTIONS = ((socket.IPPROTO_TCP, socket.TCP_NODELAY, 1),)
 
 
 def _existing_file(name: str, value) -> str | None:

@@ -58,7 +58,7 @@ from ft_sitl.bus.codec import (
     Status,
     Telemetry,
 )
-from ft_sitl.bus.options import BrokerOptions, TlsOptions, parse_broker_url
+from ft_sitl.bus.options import SOCKET_OPTIONS, BrokerOptions, TlsOptions, parse_broker_url
 from ft_sitl.bus.tick import encode_tick
 from ft_sitl.bus.topics import check_vehicle, topic
 
@@ -476,7 +476,8 @@ class BusPublisher:
                               retain=True),
             tls_context=o.tls.ssl_context() if o.tls is not None else None,
             tls_insecure=True if o.tls is not None and o.tls.insecure else None,
-            max_queued_incoming_messages=64, logger=mqtt_log)
+            max_queued_incoming_messages=64, logger=mqtt_log,
+            socket_options=SOCKET_OPTIONS)
         try:
             await self._connected_session(client)
         finally:
