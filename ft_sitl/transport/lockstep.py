@@ -45,7 +45,7 @@ from ft_sitl.missions.protocol import APPROACH_TIMEOUT_S, TrialFailure, TrialOut
 from ft_sitl.missions.results import Outcome
 from ft_sitl.missions.spec import TrialSpec, TrialSpecError
 from ft_sitl.missions.trial import fly, replan_count
-from ft_sitl.missions.watchdog import WallWatchdog
+from ft_sitl.missions.watchdog import WallWatchdog, beat
 from ft_sitl.navigation.registry import create
 from ft_sitl.transport.faces import DEFAULT_AUTOPILOT
 from ft_sitl.transport.sitl_bus import SitlBus
@@ -139,6 +139,7 @@ class LockstepPilot:
     def advanced(self, fleet) -> None:
         self.server.service()
         self.bus.service()
+        beat()  # the clock went on: the executor counts the wall budget from here
 
 
 def lockstep_argv(plan, connect: str, mqtt: str, vehicle: str) -> tuple[list[str], dict]:
