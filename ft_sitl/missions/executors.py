@@ -13,7 +13,10 @@ worker processes (the local pool, and the process each Dask worker keeps for its
 - a trial that runs past its wall budget (plus :data:`KILL_GRACE_S`) has its process
   killed and is recorded as a navigator error; the trial's own watchdog
   (:mod:`~ft_sitl.missions.watchdog`) normally ends a hung Python navigator first, but
-  cannot interrupt compiled code, which only the kill ends;
+  cannot interrupt compiled code, which only the kill ends. On the local pool a trial that
+  beats (a lockstep wire trial, whose clock goes at its navigator process's pace: the
+  watchdog's :func:`~ft_sitl.missions.watchdog.beat`) has the budget counted from its
+  last beat: killed when it stops progressing, not for being slow on a loaded machine;
 - a trial whose process dies is flown once more in a fresh process (the death may have
   been someone else's doing: the OOM killer, an operator); dying again, it is recorded as
   a navigator error. Other trials are not affected.
@@ -47,14 +50,15 @@ from pathlib import Path
 from pebble import ProcessExpired, ProcessPool
 
 from ft_sitl import __version__, numeric_env
+from ft_sitl.missions import watchdog
 from ft_sitl.missions.child_pool import ChildDied, ChildPool
 from ft_sitl.missions.resources import RESOURCES
 from ft_sitl.missions.spec import TrialSpec
 from ft_sitl.provenance import code_digest
 
 __all__ = ["DIED_DETAIL", "KILL_GRACE_S", "DaskExecutor", "Executor", "ExecutorError",
-           "LocalExecutor", "SerialExecutor", "code_digest", "overrun_detail", "supervise",
-           "worker_info"]
+           "LocalExecutor", "SerialExecutor", "code_digest", "overrun_detail", "stall_detail",
+           "supervise", "worker_info"]
 
 #: seconds past its wall budget a trial may run before its worker process is killed
 KILL_GRACE_S = 5.0
@@ -65,6 +69,8 @@ DIED_DETAIL = "the trial's process died (a crash in native code?)"
 #: trials kept scheduled on the local pool per worker (the rest wait in order, so the
 #: workers go through the campaign scenario by scenario)
 WINDOW_PER_WORKER = 2
+#: wall seconds between the local pool's looks at its trials' beacons
+BEACON_POLL_S = 0.5
 
 
 class ExecutorError(RuntimeError):
@@ -75,6 +81,13 @@ def overrun_detail(budget_s: float) -> str:
     """The navigator-error detail of a trial whose process was killed for its overrun."""
     return (f"the trial overran its wall-clock budget of {budget_s:g} s without returning "
             f"to the simulator (hung in compiled code?); its worker process was killed")
+
+
+def stall_detail(budget_s: float) -> str:
+    """The navigator-error detail of a beating trial whose process was killed because it
+    stopped progressing."""
+    return (f"the trial made no progress for its wall-clock budget of {budget_s:g} s "
+            f"(hung in compiled code?); its worker process was killed")
 
 
 def marker(d: dict, detail: str) -> tuple[str, dict, None]:
@@ -124,8 +137,13 @@ def _die_with_parent(parent_pid: int | None) -> None:
         os.kill(os.getpid(), signal.SIGTERM)
 
 
-def _labelled(fn: Callable, chunk: list[dict]) -> tuple[str, list]:
-    return worker_label(), fn(chunk)
+def _labelled(fn: Callable, chunk: list[dict], beacon: str | None = None
+              ) -> tuple[str, list]:
+    watchdog.beacon_to(beacon)
+    try:
+        return worker_label(), fn(chunk)
+    finally:
+        watchdog.beacon_to(None)
 
 
 def new_pool(workers: int, grid_dir: str | None):
@@ -136,21 +154,45 @@ def new_pool(workers: int, grid_dir: str | None):
 
 
 def supervise(pool, fn: Callable, trials: list[dict], budget_s: float | None,
-              window: int) -> Iterator[tuple[str, list]]:
+              window: int, beacons: Path | None = None) -> Iterator[tuple[str, list]]:
     """Fly ``trials`` one per task on a pebble ``pool``, at most ``window`` scheduled at a
     time, in order; yield ``(worker, results)`` per trial as each ends. The module's rule
-    for overruns and deaths applies."""
+    for overruns and deaths applies; with ``beacons`` (a directory) a trial that beats is
+    killed only :data:`KILL_GRACE_S` past its budget without a beat (the pool's future must
+    stop its worker when cancelled while running, as pebble's does)."""
     timeout = None if budget_s is None else budget_s + KILL_GRACE_S
     queue = collections.deque(trials)
     deaths: collections.Counter = collections.Counter()
     running: dict = {}
+    started: dict = {}
+    watched = beacons is not None and timeout is not None
     while queue or running:
         while queue and len(running) < window:
             d = queue.popleft()
-            running[pool.schedule(_labelled, args=(fn, [d]), timeout=timeout)] = d
-        done, _ = cf.wait(running, return_when=cf.FIRST_COMPLETED)
+            if watched:
+                beacon = beacons / f"{trial_id(d)}.beat"
+                fut = pool.schedule(_labelled, args=(fn, [d], str(beacon)))
+                started[fut] = (time.time(), beacon)
+            else:
+                fut = pool.schedule(_labelled, args=(fn, [d]), timeout=timeout)
+            running[fut] = d
+        done, _ = cf.wait(running, timeout=BEACON_POLL_S if watched else None,
+                          return_when=cf.FIRST_COMPLETED)
+        if watched:
+            for fut in [f for f in running if f not in done]:
+                t0, beacon = started[fut]
+                if watchdog.quiet_s(beacon, t0) > timeout:
+                    fut.cancel()  # (pebble stops the worker)
+                    d = running.pop(fut)
+                    started.pop(fut)
+                    why = (stall_detail if watchdog.has_beaten(beacon, t0)
+                           else overrun_detail)
+                    beacon.unlink(missing_ok=True)
+                    yield "killed", [marker(d, why(budget_s))]
         for fut in done:
             d = running.pop(fut)
+            if watched:
+                started.pop(fut)[1].unlink(missing_ok=True)
             try:
                 yield fut.result()
             except TimeoutError:
@@ -216,6 +258,7 @@ class LocalExecutor(Executor):
         self.budget_s = budget_s
         self._grid_dir_arg = grid_dir
         self._grid_dir: str | None = None
+        self._beacons: str | None = None
         self._pool = None
 
     def imap(self, fn, chunks):
@@ -225,10 +268,12 @@ class LocalExecutor(Executor):
             else:
                 self._grid_dir = str(self._grid_dir_arg)
                 os.makedirs(self._grid_dir, exist_ok=True)
+        if self._beacons is None:
+            self._beacons = tempfile.mkdtemp(prefix="ft-sitl-beacons-")
         self._pool = new_pool(self.workers, self._grid_dir)
         trials = [d for chunk in chunks for d in chunk]
         yield from supervise(self._pool, fn, trials, self.budget_s,
-                             WINDOW_PER_WORKER * self.workers)
+                             WINDOW_PER_WORKER * self.workers, beacons=Path(self._beacons))
 
     def describe(self):
         return {"executor": self.kind, "workers": self.workers}
@@ -241,6 +286,9 @@ class LocalExecutor(Executor):
         if self._grid_dir is not None:
             shutil.rmtree(self._grid_dir, ignore_errors=True)
             self._grid_dir = None
+        if self._beacons is not None:
+            shutil.rmtree(self._beacons, ignore_errors=True)
+            self._beacons = None
 
 
 # --- Dask -------------------------------------------------------------------------------------
