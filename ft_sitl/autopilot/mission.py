@@ -19,6 +19,7 @@ import numpy as np
 
 from ft_sitl.autopilot.auto import NavTarget
 from ft_sitl.autopilot.modes import MAIN_AUTO, SUB_LOITER, SUB_MISSION
+from ft_sitl.autopilot.orbit import ORBIT_DEFAULT_SPEED_M_S, circle_setpoint, circle_speed
 from ft_sitl.autopilot.setpoints import Setpoint
 from ft_sitl.autopilot.status import LandedState, Result, Severity, VehicleState
 
@@ -27,12 +28,17 @@ if TYPE_CHECKING:  # the commander owns this object; only its type is needed her
 
 # MAV_CMD ids of the mission items the navigator executes
 CMD_NAV_WAYPOINT = 16
+CMD_NAV_LOITER_TURNS = 18
 CMD_NAV_RETURN_TO_LAUNCH = 20
 CMD_NAV_LAND = 21
 CMD_NAV_TAKEOFF = 22
 CMD_NAV_DELAY = 93
 CMD_DO_JUMP = 177
 CMD_DO_CHANGE_SPEED = 178
+CMD_DO_SET_ROI_LOCATION = 195
+CMD_DO_SET_ROI = 201
+#: the items that point the vehicle's front at a location (NaN position: no longer)
+ROI_COMMANDS = (CMD_DO_SET_ROI, CMD_DO_SET_ROI_LOCATION)
 
 
 class MissionState(IntEnum):
@@ -60,6 +66,10 @@ class MissionItem:
     #: DO_JUMP: the index (in this list) to jump to, and how often (-1: for ever)
     jump_to: int = -1
     repeat: int = 0
+    #: NAV_LOITER_TURNS: the turns to fly round ``position`` and the signed radius (m;
+    #: positive clockwise seen from above); ``speed_m_s`` the speed on the circle
+    turns: float = 0.0
+    radius_m: float = 0.0
 
 
 class MissionExecutor:
@@ -74,6 +84,10 @@ class MissionExecutor:
         self.takeoff: np.ndarray | None = None
         #: the jumps each DO_JUMP item (by index) has made since the mission was loaded
         self.jumps: dict[int, int] = {}
+        #: the location a DO_SET_ROI item points the front at (None: the course's heading)
+        self.roi: np.ndarray | None = None
+        #: a NAV_LOITER_TURNS item on its circle: [bearing last step, angle swept] (rad)
+        self.circling: list[float] | None = None
 
     def load(self, items: list[MissionItem]) -> None:
         """A new mission replaces the old one; an empty one in AUTO.MISSION holds."""
@@ -81,6 +95,7 @@ class MissionExecutor:
         c.mission = list(items)
         self.takeoff = None
         self.jumps = {}
+        self.roi = None
         c.mission_seq = 0
         c.mission_state = MissionState.NOT_STARTED if items else MissionState.NO_MISSION
         self.item_started = False
@@ -163,7 +178,7 @@ class MissionExecutor:
             radius = item.acceptance_radius_m if item.acceptance_radius_m > 0 \
                 else c.params["NAV_ACC_RAD"]
             dist = float(np.linalg.norm(nav.target - s.position))
-            sp = auto.fly_to(s, nav.target, nav.yaw)
+            sp = auto.fly_to(s, nav.target, self._heading(s, nav.yaw))
             if dist <= radius or self.item_hold_until is not None:
                 if self.item_hold_until is None:
                     self.item_hold_until = c.time_us + int(item.hold_s * 1e6)
@@ -174,6 +189,14 @@ class MissionExecutor:
                     c.mission_seq += 1
                     self.item_started = False
                     return sp
+        elif item.command == CMD_NAV_LOITER_TURNS:
+            sp, done = self._loiter_turns(item, s)
+        elif item.command in ROI_COMMANDS:
+            p = np.array(item.position, dtype=float)
+            self.roi = p if np.all(np.isfinite(p[:2])) else None
+            done = True
+            last = c.last_setpoint
+            sp = last if last.kind != 0 else Setpoint.position(s.position, yaw=s.yaw)
         elif item.command == CMD_NAV_DELAY:
             if self.item_hold_until is None:
                 self.item_hold_until = c.time_us + int(max(item.hold_s, 0.0) * 1e6)
@@ -198,11 +221,42 @@ class MissionExecutor:
             self.item_started = False
         return sp
 
+    def _heading(self, s: VehicleState, yaw: float) -> float:
+        """The front toward the region of interest when one is set, else ``yaw``."""
+        if self.roi is None:
+            return yaw
+        d = self.roi[:2] - s.position[:2]
+        return math.atan2(d[1], d[0]) if float(np.hypot(*d)) > 0.5 else yaw
+
+    def _loiter_turns(self, item: MissionItem, s: VehicleState) -> tuple[Setpoint, bool]:
+        """NAV_LOITER_TURNS: fly to the circle's nearest point, then round it, the front to
+        the centre, until ``item.turns`` turns are swept (ArduCopter's AUTO circle)."""
+        c = self.cmdr
+        centre = c.auto.nav.target
+        r = item.radius_m
+        d = s.position[:2] - centre[:2]
+        dist = float(np.hypot(*d))
+        if self.circling is None:
+            u = d / dist if dist > 1e-3 else np.array([1.0, 0.0])
+            edge = np.array([centre[0] + abs(r) * u[0], centre[1] + abs(r) * u[1], centre[2]])
+            if float(np.linalg.norm(edge - s.position)) > c.params["NAV_ACC_RAD"]:
+                return c.auto.fly_to(s, edge, self._heading(s, c.auto.nav.yaw)), False
+            self.circling = [math.atan2(d[1], d[0]), 0.0]
+        bearing = math.atan2(d[1], d[0])
+        step = (bearing - self.circling[0] + math.pi) % (2.0 * math.pi) - math.pi
+        self.circling[0] = bearing
+        self.circling[1] += -step if r > 0 else step  # clockwise: the bearing falls
+        speed = circle_speed(c, r, item.speed_m_s if math.isfinite(item.speed_m_s)
+                             else ORBIT_DEFAULT_SPEED_M_S)
+        sp = circle_setpoint(c, s, centre, r, speed, 0, s.yaw)
+        return sp, self.circling[1] >= item.turns * 2.0 * math.pi
+
     def _start_item(self, item: MissionItem, s: VehicleState) -> None:
         c = self.cmdr
         self.item_started = True
         self.item_hold_until = None
         self.takeoff = None
+        self.circling = None
         p = s.position.copy()
         target = np.array([item.position[i] if math.isfinite(item.position[i]) else p[i]
                            for i in range(3)])

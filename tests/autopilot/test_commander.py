@@ -132,6 +132,60 @@ def test_mission_runs_its_items_and_finishes():
     assert not c.armed
 
 
+def test_a_mission_circles_loiter_turns_and_faces_its_region_of_interest():
+    """NAV_LOITER_TURNS: to the circle's edge, then round it (clockwise for a positive
+    radius) the turns asked, then on; DO_SET_ROI_LOCATION: the front toward the point on
+    the next legs, a ROI without a position ends it."""
+    from ft_sitl.autopilot.mission import (
+        CMD_DO_SET_ROI_LOCATION,
+        CMD_NAV_LOITER_TURNS,
+    )
+
+    f = Fleet(P)
+    c = f.commanders[0]
+    nan = math.nan
+    roi = (0.0, 40.0, 0.0)
+    c.set_mission([
+        MissionItem(cm.CMD_NAV_TAKEOFF, (nan, nan, 4.0)),
+        MissionItem(CMD_DO_SET_ROI_LOCATION, roi),
+        MissionItem(cm.CMD_NAV_WAYPOINT, (15.0, 0.0, 4.0)),
+        MissionItem(CMD_NAV_LOITER_TURNS, (15.0, 0.0, 4.0), turns=1.5, radius_m=5.0,
+                    speed_m_s=2.0),
+        MissionItem(CMD_DO_SET_ROI_LOCATION),
+        MissionItem(cm.CMD_NAV_WAYPOINT, (15.0, -12.0, 4.0)),
+        MissionItem(cm.CMD_NAV_LAND, (15.0, -12.0, nan)),
+    ])
+    assert c.arm() == Result.ACCEPTED
+    assert c.set_mode(cm.MAIN_AUTO, cm.SUB_MISSION) == Result.ACCEPTED
+    facing_roi, on_circle, angles, last_leg_yaw = [], [], [], []
+    for _ in range(3000):
+        f.run(0.05)
+        s = f.state(0)
+        seq = c.mission_seq
+        if seq == 2 and np.linalg.norm(s.position[:2] - [15.0, 0.0]) > 3.0 and \
+                s.position[0] > 3.0:
+            want = math.atan2(roi[1] - s.position[1], roi[0] - s.position[0])
+            facing_roi.append(abs((s.yaw - want + math.pi) % (2 * math.pi) - math.pi))
+        if seq == 3 and c.mission_exec.circling is not None:
+            d = s.position[:2] - np.array([15.0, 0.0])
+            on_circle.append(float(np.hypot(*d)))
+            angles.append(math.atan2(d[1], d[0]))
+        if seq == 5 and np.linalg.norm(s.velocity[:2]) > 1.0:
+            d = np.array([15.0, -12.0]) - s.position[:2]
+            course = math.atan2(d[1], d[0])
+            last_leg_yaw.append(abs((s.yaw - course + math.pi) % (2 * math.pi) - math.pi))
+        if c.mission_state == MissionState.COMPLETE and not c.armed:
+            break
+    assert list(c.reached) == [0, 1, 2, 3, 4, 5, 6]
+    assert facing_roi and max(facing_roi[len(facing_roi) // 2:]) < math.radians(10)
+    assert on_circle and np.median(on_circle) == pytest.approx(5.0, abs=0.5)
+    swept = -np.sum((np.diff(angles) + math.pi) % (2 * math.pi) - math.pi)
+    assert swept == pytest.approx(1.5 * 2 * math.pi, abs=0.3)  # clockwise: bearing falls
+    # the ROI ended: the last leg heads along its course again, not toward the ROI
+    assert last_leg_yaw and np.median(last_leg_yaw[len(last_leg_yaw) // 2:]) < math.radians(15)
+    assert f.state(0).position[:2] == pytest.approx([15.0, -12.0], abs=0.5)
+
+
 def test_battery_drains_with_flight():
     f = Fleet(P, params=[ParamSet({"FT_BAT_ENDURANCE": 60.0})])
     c = f.commanders[0]
@@ -289,3 +343,29 @@ def test_a_motor_off_stuck_or_weak_is_flown_by_the_physics():
     assert f.sim.rotor_speeds(0)[0] < 1.0
     assert f.true_state(0).position[2] < 1.5 or c.crashed  # a quad without a motor falls
     assert set(c.failures) == {"motor"}
+
+
+def test_arducopter_mission_items_give_loiter_turns_their_circle_and_end_a_roi_at_zero():
+    from types import SimpleNamespace
+
+    from pymavlink.dialects.v20 import ardupilotmega as apm
+
+    from ft_sitl.autopilot.mission import CMD_NAV_LOITER_TURNS
+    from ft_sitl.mavlink.ardupilot.mission import ArduCopterMissionItems
+
+    items = ArduCopterMissionItems(SimpleNamespace(origin=np.zeros(3),
+                                                   alt_to_local=lambda z, frame: z))
+
+    def item(command, p1=0.0, p3=0.0, x=0, y=0, frame=apm.MAV_FRAME_LOCAL_NED):
+        return apm.MAVLink_mission_item_int_message(1, 1, 1, frame, command, 0, 1, p1, 0.0,
+                                                    p3, 0.0, x, y, -5.0)
+
+    turns = items.to_mission_item(item(apm.MAV_CMD_NAV_LOITER_TURNS, 2, -4.0, 100000))
+    assert (turns.command, turns.turns, turns.radius_m) == (CMD_NAV_LOITER_TURNS, 2.0, -4.0)
+    assert turns.position == pytest.approx((0.0, 10.0, 5.0))  # NED 10 m north, ENU y
+    assert turns.speed_m_s == pytest.approx(math.radians(20) * 4.0)  # CIRCLE_RATE
+    default = items.to_mission_item(item(apm.MAV_CMD_NAV_LOITER_TURNS, 1))
+    assert default.radius_m == 10.0  # CIRCLE_RADIUS's default
+    roi_off = items.to_mission_item(item(apm.MAV_CMD_DO_SET_ROI_LOCATION,
+                                         frame=apm.MAV_FRAME_GLOBAL_RELATIVE_ALT))
+    assert all(math.isnan(v) for v in roi_off.position[:2])

@@ -6,10 +6,13 @@ does not fly. Items 1..n are the commander's mission 0..n-1, so every sequence n
 the wire (MISSION_CURRENT, MISSION_ITEM_REACHED, MISSION_SET_CURRENT, MISSION_START's
 first item, DO_JUMP's target) is the commander's plus one. ArduCopter's commands map onto
 the executor's (:mod:`ft_sitl.autopilot.mission`): NAV_LOITER_TIME is a waypoint held
-param1 seconds, NAV_SPLINE_WAYPOINT a waypoint flown straight, DO_JUMP jumps param2
-times (-1: for ever). Fences and rally points are the PX4 face's lists; an uploaded fence
-is kept and flown as FENCE_ENABLE/FENCE_TYPE say (:mod:`.fence`), RTL picks among the rally
-points by RALLY_* (:mod:`.rally`).
+param1 seconds, NAV_SPLINE_WAYPOINT a waypoint flown straight, NAV_LOITER_TURNS param1
+turns round the point at radius param3 (none: CIRCLE_RADIUS's 10 m; negative:
+anticlockwise) at CIRCLE_RATE's 20 deg/s, DO_SET_ROI(_LOCATION) the front toward its point
+(at latitude and longitude 0: no longer), DO_JUMP jumps param2 times (-1: for ever).
+Fences and rally points are the PX4 face's lists; an uploaded fence is kept and flown as
+FENCE_ENABLE/FENCE_TYPE say (:mod:`.fence`), RTL picks among the rally points by RALLY_*
+(:mod:`.rally`).
 """
 
 from __future__ import annotations
@@ -21,13 +24,20 @@ from pymavlink.dialects.v20 import ardupilotmega as apm
 
 from ft_sitl.autopilot import commander as cm
 from ft_sitl.autopilot.commander import MissionItem, Result
-from ft_sitl.autopilot.mission import CMD_DO_JUMP, CMD_NAV_WAYPOINT
+from ft_sitl.autopilot.mission import (
+    CMD_DO_JUMP,
+    CMD_NAV_LOITER_TURNS,
+    CMD_NAV_WAYPOINT,
+)
 from ft_sitl.mavlink.ardupilot import guided
 from ft_sitl.mavlink.mission import MissionProtocol
 from ft_sitl.mavlink.mission_items import GLOBAL_FRAMES, MissionItems, deg_e7
 from ft_sitl.mavlink.outgoing import Outgoing
 
 _MISSION = apm.MAV_MISSION_TYPE_MISSION
+#: a LOITER_TURNS item's radius when it gives none, and the speed round it: ArduCopter's
+#: CIRCLE_RADIUS (1000 cm) and CIRCLE_RATE (20 deg/s) defaults (AC_Circle.cpp)
+CIRCLE_RADIUS_M, CIRCLE_RATE_DEG_S = 10.0, 20.0
 
 
 class ArduCopterMissionItems(MissionItems):
@@ -40,11 +50,20 @@ class ArduCopterMissionItems(MissionItems):
         if it.command == apm.MAV_CMD_NAV_SPLINE_WAYPOINT:  # (flown straight, see docs)
             hold = it.param1 if math.isfinite(it.param1) else 0.0
             return MissionItem(CMD_NAV_WAYPOINT, self.position(it), hold_s=max(0.0, hold))
+        if it.command == apm.MAV_CMD_NAV_LOITER_TURNS:  # (AP_Mission, ModeAuto::do_circle)
+            r = it.param3 if math.isfinite(it.param3) and it.param3 != 0 else CIRCLE_RADIUS_M
+            return MissionItem(CMD_NAV_LOITER_TURNS, self.position(it),
+                               turns=max(0.0, _finite(it.param1)), radius_m=r,
+                               speed_m_s=math.radians(CIRCLE_RATE_DEG_S) * abs(r))
         if it.command == CMD_DO_JUMP:
             target = int(it.param1) if math.isfinite(it.param1) else 0
             repeat = int(it.param2) if math.isfinite(it.param2) else 0
             return MissionItem(CMD_DO_JUMP, jump_to=target - 1, repeat=repeat)
         return super().to_mission_item(it)
+
+
+def _finite(v: float) -> float:
+    return v if math.isfinite(v) else 0.0
 
 
 def _as_float(it):
