@@ -61,6 +61,9 @@ TICK_TIMEOUT_S = 300.0
 #: the autopilot by its heartbeat, and the held clock's top-up (once a wall second) made
 #: every trial's client wait half a second for it on average (docs/benchmarks.md)
 READY_HEARTBEAT_S = 0.05
+#: the messages that carry an offboard setpoint
+SETPOINT_MESSAGES = frozenset({"SET_POSITION_TARGET_LOCAL_NED", "SET_POSITION_TARGET_GLOBAL_INT",
+                               "SET_ATTITUDE_TARGET"})
 
 
 class LockstepPilot:
@@ -76,11 +79,16 @@ class LockstepPilot:
         self.out_path, self.err_path = out_path, err_path
         self.seq = 0
         self.acked = -1
+        #: setpoint messages received so far
+        self.setpoints = 0
         server.on_message = self._on_message
 
     def _on_message(self, vehicle: int, m) -> None:
-        if m.get_type() == "TIMESYNC" and m.tc1 != 0:  # a client's clock: its acknowledgement
+        t = m.get_type()
+        if t == "TIMESYNC" and m.tc1 != 0:  # a client's clock: its acknowledgement
             self.acked = max(self.acked, int(m.ts1))
+        elif t in SETPOINT_MESSAGES:
+            self.setpoints += 1
 
     def wait_ready(self) -> None:
         """Until the client has connected and said so (TIMESYNC, ts1 0), the vehicle's
@@ -88,16 +96,23 @@ class LockstepPilot:
         self._wait(0, READY_TIMEOUT_S, "connect", heartbeat_s=READY_HEARTBEAT_S)
 
     def _wait(self, seq: int, timeout_s: float, what: str,
-              heartbeat_s: float | None = None) -> None:
+              heartbeat_s: float | None = None, setpoints_past: int | None = None) -> None:
+        """Until tick ``seq`` is acknowledged (and, with ``setpoints_past``, more than that
+        many setpoint messages have arrived)."""
         deadline = time.monotonic() + timeout_s
         beat = 0.0
-        while self.acked < seq:
+
+        def waiting() -> bool:
+            return self.acked < seq or (setpoints_past is not None
+                                        and self.setpoints <= setpoints_past)
+
+        while waiting():
             if heartbeat_s is not None and time.monotonic() - beat >= heartbeat_s:
                 beat = time.monotonic()
                 for a in self.server.agents:
                     self.server.send_all(a.i, [Outgoing(a.heartbeat())])
             self.server.pump(0.02 if heartbeat_s is None else min(0.02, heartbeat_s))
-            if self.acked >= seq:
+            if not waiting():
                 break
             code = self.proc.poll()
             if code is not None:
@@ -114,13 +129,19 @@ class LockstepPilot:
 
     def _exchange(self, phase: str, obs) -> None:
         self.seq += 1
+        # a step is answered by its setpoint and its acknowledgement: in MAVSDK the setpoint
+        # (Offboard) and the acknowledgement (MavlinkDirect, straight onto the connection)
+        # leave by different paths, whose order a loaded machine does not keep, so the
+        # clock waits for both (docs/wire.md, "Lockstep")
+        setpoints = self.setpoints if phase == "step" else None
         tick = observation_tick(self.seq, phase, self.server.fleet.time_us, obs)
         deadline = time.monotonic() + 10.0
         while not self.bus.pub.publish_tick(tick):  # the broker is away: wait for it
             if time.monotonic() > deadline:
                 raise TrialFailure(Outcome.NAVIGATOR_ERROR, "the bus did not take a tick")
             time.sleep(0.01)
-        self._wait(self.seq, TICK_TIMEOUT_S, f"answer tick {self.seq}")
+        self._wait(self.seq, TICK_TIMEOUT_S, f"answer tick {self.seq}",
+                   setpoints_past=setpoints)
 
     # -- the driver's calls ------------------------------------------------------------------
     def reset(self, task, m) -> None:
