@@ -131,8 +131,8 @@ class LockstepPilot:
         self.seq += 1
         # a step is answered by its setpoint and its acknowledgement: in MAVSDK the setpoint
         # (Offboard) and the acknowledgement (MavlinkDirect, straight onto the connection)
-        # leave by different paths, whose order a loaded machine does not keep, so the
-        # clock waits for both (docs/wire.md, "Lockstep")
+        # leave by different paths, whose order MAVSDK does not promise, so the clock
+        # waits for both (docs/wire.md, "Lockstep")
         setpoints = self.setpoints if phase == "step" else None
         tick = observation_tick(self.seq, phase, self.server.fleet.time_us, obs)
         deadline = time.monotonic() + 10.0
