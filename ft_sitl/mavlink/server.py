@@ -181,11 +181,16 @@ class SitlServer:
     def __init__(self, fleet: Fleet, geo: frames.GeoReference, *, bind: str = "127.0.0.1",
                  remote_host: str = "127.0.0.1", speed_factor: float = 1.0,
                  tlog: Path | None = None, signing_key: str | None = None,
-                 base_instance: int = 0, pace: str = "wall", pace_span_s: float | None = None):
+                 base_instance: int = 0, pace: str = "wall", pace_span_s: float | None = None,
+                 gcs_link: bool = True):
         #: the simulated seconds a client-paced server may run past its client's last
         #: message (None: paced by the wall clock alone)
         self.pace_span_s = check_pacing(speed_factor, pace, pace_span_s)
         self.pace = pace
+        #: whether each vehicle's ground-station link (link 1: 18570+i, to 14550) is served;
+        #: a trial's vehicle serves its client's link alone, so no ground station on the
+        #: machine (one at 14550 hears every instance) can command it mid-trial
+        self.gcs_link = gcs_link
         self.fleet = fleet
         self.base_instance = base_instance
         self.geo = geo
@@ -296,16 +301,19 @@ class SitlServer:
     # --- running ---------------------------------------------------------------------
     async def start(self) -> None:
         loop = asyncio.get_running_loop()
-        for link in self.links:
+        for link in self._served():
             transport, _ = await loop.create_datagram_endpoint(
                 lambda link=link: _Protocol(self, link), local_addr=link.listen)
             link.transport = transport
+
+    def _served(self) -> list[Link]:
+        return [link for link in self.links if self.gcs_link or link.index != 1]
 
     def open(self) -> None:
         """Bind the links without an event loop, for a driver that steps the fleet itself
         and serves the links between its steps (:meth:`service`, :meth:`pump`): the
         lockstep wire trials (ft_sitl.transport.lockstep). OSError if a port is taken."""
-        for link in self.links:
+        for link in self._served():
             sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
             try:
                 sock.setblocking(False)
@@ -320,7 +328,8 @@ class SitlServer:
         """Handle every datagram that has arrived on the links (after :meth:`open`), waiting
         up to ``timeout_s`` wall seconds for the first; then the vehicles' wall-clock
         duties."""
-        socks = {link.transport.sock: link for link in self.links}
+        socks = {link.transport.sock: link for link in self.links
+                 if link.transport is not None}
         ready, _, _ = select.select(list(socks), [], [], timeout_s)
         for sock in ready:
             while True:

@@ -127,7 +127,7 @@ def serve(autopilot: str, fleet, instance: int, *, lockstep: bool,
     if check_autopilot(autopilot) == PX4:
         server = SitlServer(fleet, geo, speed_factor=speed_factor, base_instance=instance,
                             pace="wall" if pace_span_s is None else "client",
-                            pace_span_s=pace_span_s)
+                            pace_span_s=pace_span_s, gcs_link=False)
     elif not lockstep:
         raise ValueError(ARDUPILOT_LOCKSTEP_ONLY)
     else:

@@ -77,3 +77,29 @@ def test_a_step_waits_for_its_setpoint_when_the_acknowledgement_overtakes_it(tmp
         proc.kill()
         proc.wait(10)
         trial.close()
+
+
+def test_a_trial_vehicle_serves_no_ground_station_link(tmp_path):
+    """A wire trial's vehicle answers its client's link alone: a ground station on the
+    machine (every instance sends its GCS link to 14550, MAVProxy or QGC there answers to
+    whichever spoke last) cannot command it mid-trial; its GCS listen port stays free."""
+    import socket
+
+    from ft_sitl.mavlink.server import GCS_LISTEN_BASE
+
+    spec = TrialSpec(algorithm="straight", platform="1.00kg-SunnySky", family="forest",
+                     scenario_index=2)
+    trial = WireTrial(spec, log_dir=tmp_path)
+    try:
+        server, _ = trial.serve(lockstep=True)
+        api, gcs = server.links[0], server.links[1]
+        assert api.transport is not None and gcs.transport is None
+        assert gcs.listen[1] == GCS_LISTEN_BASE + server.base_instance
+        with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as s:
+            s.bind(gcs.listen)  # nobody holds it
+        server.pump(0.05)  # (serving without the link does not fail)
+        with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as s, \
+                pytest.raises(OSError):
+            s.bind(api.listen)  # the client's link is served
+    finally:
+        trial.close()
