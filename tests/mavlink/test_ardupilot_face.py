@@ -52,7 +52,7 @@ def test_pymavlink_arducopter_helpers_fly_guided_takeoff_goto_land():
             _wait(conn, lambda m: m.custom_mode == 9, 10.0, type="HEARTBEAT")
             conn.arducopter_arm()
             assert _ack(conn, 400).result == mavutil.mavlink.MAV_RESULT_FAILED
-            _wait(conn, lambda m: m.text.startswith("Arm: Mode not armable"), 10.0,
+            _wait(conn, lambda m: m.text == "Arm: LAND mode not armable", 10.0,
                   type="STATUSTEXT")
 
             conn.set_mode("GUIDED")
@@ -104,7 +104,8 @@ def test_parameters_by_arducopter_names_honoured_and_refused():
             assert m.param_value == 3000.0 and m.param_type == 4  # refused, echoed as INT16
             _wait(conn, lambda m: m.text == "Param write denied (ANGLE_MAX)", 10.0,
                   type="STATUSTEXT")
-            _wait(conn, lambda m: "[1000, 8000] cdeg" in m.text, 10.0, type="STATUSTEXT")
+            _wait(conn, lambda m: m.text == "ANGLE_MAX: 9000 not in 1000..8000 cdeg", 10.0,
+                  type="STATUSTEXT")  # (the reason in one STATUSTEXT)
         finally:
             conn.close()
 
@@ -168,15 +169,21 @@ def test_auto_mission_with_home_at_zero_flies_to_the_land_and_disarms():
             # read back: item 0 is home as the vehicle holds it, the rest as uploaded
             conn.waypoint_request_list_send()
             assert _wait(conn, lambda m: True, 10.0, type="MISSION_COUNT").count == 7
-            for seq in (0, 5):
+            for seq in (0, 1, 2, 5):
                 conn.waypoint_request_send(seq)
                 m = _wait(conn, lambda m, seq=seq: m.seq == seq, 10.0,
                           type=["MISSION_ITEM", "MISSION_ITEM_INT"])
+                assert m.current == 0  # (AP_Mission: nothing runs before AUTO starts it)
                 if seq == 0:
                     x = m.x if m.get_type() == "MISSION_ITEM" else m.x * 1e-7
                     assert abs(x - lat0) < 1e-5 and m.command == mav.MAV_CMD_NAV_WAYPOINT
+                elif seq == 1:  # a command with a location keeps its frame
+                    assert m.command == mav.MAV_CMD_NAV_TAKEOFF and m.frame == rel
+                elif seq == 2:  # one without comes back in frame 0, GLOBAL
+                    assert m.command == mav.MAV_CMD_DO_CHANGE_SPEED and m.frame == 0
                 else:
                     assert m.command == mav.MAV_CMD_DO_JUMP and m.param1 == 3
+                    assert m.frame == 0
             conn.mav.mission_ack_send(conn.target_system, conn.target_component, 0)
 
             conn.set_mode("GUIDED")
@@ -205,6 +212,15 @@ def test_auto_mission_with_home_at_zero_flies_to_the_land_and_disarms():
             assert abs((m.lat * 1e-7 - lat0) / north) < 2.0
             mc = _wait(conn, lambda m: True, 10.0, type="MISSION_CURRENT")
             assert mc.seq == 6 and mc.total == 7
+            # MISSION_CLEAR_ALL leaves nothing, home's item neither (AP_Mission::clear)
+            conn.waypoint_clear_all_send()
+            assert _wait(conn, lambda m: True, 10.0, type="MISSION_ACK").type == \
+                mav.MAV_MISSION_ACCEPTED
+            conn.waypoint_request_list_send()
+            assert _wait(conn, lambda m: True, 10.0, type="MISSION_COUNT").count == 0
+            conn.waypoint_request_send(0)  # home can still be read (DroneKit asks for it)
+            m = _wait(conn, lambda m: m.seq == 0, 10.0, type=["MISSION_ITEM", "MISSION_ITEM_INT"])
+            assert m.command == mav.MAV_CMD_NAV_WAYPOINT and m.frame == 0
         finally:
             conn.close()
 

@@ -81,6 +81,10 @@ def test_fence_kinds_gate_the_uploaded_areas_and_set_ac_fences_sys_status_bits()
     v = ArduCopterVehicle(fleet, 0, frames.GeoReference(*frames.PX4_SITL_HOME))
     ap, c = v.ap_params, v.cmd
     assert _bits(v) == (True, False, True)  # FENCE_TYPE 7: altitude, circle; off; healthy
+    assert v.fence.status() is None  # FENCE_ENABLE 0: no FENCE_STATUS (send_fence_status)
+    ap.set("FENCE_ENABLE", 1)
+    assert v.fence.status() is not None
+    ap.set("FENCE_ENABLE", 0)
     ap.set("FENCE_TYPE", 4)
     assert _bits(v) == (False, False, True)  # polygons, none uploaded: absent, healthy
     area = Fence([polygon([(-30, -30), (30, -30), (30, 30), (-30, 30)], True, "test")])

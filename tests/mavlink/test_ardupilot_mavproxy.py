@@ -88,7 +88,7 @@ def test_mavproxy_session_flies_guided_a_waypoints_file_in_auto_and_rtl(tmp_path
                    "MAVProxy's download saved", log)
             back = waypoints.read(saved)
             assert [it.command for it in back] == [16, 16, 16]
-            assert [it.current for it in back] == [0, 1, 0]  # (item 1 is next to fly)
+            assert [it.current for it in back] == [0, 0, 0]  # (none runs before AUTO)
             lat, lon, _ = geo.to_global(home)
             assert abs(back[0].x - lat * 1e7) <= 1 and abs(back[0].y - lon * 1e7) <= 1
             assert back[2].z == 12

@@ -13,9 +13,17 @@ import pytest
 os.environ.setdefault("MAVLINK20", "1")
 from pymavlink import mavutil  # noqa: E402
 
+from ft_sitl import frames  # noqa: E402
+from ft_sitl.autopilot import commander as cm  # noqa: E402
+from ft_sitl.autopilot.commander import Result  # noqa: E402
+from ft_sitl.mavlink.ardupilot import modes, prearm  # noqa: E402
+from ft_sitl.mavlink.ardupilot.agent import ArduCopterVehicle  # noqa: E402
 from ft_sitl.mavlink.ardupilot.server import tcp_ports  # noqa: E402
+from ft_sitl.physics.catalog import get_platform  # noqa: E402
+from ft_sitl.sim.fleet import Fleet  # noqa: E402
 
 from .ardupilot_harness import free_ardupilot_sitl  # noqa: E402
+from .sitl_harness import PLATFORM  # noqa: E402
 
 pytestmark = pytest.mark.e2e  # (tests/lanes.py)
 
@@ -122,6 +130,26 @@ def _session(test):
             test(gcs, server)
         finally:
             gcs.close()
+
+
+def test_boots_in_stabilize_and_takes_any_mode_while_disarmed():
+    """ArduCopter boots in STABILIZE; disarmed, Copter::set_mode takes every mode, AUTO
+    without a mission too (a hold until there is one); armed, AUTO needs a mission; an
+    unknown mode and an unarmable one are named in the texts (the parity run's wording)."""
+    fleet = Fleet([get_platform(PLATFORM)])
+    v = ArduCopterVehicle(fleet, 0, frames.GeoReference(*frames.PX4_SITL_HOME))
+    c, m = v.cmd, v.modes
+    assert m.number == modes.STABILIZE and (c.main_mode, c.sub_mode) == (cm.MAIN_STABILIZED, 0)
+    assert m.set(99) == Result.FAILED and c.statustexts[-1][1] == "No such mode 99"
+    assert m.number == modes.STABILIZE
+    assert not c.mission
+    assert m.set(modes.AUTO) == Result.ACCEPTED and m.number == modes.AUTO
+    assert (c.main_mode, c.sub_mode) == (cm.MAIN_AUTO, cm.SUB_LOITER)
+    assert prearm.arm_failure(v) == "Arm: AUTO mode not armable"
+    assert m.set(modes.LAND) == Result.ACCEPTED
+    assert prearm.arm_failure(v) == "Arm: LAND mode not armable"
+    assert m.set(modes.GUIDED) == Result.ACCEPTED and c.arm() == Result.ACCEPTED
+    assert m.set(modes.AUTO) == Result.FAILED and m.number == modes.GUIDED
 
 
 def _horizontal(m0, m1) -> float:
@@ -236,7 +264,7 @@ def test_arming_checks_answer_arducopter_texts_and_force_arm_bypasses():
                       mavutil.mavlink.MAV_RESULT_ACCEPTED)
         gcs.mode("RTL")
         assert gcs.arm() == failed
-        gcs.text("Arm: Mode not armable")
+        gcs.text("Arm: RTL mode not armable")
 
         # no GPS (SITL's SIM_GPS_DISABLE): a mode that needs a position is refused
         gcs.mode("GUIDED")

@@ -14,7 +14,8 @@ from pymavlink import mavutil
 
 from ft_sitl.autopilot.params import ParamSet
 from ft_sitl.mavlink.ardupilot import parm
-from ft_sitl.mavlink.ardupilot.params import ApParamSet
+from ft_sitl.mavlink.ardupilot.parameters import STATUSTEXT_LEN, refusal_text
+from ft_sitl.mavlink.ardupilot.params import AP_PARAMS, FLOAT, ApParamSet
 from ft_sitl.mavlink.ardupilot.server import tcp_ports
 
 from .ardupilot_harness import free_ardupilot_sitl
@@ -51,6 +52,22 @@ def test_a_bad_parm_file_is_refused_in_one_line_naming_file_and_line(tmp_path, t
     assert "\n" not in str(e.value)
     with pytest.raises(parm.ParmError, match="cannot read"):
         parm.read(tmp_path / "none.parm")
+
+
+def test_defaults_and_types_arducopter_has():
+    """The parity run's findings: FS_OPTIONS 16 (GCS_CONTINUE_IF_PILOT_CONTROL),
+    BATT_LOW_MAH/BATT_CRT_MAH floats (AP_BattMonitor_Params' AP_Float: REAL32)."""
+    assert AP_PARAMS["FS_OPTIONS"].default == 16
+    assert AP_PARAMS["BATT_LOW_MAH"].ptype == FLOAT and AP_PARAMS["BATT_CRT_MAH"].ptype == FLOAT
+    assert not AP_PARAMS["BATT_LOW_MAH"].is_int
+
+
+def test_a_refusal_fits_one_statustext():
+    for name, spec in AP_PARAMS.items():
+        for value in (-1.234567e300, spec.hi + 1e9, (spec.lo + spec.hi) / 2):
+            text = refusal_text(name, value)
+            assert len(text) <= STATUSTEXT_LEN and text.startswith(name), text
+    assert refusal_text("WPNAV_SPEED", 1e6) == "WPNAV_SPEED: 1e+06 not in 10..2000 cm/s"
 
 
 def test_written_parameters_read_back_identical(tmp_path):

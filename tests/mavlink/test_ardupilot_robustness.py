@@ -231,6 +231,12 @@ def test_bad_parameter_sets_answered_as_arducopter():
             assert pv.param_value == 1000.0 and ap["WPNAV_SPEED"] == 1000
             wait_msg(conn, "STATUSTEXT", lambda m: m.text == "Param write denied (WPNAV_SPEED)",
                      30)
+            why = wait_msg(conn, "STATUSTEXT", lambda m: m.text.startswith("WPNAV_SPEED"), 30)
+            assert why.text == "WPNAV_SPEED: 1e+09 not in 10..2000 cm/s"  # one STATUSTEXT
+            # inside ArduCopter's range, outside what the controller flies (MPC_XY_CRUISE)
+            conn.mav.param_set_send(1, 1, b"WPNAV_SPEED", 100, MAV.MAV_PARAM_TYPE_REAL32)
+            why = wait_msg(conn, "STATUSTEXT", lambda m: m.text.startswith("WPNAV_SPEED"), 30)
+            assert why.text == "WPNAV_SPEED: 100 not flown by ft-sitl"
             conn.mav.param_set_send(1, 1, b"RTL_ALT", 2000.6, MAV.MAV_PARAM_TYPE_REAL32)
             pv = wait_msg(conn, "PARAM_VALUE", lambda m: m.param_id == "RTL_ALT", 30)
             assert pv.param_value == 2001.0 and pv.param_type == MAV.MAV_PARAM_TYPE_INT32

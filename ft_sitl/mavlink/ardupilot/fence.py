@@ -13,7 +13,7 @@ _enabled, _failed): present when a kind is configured (the polygon kind only wit
 uploaded), enabled when present, on and not report-only, healthy unless present and
 breached. The health bit is set with no fence at all: a ground station (MAVProxy's fence
 module) reads a missing health bit as "fence breach". FENCE_STATUS goes out while a fence
-is present.
+is present and FENCE_ENABLE is on.
 """
 
 from __future__ import annotations
@@ -95,9 +95,10 @@ class ArduCopterFence:
         return present, enabled, health
 
     def status(self) -> apm.MAVLink_fence_status_message | None:
-        """FENCE_STATUS (AC_Fence::send_fence_status) while a fence is present: breached
-        now, breaches so far, the last one's kind and time (ms since boot)."""
-        if not self.present:
+        """FENCE_STATUS (GCS_MAVLINK::send_fence_status) while a fence is present and
+        FENCE_ENABLE is on (none with the fence off): breached now, breaches so far, the
+        last one's kind and time (ms since boot)."""
+        if not self.present or not self.v.ap_params["FENCE_ENABLE"]:
             return None
         events = self.v.cmd.fence_events
         kind, t_ms = apm.FENCE_BREACH_NONE, 0

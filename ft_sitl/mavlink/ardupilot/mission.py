@@ -28,6 +28,7 @@ from ft_sitl.autopilot.mission import (
     CMD_DO_JUMP,
     CMD_NAV_LOITER_TURNS,
     CMD_NAV_WAYPOINT,
+    MissionState,
 )
 from ft_sitl.mavlink.ardupilot import guided
 from ft_sitl.mavlink.mission import MissionProtocol
@@ -35,6 +36,17 @@ from ft_sitl.mavlink.mission_items import GLOBAL_FRAMES, MissionItems, deg_e7
 from ft_sitl.mavlink.outgoing import Outgoing
 
 _MISSION = apm.MAV_MISSION_TYPE_MISSION
+#: the commands AP_Mission stores with a location (AP_Mission::stored_in_location); a
+#: download gives every other command frame 0 (MAV_FRAME_GLOBAL, the packet's default)
+LOCATION_COMMANDS = frozenset((
+    apm.MAV_CMD_NAV_WAYPOINT, apm.MAV_CMD_NAV_LOITER_UNLIM, apm.MAV_CMD_NAV_LOITER_TURNS,
+    apm.MAV_CMD_NAV_LOITER_TIME, apm.MAV_CMD_NAV_LAND, apm.MAV_CMD_NAV_TAKEOFF,
+    apm.MAV_CMD_NAV_CONTINUE_AND_CHANGE_ALT, apm.MAV_CMD_NAV_LOITER_TO_ALT,
+    apm.MAV_CMD_NAV_SPLINE_WAYPOINT, apm.MAV_CMD_NAV_GUIDED_ENABLE, apm.MAV_CMD_DO_SET_HOME,
+    apm.MAV_CMD_DO_LAND_START, apm.MAV_CMD_DO_GO_AROUND, apm.MAV_CMD_DO_SET_ROI,
+    apm.MAV_CMD_NAV_VTOL_TAKEOFF, apm.MAV_CMD_NAV_VTOL_LAND, apm.MAV_CMD_NAV_PAYLOAD_PLACE))
+#: the mission states in which a nav command runs (a download marks it current)
+_RUNNING = (MissionState.ACTIVE, MissionState.PAUSED)
 #: a LOITER_TURNS item's radius when it gives none, and the speed round it: ArduCopter's
 #: CIRCLE_RADIUS (1000 cm) and CIRCLE_RATE (20 deg/s) defaults (AC_Circle.cpp)
 CIRCLE_RADIUS_M, CIRCLE_RATE_DEG_S = 10.0, 20.0
@@ -81,6 +93,17 @@ def _as_float(it):
         it.mission_type)
 
 
+def _as_stored(it):
+    """An uploaded item as AP_Mission gives it back: frame 0 for a command it stores
+    without a location (RTL, DO_* ...), else as uploaded."""
+    if it.command in LOCATION_COMMANDS or it.frame == apm.MAV_FRAME_GLOBAL:
+        return it
+    return apm.MAVLink_mission_item_int_message(
+        it.target_system, it.target_component, it.seq, apm.MAV_FRAME_GLOBAL, it.command,
+        it.current, it.autocontinue, it.param1, it.param2, it.param3, it.param4, it.x, it.y,
+        it.z, it.mission_type)
+
+
 class ArduCopterMission(MissionProtocol):
     """One vehicle's mission protocol with home at sequence 0 of the mission list."""
 
@@ -104,9 +127,16 @@ class ArduCopterMission(MissionProtocol):
         return super()._fence_download()
 
     def _download(self, mtype: int) -> list | None:
+        """The mission as AP_Mission reads it back: nothing when none is stored (after
+        MISSION_CLEAR_ALL too: its count is 0, though item 0, home, can still be read:
+        :meth:`on_request`), else home now as item 0 and the items, a command without a
+        location in frame 0 (MAV_FRAME_GLOBAL)."""
         if mtype != _MISSION:
             return super()._download(mtype)
-        return [self._home_item()] + self._stored[mtype][1:]
+        stored = self._stored[mtype]
+        if not stored:
+            return []
+        return [self._home_item()] + [_as_stored(it) for it in stored[1:]]
 
     def _home_item(self):
         """Item 0: home now, as AP_Mission writes it (absolute altitude, MAV_FRAME_GLOBAL)."""
@@ -121,8 +151,8 @@ class ArduCopterMission(MissionProtocol):
         self._apply_upload(_MISSION, list(items))
 
     def mission_items(self) -> list:
-        """The mission as a download returns it (item 0: home now; only home when no
-        mission is loaded)."""
+        """The mission as a download returns it (item 0: home now; empty when no mission
+        is loaded)."""
         return self._download(_MISSION)
 
     def _request_item(self, seq: int) -> Outgoing:
@@ -137,7 +167,17 @@ class ArduCopterMission(MissionProtocol):
         """A download's MISSION_REQUEST is answered with MISSION_ITEM (degrees as floats),
         MISSION_REQUEST_INT with MISSION_ITEM_INT, as ArduPilot answers each
         (GCS_MAVLINK::handle_mission_request): DroneKit reads what it asked for."""
-        out = super().on_request(m, link, peer, wall_us)
+        if getattr(m, "mission_type", 0) == _MISSION and m.seq == 0 and \
+                not self._stored[_MISSION]:
+            # no mission (count 0): home can still be read (MissionItemProtocol_Waypoints
+            # get_item "always allow HOME to be read"; DroneKit's download asks for it)
+            h = self._home_item()
+            out = [Outgoing(apm.MAVLink_mission_item_int_message(
+                m.get_srcSystem(), m.get_srcComponent(), 0, h.frame, h.command, 0,
+                h.autocontinue, h.param1, h.param2, h.param3, h.param4, h.x, h.y, h.z,
+                _MISSION), link, peer)]
+        else:
+            out = super().on_request(m, link, peer, wall_us)
         if m.get_type() != "MISSION_REQUEST":
             return out
         return [Outgoing(_as_float(o.msg), o.link, o.peer)
@@ -172,7 +212,10 @@ class ArduCopterMission(MissionProtocol):
             apm.MAV_MISSION_ACCEPTED if ok else apm.MAV_MISSION_ERROR, _MISSION), link, peer)
 
     def _current_seq(self) -> int:
-        return self.v.cmd.mission_seq + 1 if self.v.cmd.mission else -1
+        """The item a download marks current: the nav command running (AP_Mission's
+        current nav index), none before the mission has started."""
+        c = self.v.cmd
+        return c.mission_seq + 1 if c.mission and c.mission_state in _RUNNING else -1
 
     def on_set_current(self, m, link, peer, wall_us):
         seq = max(int(m.seq), 1)  # (ArduPilot: home cannot be the current item)

@@ -77,7 +77,12 @@ class FlightModes:
     def __init__(self, cmd: cm.Commander, velocity: Callable[[], np.ndarray] | None = None):
         self.cmd = cmd
         self.velocity = velocity
-        self._chosen = FROM_COMMANDER.get((cmd.main_mode, cmd.sub_mode), LOITER)
+        if not cmd.armed and (cmd.main_mode, cmd.sub_mode) == (cm.MAIN_POSCTL, 0):
+            # ArduCopter boots in STABILIZE (Copter's mode at start, as the parity run
+            # against a real ArduCopter saw, docs/mavlink.md); the commander's own boot
+            # mode is POSCTL. A client sets its mode (GUIDED) before it flies.
+            cmd.switch_mode(*ENTRY[STABILIZE])
+        self._chosen = FROM_COMMANDER.get((cmd.main_mode, cmd.sub_mode), STABILIZE)
 
     @property
     def number(self) -> int:
@@ -94,16 +99,24 @@ class FlightModes:
 
     def set(self, number: int) -> Result:
         """Switch to ArduCopter mode ``number``: ACCEPTED, or FAILED with ArduCopter's
-        STATUSTEXT ("No such mode", "Flight mode change failed")."""
+        STATUSTEXT ("No such mode 99", "Flight mode change failed AUTO").
+
+        Disarmed, every mode is accepted (Copter::set_mode ignores the modes' checks while
+        the motors are off): AUTO without a mission too, holding where the vehicle is
+        (ModeAuto::init's LOITER sub mode; the mission starts when there is one). Armed,
+        AUTO needs a mission (ModeAuto::init: more than the home item)."""
         if number not in NAMES:
-            self.cmd.text(cm.Severity.WARNING, "No such mode")
+            self.cmd.text(cm.Severity.WARNING, f"No such mode {number}")
             return Result.FAILED
         if number == self.number:
             return Result.ACCEPTED
         main, sub = ENTRY[number]
         if number == AUTO and not self.cmd.mission:
-            self.cmd.text(cm.Severity.WARNING, f"Flight mode change failed {NAMES[number]}")
-            return Result.FAILED
+            if self.cmd.armed:
+                self.cmd.text(cm.Severity.WARNING,
+                              f"Flight mode change failed {NAMES[number]}")
+                return Result.FAILED
+            main, sub = _A, cm.SUB_LOITER  # (AUTO with nothing to fly yet: a hold)
         result = self.cmd.set_mode(main, sub)
         if result != Result.ACCEPTED:
             self.cmd.text(cm.Severity.WARNING, f"Flight mode change failed {NAMES[number]}")

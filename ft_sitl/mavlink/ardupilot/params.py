@@ -167,18 +167,20 @@ _SPECS += [
        "7 brake or land (ft-sitl: SmartRTL and DO_LAND_START fall back to RTL)", INT8),
     _P("FS_GCS_TIMEOUT", 5.0, 2.0, 120.0, "s", "silence of the ground station (SYSID_MYGCS) "
        "before the GCS failsafe"),
-    _P("FS_OPTIONS", 0, 0, 63, "", "failsafe options (bitmask): 2 GCS failsafe continues "
-       "AUTO, 8 any failsafe continues a landing, 16 GCS failsafe continues pilot modes",
-       INT32),
+    _P("FS_OPTIONS", 16, 0, 63, "", "failsafe options (bitmask): 2 GCS failsafe continues "
+       "AUTO, 8 any failsafe continues a landing, 16 GCS failsafe continues pilot modes "
+       "(ArduCopter's default)", INT32),
     _P("BATT_CAPACITY", 3300, 0, 1000000, "mAh", "battery capacity (ft-sitl: the model's "
        "charge fraction in these units)", INT32),
     _P("BATT_LOW_VOLT", 10.5, 0.0, 100.0, "V", "low battery voltage (0: off), held for "
        "BATT_LOW_TIMER"),
     _P("BATT_LOW_TIMER", 10, 0, 120, "s", "time below a voltage threshold before its "
        "failsafe", INT8),
-    _P("BATT_LOW_MAH", 0, 0, 1000000, "mAh", "low remaining capacity (0: off)", INT32),
+    _P("BATT_LOW_MAH", 0, 0, 1000000, "mAh", "low remaining capacity (0: off; a float, as "
+       "AP_BattMonitor_Params' AP_Float)"),
     _P("BATT_CRT_VOLT", 0.0, 0.0, 100.0, "V", "critical battery voltage (0: off)"),
-    _P("BATT_CRT_MAH", 0, 0, 1000000, "mAh", "critical remaining capacity (0: off)", INT32),
+    _P("BATT_CRT_MAH", 0, 0, 1000000, "mAh", "critical remaining capacity (0: off; a "
+       "float, as AP_BattMonitor_Params' AP_Float)"),
     _P("BATT_FS_LOW_ACT", 0, 0, 7, "", "low battery action: 0 none, 1 land, 2 RTL, "
        "3 SmartRTL or RTL, 4 SmartRTL or land, 5 terminate, 6 DO_LAND_START or RTL, 7 brake "
        "or land", INT8),

@@ -78,7 +78,7 @@ def arm_failure(v: ArduCopterVehicle, from_gcs: bool = True) -> str:
     """The final arm checks' first failure ("" when they pass)."""
     mode = v.modes.number
     if mode not in modes.ARMABLE:
-        return "Arm: Mode not armable"
+        return f"Arm: {v.modes.name} mode not armable"  # (AP_Arming_Copter: the name)
     if int(v.ap_params["ARMING_CHECK"]) == 0 or not enabled(v, CHECK_RC):
         return ""
     rc = v.rc

@@ -16,13 +16,19 @@ from ft_sitl.mavlink.ardupilot.rc import RC_CHANNELS
 from ft_sitl.mavlink.telemetry import Telemetry
 from ft_sitl.physics.quaternion import qto_euler
 
-#: what ArduPilot advertises (GCS_MAVLINK::capabilities): parameters C-cast, not bytewise
+#: what ArduPilot advertises (GCS_MAVLINK::capabilities, GCS_MAVLINK_Copter's) of what
+#: this face does: the mission, fence and rally lists, COMMAND_INT, the setpoint messages.
+#: No parameter encoding bit: ArduPilot announces neither C_CAST nor BYTEWISE, though its
+#: PARAM_VALUE carries integers C-cast into the float (so does this face, .parameters);
+#: ground stations assume that of ArduPilot. Not the compass calibration, FTP or terrain
+#: ArduCopter also announces (the face has none of them).
 CAPABILITIES = (
     apm.MAV_PROTOCOL_CAPABILITY_MISSION_FLOAT
     | apm.MAV_PROTOCOL_CAPABILITY_PARAM_FLOAT
     | apm.MAV_PROTOCOL_CAPABILITY_MISSION_INT
     | apm.MAV_PROTOCOL_CAPABILITY_COMMAND_INT
-    | apm.MAV_PROTOCOL_CAPABILITY_PARAM_ENCODE_C_CAST
+    | apm.MAV_PROTOCOL_CAPABILITY_MISSION_FENCE
+    | apm.MAV_PROTOCOL_CAPABILITY_MISSION_RALLY
     | apm.MAV_PROTOCOL_CAPABILITY_SET_POSITION_TARGET_LOCAL_NED
     | apm.MAV_PROTOCOL_CAPABILITY_SET_POSITION_TARGET_GLOBAL_INT
     | apm.MAV_PROTOCOL_CAPABILITY_SET_ATTITUDE_TARGET
