@@ -20,8 +20,9 @@ The session (``observe``), over one TCP connection to SERIAL0, in this order:
    (count and each item), AUTO on the ground with the mission, MISSION_CLEAR_ALL;
 8. arming in LAND again (the estimator settled by now), arming in GUIDED (retried until
    accepted), a GUIDED take-off to 5 m (MAV_CMD_NAV_TAKEOFF), a 10 m goto east
-   (SET_POSITION_TARGET_LOCAL_NED, position only, yaw ignored), then BRAKE, RTL (6 s),
-   LOITER (5 s), LAND until disarmed.
+   (SET_POSITION_TARGET_LOCAL_NED, position only, yaw ignored), then BRAKE (3 s), RTL
+   (6 s), LOITER (5 s), each timed by the vehicle's clock (time_boot_ms), LAND until
+   disarmed.
 
 Every STATUSTEXT of the session is kept in order.
 
@@ -335,10 +336,19 @@ def flight(s: Session) -> dict:
             "texts": s.texts_since(t)}
 
     def alt_change(mode: str, seconds: float) -> dict:
-        r = s.set_mode(MODES[mode])
+        """The height change over ``seconds`` of the vehicle's own clock
+        (GLOBAL_POSITION_INT.time_boot_ms) from just before the mode change: set_mode
+        returns a second or two after it (two HEARTBEATs), by when a vehicle that starts
+        climbing at once is metres up; and a side running slower than wall time (ft-sitl
+        on a loaded machine) is measured over the same flight time."""
         a = position(s)
-        s.pump(seconds)
-        b = position(s)
+        r = s.set_mode(MODES[mode])
+        b = a
+        if a is not None:
+            end_ms = a.time_boot_ms + seconds * 1000.0
+            b = s.wait("GLOBAL_POSITION_INT",
+                       lambda m: m.get_srcSystem() == s.conn.target_system and
+                       m.time_boot_ms >= end_ms, 10.0 * seconds)
         r["alt_change_m"] = None if a is None or b is None else \
             round((b.relative_alt - a.relative_alt) / 1000.0, 2)
         return r

@@ -39,7 +39,7 @@ def test_compare_marks_a_changed_answer_and_nothing_else():
     ours = _load("ft-sitl.json")
     other = json.loads(json.dumps(ours))
     other["label"] = "changed"
-    other["mode_unknown_99"]["texts"] = ["No such mode 99"]
+    other["mode_unknown_99"]["texts"] = ["No such mode"]  # (the old wording)
     changed = [name for name, _, _, same in parity.rows(ours, other) if same == "differs"]
     assert changed == ["SET_MODE 99"]
 
