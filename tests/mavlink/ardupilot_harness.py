@@ -85,15 +85,29 @@ def _accepts(host: str, port: int) -> bool:
     return True
 
 
-def wait_msg(conn, types, what=lambda m: True, timeout_s: float = 60.0, describe: str = ""):
-    """The first message of ``types`` for which ``what`` holds, within ``timeout_s`` wall
-    seconds (AssertionError naming what was awaited)."""
+def wait_for(conn, what=lambda m: True, timeout_s: float = 60.0, describe: str = "",
+             **match):
+    """The first message matching ``match`` (pymavlink's recv_match keywords: ``type``,
+    a condition) for which ``what`` holds, within ``timeout_s`` wall seconds
+    (AssertionError naming what was awaited)."""
     deadline = time.monotonic() + timeout_s
     while time.monotonic() < deadline:
-        m = conn.recv_match(type=types, blocking=True, timeout=1.0)
+        m = conn.recv_match(blocking=True, timeout=1.0, **match)
         if m is not None and what(m):
             return m
-    raise AssertionError(f"no {types} {describe or 'matching'} within {timeout_s:g} s")
+    raise AssertionError(f"no {match or 'message'} {describe or 'matching'} within "
+                         f"{timeout_s:g} s")
+
+
+def wait_msg(conn, types, what=lambda m: True, timeout_s: float = 60.0, describe: str = ""):
+    """:func:`wait_for` of messages of ``types``."""
+    return wait_for(conn, what, timeout_s, describe, type=types)
+
+
+def command_ack(conn, command: int, timeout_s: float = 10.0):
+    """The COMMAND_ACK of ``command``."""
+    return wait_for(conn, lambda m: m.command == command, timeout_s, f"for command {command}",
+                    type="COMMAND_ACK")
 
 
 def wait_disarmed(conn, timeout_s: float = 180.0):

@@ -13,22 +13,18 @@ from pymavlink import mavutil  # noqa: E402
 
 from ft_sitl.mavlink.ardupilot.server import tcp_ports  # noqa: E402
 
-from .ardupilot_harness import free_ardupilot_sitl, wait_armed, wait_disarmed  # noqa: E402
+from .ardupilot_harness import (  # noqa: E402
+    command_ack,
+    free_ardupilot_sitl,
+    wait_armed,
+    wait_disarmed,
+    wait_for,
+)
 
 pytestmark = pytest.mark.e2e  # (tests/lanes.py)
 
 
-def _wait(conn, what, timeout_s=60.0, **match):
-    deadline = time.time() + timeout_s
-    while time.time() < deadline:
-        m = conn.recv_match(blocking=True, timeout=1.0, **match)
-        if m is not None and what(m):
-            return m
-    raise AssertionError(f"timed out waiting for {match}")
-
-
-def _ack(conn, command):
-    return _wait(conn, lambda m: m.command == command, 10.0, type="COMMAND_ACK")
+_wait, _ack = wait_for, command_ack  # (ardupilot_harness)
 
 
 def test_pymavlink_arducopter_helpers_fly_guided_takeoff_goto_land():

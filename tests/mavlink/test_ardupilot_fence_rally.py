@@ -15,7 +15,6 @@ import math
 import os
 import subprocess
 import sys
-import time
 
 import numpy as np
 import pytest
@@ -34,24 +33,20 @@ from ft_sitl.mavlink.ardupilot.server import tcp_ports  # noqa: E402
 from ft_sitl.physics.catalog import get_platform  # noqa: E402
 from ft_sitl.sim.fleet import Fleet  # noqa: E402
 
-from .ardupilot_harness import free_ardupilot_sitl, wait_armed, wait_disarmed  # noqa: E402
+from .ardupilot_harness import (  # noqa: E402
+    command_ack,
+    free_ardupilot_sitl,
+    wait_armed,
+    wait_disarmed,
+    wait_for,
+)
 from .sitl_harness import PLATFORM  # noqa: E402
 from .test_ardupilot_mavproxy import MAVPROXY, _until  # noqa: E402
 
 _m = mavutil.mavlink
 
 
-def _wait(conn, what, timeout_s=60.0, **match):
-    deadline = time.time() + timeout_s
-    while time.time() < deadline:
-        m = conn.recv_match(blocking=True, timeout=1.0, **match)
-        if m is not None and what(m):
-            return m
-    raise AssertionError(f"timed out waiting for {match}")
-
-
-def _ack(conn, command):
-    return _wait(conn, lambda m: m.command == command, 10.0, type="COMMAND_ACK")
+_wait, _ack = wait_for, command_ack  # (ardupilot_harness)
 
 
 def test_rally_rule_is_ap_rallys():
