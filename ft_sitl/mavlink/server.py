@@ -324,6 +324,11 @@ class SitlServer:
                 raise
             link.transport = _SocketTransport(sock)
 
+    def on_received(self, link: Link, data: bytes, addr) -> None:
+        """What :meth:`pump` read from ``link``'s socket: one datagram (a face whose
+        transport carries a stream of frames cuts it first)."""
+        self.on_datagram(link, data, addr)
+
     def pump(self, timeout_s: float) -> None:
         """Handle every datagram that has arrived on the links (after :meth:`open`), waiting
         up to ``timeout_s`` wall seconds for the first; then the vehicles' wall-clock
@@ -339,7 +344,7 @@ class SitlServer:
                     break
                 except OSError:  # ICMP port unreachable of an earlier send: no datagram
                     continue
-                self.on_datagram(socks[sock], data, addr)
+                self.on_received(socks[sock], data, addr)
         wall_us = int(time.monotonic() * 1e6)
         for a in self.agents:
             self.send_all(a.i, a.poll(wall_us))

@@ -20,16 +20,13 @@ and what the client sends from there is answered on SERIAL0.
 
 from __future__ import annotations
 
-import select
 import socket
-import time
 
 from ft_sitl import frames
 from ft_sitl.mavlink.ardupilot.framing import FrameSplitter
 from ft_sitl.mavlink.ardupilot.server import ArduPilotServer
 from ft_sitl.mavlink.autopilots import AUTOPILOTS, DEFAULT_AUTOPILOT, PX4
-from ft_sitl.mavlink.outgoing import Outgoing
-from ft_sitl.mavlink.server import API_REMOTE_BASE, HEARTBEAT_TOP_UP_S, SitlServer
+from ft_sitl.mavlink.server import API_REMOTE_BASE, SitlServer
 
 __all__ = ["ARDUPILOT_LOCKSTEP_ONLY", "AUTOPILOTS", "DEFAULT_AUTOPILOT",
            "LockstepArduPilotServer", "check_autopilot", "client_port", "serve"]
@@ -85,27 +82,9 @@ class LockstepArduPilotServer(ArduPilotServer):
                 raise
             link.transport = _UdpOut(sock, list(self.outs))
 
-    def pump(self, timeout_s: float) -> None:
-        """Handle every datagram that has arrived (each cut into its frames), waiting up to
-        ``timeout_s`` wall seconds for the first; then the vehicles' wall-clock duties."""
-        socks = {link.transport.sock: link for link in self.links if link.transport}
-        ready, _, _ = select.select(list(socks), [], [], timeout_s)
-        for sock in ready:
-            while True:
-                try:
-                    data, addr = sock.recvfrom(65535)
-                except (BlockingIOError, InterruptedError):
-                    break
-                except OSError:  # ICMP port unreachable of an earlier send: no datagram
-                    continue
-                for frame in FrameSplitter().feed(data):
-                    self.on_datagram(socks[sock], frame, addr)
-        wall_us = int(time.monotonic() * 1e6)
-        for a in self.agents:
-            self.send_all(a.i, a.poll(wall_us))
-            if time.monotonic() - self._last_hb_wall[a.i] >= HEARTBEAT_TOP_UP_S:
-                self._last_hb_wall[a.i] = time.monotonic()
-                self.send_all(a.i, [Outgoing(a.heartbeat())])
+    def on_received(self, link, data: bytes, addr) -> None:
+        for frame in FrameSplitter().feed(data):  # (a datagram may carry several frames)
+            self.on_datagram(link, frame, addr)
 
 
 def client_port(instance: int) -> int:
