@@ -65,7 +65,8 @@ def test_the_task_travels_as_a_document_and_names_bad_fields():
     with pytest.raises(TaskError, match="task seed"):
         Task.from_dict({"goal": [1, 2, 3], "start": [0, 0, 1], "start_yaw": 0.0,
                         "seed": [-1]})
-    with pytest.raises(TaskError, match="limits.timeout_s"):
+    with pytest.raises(TaskError,
+                       match=r"limits: timeout_s: must be a number 0.1..3600 \(s\), got 0"):
         Task.from_dict({"goal": [1, 2, 3], "start": [0, 0, 1], "start_yaw": 0.0,
                         "timeout_s": 0})
     with pytest.raises(TaskError, match="not JSON"):
