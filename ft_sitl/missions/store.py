@@ -59,7 +59,10 @@ class ResultStore:
         self.spec_path = self.dir / SPEC_FILE
         self._fh = None
         self._lock_fh = None
+        #: the finished trials (trial id -> row): read by :meth:`open` or :meth:`load`, or
+        #: on first use by :meth:`rows` (so a table is never written from an unread store)
         self.done: dict[str, dict] = {}
+        self._read = False
         #: 1-based numbers of the damaged lines of trials.jsonl (skipped), as last read
         self.damaged: list[int] = []
         #: length in bytes of a torn last line of trials.jsonl (no newline), as last read
@@ -221,6 +224,7 @@ class ResultStore:
         done: dict[str, dict] = {}
         self.damaged = []
         self.torn_bytes = 0
+        self._read = True
         if not self.trials_path.exists():
             return done
         data = self.trials_path.read_bytes()
@@ -278,6 +282,9 @@ class ResultStore:
 
     # --- reading ------------------------------------------------------------------------
     def rows(self) -> list[dict]:
+        """The finished trials; trials.jsonl is read first if nothing has read it yet."""
+        if not self._read:
+            self.load()
         return list(self.done.values())
 
     def frame(self):

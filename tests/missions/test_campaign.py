@@ -557,6 +557,20 @@ def test_a_damaged_tail_is_cut_before_appending(tmp_path):
         ResultStore(tmp_path).open({"spec": {"name": "y"}})
 
 
+def test_a_table_written_from_a_store_never_opened_holds_its_trials(tmp_path):
+    # (2026-12-07: write_tables() on a store nobody had opened or loaded wrote an empty
+    # trials.parquet over a campaign's table)
+    store = ResultStore(tmp_path)
+    store.open({"spec": {"name": "x"}})
+    store.append(_row("a", 1))
+    store.append(_row("b", 2, "success"))
+    store.close()
+    written = ResultStore(tmp_path).write_tables()
+    table = pd.read_parquet(written[0])
+    assert sorted(table["trial_id"]) == ["a", "b"]
+    assert ResultStore(tmp_path / "none").rows() == []
+
+
 @pytest.mark.parametrize("row,message", [
     (_row("c", 1, "crashed"), r"trial c: reason 'crashed' is not one of success, collision"),
     ({"trial_id": "c", "success": True, "reason": "timeout"},
