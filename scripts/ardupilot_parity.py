@@ -59,7 +59,11 @@ import ft_sitl  # noqa: F401  (first: the numeric pins before numpy loads)
 os.environ.setdefault("MAVLINK20", "1")
 from pymavlink import mavutil  # noqa: E402
 
-from ft_sitl.mavlink.ardupilot.server import tcp_port_free, tcp_ports  # noqa: E402
+from ft_sitl.mavlink.ardupilot.server import (  # noqa: E402
+    serial_ports_free,
+    tcp_port_free,
+    tcp_ports,
+)
 from ft_sitl.mavlink.instances import free_instances  # noqa: E402
 
 M = mavutil.mavlink
@@ -528,10 +532,6 @@ def compare(a: dict, b: dict) -> str:
 # -- running both sides ------------------------------------------------------------------
 
 
-def _free(k: int) -> bool:
-    return all(tcp_port_free("127.0.0.1", p) for p in tcp_ports(k))
-
-
 def _stop(proc: subprocess.Popen) -> None:
     if proc.poll() is None:
         proc.terminate()
@@ -547,7 +547,7 @@ def arducopter(binary: Path, defaults: Path, log: Path):
     """``arducopter --model quad`` on the first free instance >= 5 (its lock held), in a
     scratch directory (its eeprom and logs); yields SERIAL0's URL."""
     home = ",".join(str(x) for x in HOME) + ",0"
-    with free_instances(1, _free, base=5, slots=15) as k, \
+    with free_instances(1, serial_ports_free, base=5, slots=15) as k, \
             tempfile.TemporaryDirectory(prefix="arducopter-") as scratch:
         shutil.copy(defaults, Path(scratch) / "defaults.parm")
         with open(log, "w") as fh:
@@ -558,7 +558,7 @@ def arducopter(binary: Path, defaults: Path, log: Path):
             try:
                 port = tcp_ports(k)[0]
                 end = time.monotonic() + 60.0
-                while _free(k) and proc.poll() is None and time.monotonic() < end:
+                while serial_ports_free(k) and proc.poll() is None and time.monotonic() < end:
                     time.sleep(0.2)
                 if proc.poll() is not None or tcp_port_free("127.0.0.1", port):
                     raise SystemExit(f"ardupilot_parity: {binary} did not listen on {port} "

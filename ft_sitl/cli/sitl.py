@@ -26,6 +26,7 @@ from ft_sitl.mavlink.ardupilot import parm, waypoints
 from ft_sitl.mavlink.ardupilot.server import (
     ArduPilotServer,
     parse_out,
+    serial_ports_free,
     tcp_port_free,
     tcp_ports,
 )
@@ -120,7 +121,7 @@ def cmd_sitl(args) -> int:
 def _ports_free(args, i: int) -> bool:
     """Whether instance i's ports are free for the face asked for."""
     if args.autopilot == "ardupilot":
-        return all(tcp_port_free(args.bind, p) for p in tcp_ports(i))
+        return serial_ports_free(i, args.bind)
     return not taken_ports(i, args.bind, client=True)
 
 

@@ -2,7 +2,8 @@
 their TCP ports free), so tests never collide with each other or with a SITL or trial of
 this machine: in this process (:func:`free_ardupilot_sitl`) or as ``ft-sitl sitl
 --autopilot ardupilot --instance auto`` in a process of its own
-(:func:`ardupilot_sitl_process`, for clients that run their own threads: DroneKit, MAVSDK).
+(:func:`ardupilot_sitl_process`, for clients that run their own threads: DroneKit, MAVSDK);
+MAVProxy, unmodified, typed at on such an instance (:func:`mavproxy_session`).
 Waits with deadlines that fail naming what was awaited (pymavlink's own
 ``motors_disarmed_wait`` waits for ever)."""
 
@@ -15,22 +16,24 @@ import subprocess
 import sys
 import time
 from contextlib import contextmanager
+from pathlib import Path
 
 os.environ.setdefault("MAVLINK20", "1")
 from pymavlink import mavutil  # noqa: E402
 
-from ft_sitl.mavlink.ardupilot.server import ArduPilotServer, tcp_port_free, tcp_ports  # noqa: E402,E501
+from ft_sitl.mavlink.ardupilot.server import (  # noqa: E402
+    ArduPilotServer,
+    serial_ports_free,
+    tcp_ports,
+)
 from ft_sitl.mavlink.instances import free_instances  # noqa: E402
 
 from .sitl_harness import _running_sitl  # noqa: E402
 
 #: the seconds a started process may take to print where it serves (a cold numba cache)
 START_TIMEOUT_S = 300.0
-
-
-def serial_ports_free(k: int) -> bool:
-    """Whether instance k's three TCP serial ports are free on the loopback."""
-    return all(tcp_port_free("127.0.0.1", p) for p in tcp_ports(k))
+#: MAVProxy, unmodified, as installed beside ft-sitl (pyproject's test extra)
+MAVPROXY = Path(sys.executable).parent / "mavproxy.py"
 
 
 @contextmanager
@@ -74,6 +77,53 @@ def ardupilot_sitl_process(*args: str):
                 proc.wait()
         proc.stdout.close()
         proc.stderr.close()
+
+
+class MavproxySession:
+    """A running MAVProxy: commands typed on its stdin, what it printed in ``log``."""
+
+    def __init__(self, proc: subprocess.Popen, log: Path):
+        self.proc, self.log = proc, log
+
+    def type(self, line: str) -> None:
+        """``line`` typed at MAVProxy's prompt."""
+        self.proc.stdin.write(line + "\n")
+        self.proc.stdin.flush()
+
+    def output(self) -> str:
+        """All MAVProxy has printed so far."""
+        return self.log.read_text() if self.log.exists() else ""
+
+    def until(self, what, timeout_s: float, describe: str) -> None:
+        """:func:`until`, failing with the tail of what MAVProxy printed."""
+        try:
+            until(what, timeout_s, describe)
+        except AssertionError as exc:
+            raise AssertionError(f"{exc}; MAVProxy said:\n{self.output()[-1500:]}") from None
+
+
+@contextmanager
+def mavproxy_session(k: int, workdir: Path):
+    """MAVProxy on instance k's SERIAL0 (``--master=tcp:127.0.0.1:PORT``; its state, tlog
+    and printed output, ``mavproxy.out``, in ``workdir``), yielded once it has fetched the
+    vehicle's parameters (it reads commands once it has the vehicle's heartbeat); killed at
+    the end."""
+    log = workdir / "mavproxy.out"
+    with open(log, "w") as out:
+        proc = subprocess.Popen(
+            [sys.executable, str(MAVPROXY), f"--master=tcp:127.0.0.1:{tcp_ports(k)[0]}",
+             f"--state-basedir={workdir}", "--logfile", str(workdir / "mav.tlog")],
+            stdin=subprocess.PIPE, stdout=out, stderr=subprocess.STDOUT, text=True,
+            cwd=workdir)
+    session = MavproxySession(proc, log)
+    try:
+        session.until(lambda: "Received" in session.output(), 60,
+                      "MAVProxy's parameter fetch")
+        yield session
+    finally:
+        proc.kill()
+        proc.wait(10)
+        proc.stdin.close()
 
 
 def _accepts(host: str, port: int) -> bool:

@@ -13,8 +13,6 @@ and home by RALLY_INCL_HOME / RALLY_LIMIT_KM (AP_Rally's rule)."""
 
 import math
 import os
-import subprocess
-import sys
 
 import numpy as np
 import pytest
@@ -36,12 +34,12 @@ from ft_sitl.sim.fleet import Fleet  # noqa: E402
 from .ardupilot_harness import (  # noqa: E402
     command_ack,
     free_ardupilot_sitl,
+    mavproxy_session,
     wait_armed,
     wait_disarmed,
     wait_for,
 )
 from .sitl_harness import PLATFORM  # noqa: E402
-from .test_ardupilot_mavproxy import MAVPROXY, _until  # noqa: E402
 
 _m = mavutil.mavlink
 
@@ -117,68 +115,52 @@ def test_mavproxy_fence_load_list_enable_and_a_breach_returns(tmp_path):
             f"{i}\t0\t0\t5001\t4\t0\t0\t0\t{latlon(e, n)}\t0\t1\n"
             for i, (e, n) in enumerate(square))
             + f"4\t0\t0\t5004\t5\t0\t0\t0\t{latlon(15, 0)}\t0\t1\n")
-        log = tmp_path / "mavproxy.out"
-        with open(log, "w") as out:
-            proc = subprocess.Popen(
-                [sys.executable, str(MAVPROXY), f"--master=tcp:127.0.0.1:{tcp_ports(k)[0]}",
-                 f"--state-basedir={tmp_path}", "--logfile", str(tmp_path / "mav.tlog")],
-                stdin=subprocess.PIPE, stdout=out, stderr=subprocess.STDOUT, text=True,
-                cwd=tmp_path)
-        try:
-            def type_(line: str) -> None:
-                proc.stdin.write(line + "\n")
-                proc.stdin.flush()
-
-            _until(lambda: "Received" in log.read_text(), 60, "MAVProxy's parameter fetch",
-                   log)
+        with mavproxy_session(k, tmp_path) as mp:
             # FENCE_TYPE 7 configures the altitude and circle kinds: present, not enabled,
             # healthy (MAVProxy printed "fence breach" when the health bit was missing)
-            _until(lambda: "fence present" in log.read_text(), 30, "fence present", log)
-            assert "fence breach" not in log.read_text()
+            mp.until(lambda: "fence present" in mp.output(), 30, "fence present")
+            assert "fence breach" not in mp.output()
 
-            type_(f"fence load {fence_file}")
-            _until(lambda: len(v.fence.uploaded.areas) == 2, 30, "the fence uploaded", log)
+            mp.type(f"fence load {fence_file}")
+            mp.until(lambda: len(v.fence.uploaded.areas) == 2, 30, "the fence uploaded")
             assert c.fence.empty  # FENCE_ENABLE 0: stored, not flown
-            type_("fence list")
-            _until(lambda: log.read_text().count("\n5001 ") == 4, 30, "fence list", log)
-            assert log.read_text().count("\n5004 0 ") == 1
+            mp.type("fence list")
+            mp.until(lambda: mp.output().count("\n5001 ") == 4, 30, "fence list")
+            assert mp.output().count("\n5004 0 ") == 1
 
             # a rally point 20 m north, loaded and listed with MAVProxy's rally module
             rally_file = tmp_path / "rally.waypoints"
             rally_file.write_text("QGC WPL 110\n"
                                   f"0\t0\t3\t5100\t0\t0\t0\t0\t{latlon(0, 20)}\t15\t1\n")
-            type_(f"rally load {rally_file}")
-            _until(lambda: len(c.rally) == 1, 30, "the rally point uploaded", log)
+            mp.type(f"rally load {rally_file}")
+            mp.until(lambda: len(c.rally) == 1, 30, "the rally point uploaded")
             assert abs(c.rally[0][1] - home[1] - 20) < 0.1
-            type_("rally list")
-            _until(lambda: "\n5100 3 " in log.read_text(), 30, "rally list", log)
+            mp.type("rally list")
+            mp.until(lambda: "\n5100 3 " in mp.output(), 30, "rally list")
 
-            type_("fence enable")
-            _until(lambda: c.fence is v.fence.uploaded, 30, "the fence in force", log)
-            _until(lambda: "fence enabled" in log.read_text(), 30, "fence enabled", log)
+            mp.type("fence enable")
+            mp.until(lambda: c.fence is v.fence.uploaded, 30, "the fence in force")
+            mp.until(lambda: "fence enabled" in mp.output(), 30, "fence enabled")
 
-            type_("mode guided")
-            _until(lambda: agent.mode_name == "GUIDED", 30, "GUIDED", log)
-            type_("arm throttle")
-            _until(lambda: c.armed, 30, "armed", log)
-            type_("takeoff 10")
-            _until(lambda: c.position_now()[2] - home[2] > 9.5, 60, "10 m up", log)
+            mp.type("mode guided")
+            mp.until(lambda: agent.mode_name == "GUIDED", 30, "GUIDED")
+            mp.type("arm throttle")
+            mp.until(lambda: c.armed, 30, "armed")
+            mp.type("takeoff 10")
+            mp.until(lambda: c.position_now()[2] - home[2] > 9.5, 60, "10 m up")
             assert not c.fence_events
             lat, lon = latlon(0, 45).split("\t")
-            type_(f"guided {lat} {lon} 10")
-            _until(lambda: c.fence_events, 60, "the breach", log)
+            mp.type(f"guided {lat} {lon} 10")
+            mp.until(lambda: c.fence_events, 60, "the breach")
             assert c.fence_events[0][1:] == ("outside the fence", "return")
             assert (c.main_mode, c.sub_mode) == (cm.MAIN_AUTO, cm.SUB_RTL)
             # RTL returns to the rally point, nearer than home (RALLY_INCL_HOME 1)
             assert math.hypot(*(c.auto.rtl_dest[:2] - c.rally[0][:2])) < 1e-6
-            _until(lambda: "fence breach" in log.read_text(), 30, "MAVProxy's breach", log)
+            mp.until(lambda: "fence breach" in mp.output(), 30, "MAVProxy's breach")
             st = agent.telemetry.build(_m.MAVLINK_MSG_ID_FENCE_STATUS)
             assert st.breach_count == 1 and st.breach_type == _m.FENCE_BREACH_BOUNDARY
             p = c.position_now()
             assert 30 < p[1] - home[1] < 45  # (turned back where it crossed)
-        finally:
-            proc.kill()
-            proc.wait(10)
 
 
 def _upload_rally(conn, points) -> int:

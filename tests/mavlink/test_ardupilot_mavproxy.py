@@ -6,31 +6,14 @@ vehicle's own state (mode, arming, altitude, parameters, mission, items reached,
 position), not on what MAVProxy prints."""
 
 import math
-import subprocess
-import sys
-import time
-from pathlib import Path
 
 import pytest
 
 from ft_sitl.mavlink.ardupilot import waypoints
-from ft_sitl.mavlink.ardupilot.server import tcp_ports
 
-from .ardupilot_harness import free_ardupilot_sitl
+from .ardupilot_harness import free_ardupilot_sitl, mavproxy_session
 
 pytestmark = pytest.mark.e2e  # (tests/lanes.py: a MAVProxy process, TCP)
-
-MAVPROXY = Path(sys.executable).parent / "mavproxy.py"  # (pyproject's test extra)
-
-
-def _until(what, timeout_s: float, describe: str, log: Path):
-    deadline = time.time() + timeout_s
-    while time.time() < deadline:
-        if what():
-            return
-        time.sleep(0.1)
-    tail = log.read_text()[-1500:] if log.exists() else ""
-    raise AssertionError(f"timed out waiting for {describe}; MAVProxy said:\n{tail}")
 
 
 def test_mavproxy_session_flies_guided_a_waypoints_file_in_auto_and_rtl(tmp_path):
@@ -50,42 +33,28 @@ def test_mavproxy_session_flies_guided_a_waypoints_file_in_auto_and_rtl(tmp_path
             f"0\t1\t0\t16\t0\t0\t0\t0\t{latlon(0, 0)}\t{geo.alt_m:.2f}\t1\n"
             f"1\t0\t3\t16\t0\t0\t0\t0\t{latlon(0, 20)}\t10\t1\n"
             f"2\t0\t3\t16\t0\t0\t0\t0\t{latlon(20, 20)}\t12\t1\n")
-        log = tmp_path / "mavproxy.out"
-        with open(log, "w") as out:
-            proc = subprocess.Popen(
-                [sys.executable, str(MAVPROXY), f"--master=tcp:127.0.0.1:{tcp_ports(k)[0]}",
-                 f"--state-basedir={tmp_path}", "--logfile", str(tmp_path / "mav.tlog")],
-                stdin=subprocess.PIPE, stdout=out, stderr=subprocess.STDOUT, text=True,
-                cwd=tmp_path)
-        try:
-            def type_(line: str) -> None:
-                proc.stdin.write(line + "\n")
-                proc.stdin.flush()
-
-            # (MAVProxy reads commands once it has the vehicle's heartbeat)
-            _until(lambda: "Received" in log.read_text(), 60, "MAVProxy's parameter fetch",
-                   log)
-            type_("mode guided")
-            _until(lambda: agent.mode_name == "GUIDED", 30, "GUIDED", log)
-            type_("arm throttle")
-            _until(lambda: c.armed, 30, "armed", log)
-            type_("takeoff 10")
-            _until(lambda: c.position_now()[2] - home[2] > 9.5, 60, "10 m up", log)
+        with mavproxy_session(k, tmp_path) as mp:
+            mp.type("mode guided")
+            mp.until(lambda: agent.mode_name == "GUIDED", 30, "GUIDED")
+            mp.type("arm throttle")
+            mp.until(lambda: c.armed, 30, "armed")
+            mp.type("takeoff 10")
+            mp.until(lambda: c.position_now()[2] - home[2] > 9.5, 60, "10 m up")
             assert agent.mode_name == "GUIDED"
 
-            type_("param set WPNAV_SPEED 800")
-            _until(lambda: server.fleet.params[0]["MPC_XY_CRUISE"] == 8.0, 30,
-                   "WPNAV_SPEED 800 honoured", log)
+            mp.type("param set WPNAV_SPEED 800")
+            mp.until(lambda: server.fleet.params[0]["MPC_XY_CRUISE"] == 8.0, 30,
+                     "WPNAV_SPEED 800 honoured")
 
-            type_(f"wp load {wp_file}")
-            _until(lambda: len(c.mission) == 2, 30, "the file's two items uploaded", log)
+            mp.type(f"wp load {wp_file}")
+            mp.until(lambda: len(c.mission) == 2, 30, "the file's two items uploaded")
             p1 = c.mission[0].position
             assert abs(p1[1] - home[1] - 20) < 0.1 and abs(p1[2] - home[2] - 10) < 0.1
 
             saved = tmp_path / "saved.waypoints"
-            type_(f"wp save {saved}")
-            _until(lambda: saved.exists() and len(saved.read_text().splitlines()) == 4, 30,
-                   "MAVProxy's download saved", log)
+            mp.type(f"wp save {saved}")
+            mp.until(lambda: saved.exists() and len(saved.read_text().splitlines()) == 4, 30,
+                     "MAVProxy's download saved")
             back = waypoints.read(saved)
             assert [it.command for it in back] == [16, 16, 16]
             assert [it.current for it in back] == [0, 0, 0]  # (none runs before AUTO)
@@ -93,27 +62,24 @@ def test_mavproxy_session_flies_guided_a_waypoints_file_in_auto_and_rtl(tmp_path
             assert abs(back[0].x - lat * 1e7) <= 1 and abs(back[0].y - lon * 1e7) <= 1
             assert back[2].z == 12
 
-            type_("mode auto")
-            _until(lambda: agent.mode_name == "AUTO", 30, "AUTO", log)
-            _until(lambda: 1 in c.reached, 120, "the file's last waypoint reached", log)
+            mp.type("mode auto")
+            mp.until(lambda: agent.mode_name == "AUTO", 30, "AUTO")
+            mp.until(lambda: 1 in c.reached, 120, "the file's last waypoint reached")
             p = c.position_now()
             assert math.hypot(p[0] - home[0] - 20, p[1] - home[1] - 20) < 3.0
 
-            type_("rtl")
-            _until(lambda: agent.mode_name == "RTL", 30, "RTL", log)
-            _until(lambda: not c.armed, 180, "landed at home and disarmed", log)
+            mp.type("rtl")
+            mp.until(lambda: agent.mode_name == "RTL", 30, "RTL")
+            mp.until(lambda: not c.armed, 180, "landed at home and disarmed")
             p = c.position_now()
             assert math.hypot(p[0] - home[0], p[1] - home[1]) < 2.0
             assert p[2] - home[2] < 0.5
 
             # DO_FENCE_ENABLE: FENCE_ENABLE, written through to the geofence's limits
-            type_("fence enable")
+            mp.type("fence enable")
             ap = agent.vehicle.ap_params
-            _until(lambda: ap["FENCE_ENABLE"] == 1, 30, "the fence enabled", log)
+            mp.until(lambda: ap["FENCE_ENABLE"] == 1, 30, "the fence enabled")
             assert server.fleet.params[0]["GF_MAX_HOR_DIST"] == ap["FENCE_RADIUS"] > 0
-            type_("fence disable")
-            _until(lambda: ap["FENCE_ENABLE"] == 0, 30, "the fence disabled", log)
+            mp.type("fence disable")
+            mp.until(lambda: ap["FENCE_ENABLE"] == 0, 30, "the fence disabled")
             assert server.fleet.params[0]["GF_MAX_HOR_DIST"] == 0
-        finally:
-            proc.kill()
-            proc.wait(10)

@@ -16,10 +16,8 @@ from ft_sitl.autopilot.params import ParamSet
 from ft_sitl.mavlink.ardupilot import parm
 from ft_sitl.mavlink.ardupilot.parameters import STATUSTEXT_LEN, refusal_text
 from ft_sitl.mavlink.ardupilot.params import AP_PARAMS, FLOAT, ApParamSet
-from ft_sitl.mavlink.ardupilot.server import tcp_ports
 
-from .ardupilot_harness import free_ardupilot_sitl
-from .test_ardupilot_mavproxy import MAVPROXY, _until
+from .ardupilot_harness import free_ardupilot_sitl, mavproxy_session
 
 
 def test_a_parm_file_reads_with_spaces_commas_tabs_and_comments(tmp_path):
@@ -157,25 +155,12 @@ def test_mavproxy_param_save_writes_a_file_defaults_reads_back(tmp_path):
         ap = agent.vehicle.ap_params
         agent.parameters.set("WPNAV_SPEED", 640)
         agent.parameters.set("PSC_VELXY_P", 2.5)
-        log = tmp_path / "mavproxy.out"
         saved = tmp_path / "saved.parm"
-        with open(log, "w") as out:
-            proc = subprocess.Popen(
-                [sys.executable, str(MAVPROXY), f"--master=tcp:127.0.0.1:{tcp_ports(k)[0]}",
-                 f"--state-basedir={tmp_path}", "--logfile", str(tmp_path / "mav.tlog")],
-                stdin=subprocess.PIPE, stdout=out, stderr=subprocess.STDOUT, text=True,
-                cwd=tmp_path)
-        try:
-            _until(lambda: "Received" in log.read_text(), 60, "MAVProxy's parameter fetch",
-                   log)
-            proc.stdin.write(f"param save {saved}\n")
-            proc.stdin.flush()
-            _until(lambda: saved.exists() and
-                   len(saved.read_text().splitlines()) == len(dict(ap.items())), 30,
-                   "param save", log)
-        finally:
-            proc.kill()
-            proc.wait(10)
+        with mavproxy_session(k, tmp_path) as mp:
+            mp.type(f"param save {saved}")
+            mp.until(lambda: saved.exists() and
+                     len(saved.read_text().splitlines()) == len(dict(ap.items())), 30,
+                     "param save")
         back = {n: v for n, v, _ in parm.read(saved)}
         assert back["WPNAV_SPEED"] == 640 and back["PSC_VELXY_P"] == 2.5
         assert set(back) == set(dict(ap.items()))

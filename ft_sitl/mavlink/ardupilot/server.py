@@ -41,6 +41,12 @@ def tcp_port_free(host: str, port: int) -> bool:
     return True
 
 
+def serial_ports_free(k: int, host: str = "127.0.0.1") -> bool:
+    """Whether instance k's three TCP serial ports (:func:`tcp_ports`) are free on
+    ``host``: the test an instance number must pass to be taken for an ArduCopter face."""
+    return all(tcp_port_free(host, p) for p in tcp_ports(k))
+
+
 def parse_out(text: str) -> tuple[str, int]:
     """An ``--out`` target: udp:HOST:PORT, udpout:HOST:PORT or HOST:PORT (ValueError)."""
     body = text.split(":", 1)[1] if text.split(":", 1)[0] in ("udp", "udpout") else text
