@@ -21,11 +21,11 @@ from __future__ import annotations
 
 import functools
 
-from ft_sitl.mavlink.autopilots import ARDUPILOT, DEFAULT_AUTOPILOT
+from ft_sitl.mavlink.autopilots import DEFAULT_AUTOPILOT
 from ft_sitl.missions.campaign import CampaignError, Transport
 from ft_sitl.missions.campaign_file import COMMAND
 from ft_sitl.missions.spec import TrialSpec
-from ft_sitl.transport.faces import ARDUPILOT_LOCKSTEP_ONLY, check_autopilot
+from ft_sitl.transport.faces import check_autopilot
 from ft_sitl.transport.lockstep import run_trial_lockstep
 from ft_sitl.transport.mavlink_trial import fly_over_mavlink, worker_bus
 
@@ -45,14 +45,12 @@ def transport(kind: str = "inprocess", speed_factor: float = 2.0,
               autopilot: str = DEFAULT_AUTOPILOT) -> Transport:
     """A campaign's transport that can fly trials over MAVLink (``kind`` "mavlink", and a
     ``command`` algorithm in any campaign), in lockstep (default) or free-running, served
-    by ``autopilot``'s face (:mod:`ft_sitl.transport.faces`: the ArduCopter face in lockstep
-    only); CampaignError for a bad kind, speed factor or autopilot."""
+    by ``autopilot``'s face (:mod:`ft_sitl.transport.faces`); CampaignError for a bad
+    kind, speed factor or autopilot."""
     try:
         check_autopilot(autopilot)
     except ValueError as exc:
         raise CampaignError(str(exc)) from None
-    if autopilot == ARDUPILOT and not lockstep:
-        raise CampaignError(ARDUPILOT_LOCKSTEP_ONLY)
     return Transport(kind, speed_factor, mqtt,
                      wire=functools.partial(fly_wire, lockstep=lockstep, autopilot=autopilot),
                      lockstep=lockstep, autopilot=autopilot)

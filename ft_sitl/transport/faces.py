@@ -15,11 +15,19 @@ A lockstep trial serves the links between its own physics steps, without an even
 of its own (it serves TCP under asyncio); :class:`LockstepArduPilotServer` serves it as
 ArduPilot SITL forwards to a ground station with MAVProxy's ``--out``: SERIAL0's
 messages go to the client's UDP port (the instance's client port, as the PX4 face's),
-and what the client sends from there is answered on SERIAL0.
+and what the client sends from there is answered on SERIAL0. A free-running trial
+(:class:`FreeRunningArduPilotServer`) serves the same UDP link under the event loop,
+paced as the PX4 face's (SitlServer ``run``); no TCP port is bound, so a trial holds
+only its instance's UDP ports.
+
+Over the ArduCopter face the navigator client asks for its telemetry's rates itself
+(ArduPilot streams nothing but HEARTBEAT until asked: :mod:`ft_sitl.wire.navigate`
+``ARDUPILOT_RATES_HZ``), as a MAVSDK user on ArduPilot does.
 """
 
 from __future__ import annotations
 
+import asyncio
 import socket
 
 from ft_sitl import frames
@@ -28,15 +36,8 @@ from ft_sitl.mavlink.ardupilot.server import ArduPilotServer
 from ft_sitl.mavlink.autopilots import AUTOPILOTS, DEFAULT_AUTOPILOT, PX4
 from ft_sitl.mavlink.server import API_REMOTE_BASE, SitlServer
 
-__all__ = ["ARDUPILOT_LOCKSTEP_ONLY", "AUTOPILOTS", "DEFAULT_AUTOPILOT",
+__all__ = ["AUTOPILOTS", "DEFAULT_AUTOPILOT", "FreeRunningArduPilotServer",
            "LockstepArduPilotServer", "check_autopilot", "client_port", "serve"]
-
-
-#: why a free-running trial (a command navigator's, or --free-running) cannot have the
-#: ArduCopter face (docs/wire.md, "Autopilots")
-ARDUPILOT_LOCKSTEP_ONLY = ("--autopilot ardupilot: the ArduCopter face serves lockstep wire "
-                           "trials only (registered navigators, without --free-running); "
-                           "free-running trials and command navigators fly the PX4 face")
 
 
 def check_autopilot(name) -> str:
@@ -87,6 +88,38 @@ class LockstepArduPilotServer(ArduPilotServer):
             self.on_datagram(link, frame, addr)
 
 
+class _Datagrams(asyncio.DatagramProtocol):
+    """SERIAL0's UDP socket under the event loop: what arrives goes to the server."""
+
+    def __init__(self, server: LockstepArduPilotServer, link):
+        self.server, self.link = server, link
+
+    def datagram_received(self, data: bytes, addr) -> None:
+        self.server.on_received(self.link, data, addr)
+
+    def error_received(self, exc) -> None:  # the client not listening yet
+        pass
+
+
+class FreeRunningArduPilotServer(LockstepArduPilotServer):
+    """The ArduCopter face of a free-running wire trial: SERIAL0 on a UDP socket sending to
+    ``outs``, served under the event loop (:meth:`start`, then SitlServer ``run``, paced
+    as the PX4 face's); SERIAL1 and the TCP ports not served."""
+
+    async def start(self) -> None:
+        loop = asyncio.get_running_loop()
+        try:
+            for link in self.links:
+                if link.index != 0:
+                    continue
+                transport, _ = await loop.create_datagram_endpoint(
+                    lambda link=link: _Datagrams(self, link), local_addr=(self.bind, 0))
+                link.transport = _UdpOut(transport, list(self.outs))
+        except OSError:
+            self.close()
+            raise
+
+
 def client_port(instance: int) -> int:
     """The UDP port a navigator client listens on for instance ``instance`` (the one the
     instance lock reserves for it: PX4 SITL's 14540 + i)."""
@@ -98,21 +131,22 @@ def serve(autopilot: str, fleet, instance: int, *, lockstep: bool,
           pace_span_s: float | None = None) -> tuple[SitlServer, str]:
     """The face ``autopilot`` serving ``fleet`` as ``instance`` (bound: :meth:`open` in
     lockstep; started later under an event loop otherwise), the trial's parameters kept,
-    and the MAVSDK URL its client connects with; free-running with ``pace_span_s``,
-    client-paced (SitlServer ``pace="client"``). ValueError for the ArduCopter face
-    free-running (:data:`ARDUPILOT_LOCKSTEP_ONLY`)."""
+    and the MAVSDK URL its client connects with; free-running at ``speed_factor``, with
+    ``pace_span_s`` client-paced (SitlServer ``pace="client"``)."""
     geo = frames.GeoReference(*frames.PX4_SITL_HOME)
     port = client_port(instance)
+    pacing = {} if lockstep else {"speed_factor": speed_factor,
+                                  "pace": "wall" if pace_span_s is None else "client",
+                                  "pace_span_s": pace_span_s}
     if check_autopilot(autopilot) == PX4:
         server = SitlServer(fleet, geo, speed_factor=speed_factor, base_instance=instance,
                             pace="wall" if pace_span_s is None else "client",
                             pace_span_s=pace_span_s, gcs_link=False)
-    elif not lockstep:
-        raise ValueError(ARDUPILOT_LOCKSTEP_ONLY)
     else:
         trial_params = [p.as_dict() for p in fleet.params]
-        server = LockstepArduPilotServer(fleet, geo, base_instance=instance,
-                                         outs=[("127.0.0.1", port)])
+        face = LockstepArduPilotServer if lockstep else FreeRunningArduPilotServer
+        server = face(fleet, geo, base_instance=instance, outs=[("127.0.0.1", port)],
+                      gcs_link=False, **pacing)
         for params, values in zip(fleet.params, trial_params, strict=True):
             for name, value in values.items():
                 if params[name] != value:

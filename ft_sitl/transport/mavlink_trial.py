@@ -34,7 +34,7 @@ from ft_sitl.autopilot.commander import FENCE_ARM_DENIAL
 from ft_sitl.bus.broker import EmbeddedBroker
 from ft_sitl.bus.codec import EventType
 from ft_sitl.bus.publisher import BusPublisher
-from ft_sitl.mavlink.autopilots import DEFAULT_AUTOPILOT, PX4
+from ft_sitl.mavlink.autopilots import DEFAULT_AUTOPILOT
 from ft_sitl.missions.campaign_file import COMMAND
 from ft_sitl.missions.plan import TrialPlan
 from ft_sitl.missions.protocol import (
@@ -46,10 +46,9 @@ from ft_sitl.missions.protocol import (
     arming_failure,
 )
 from ft_sitl.missions.results import Outcome
-from ft_sitl.missions.spec import TrialSpec, TrialSpecError
+from ft_sitl.missions.spec import TrialSpec
 from ft_sitl.navigation.base import Task
 from ft_sitl.scenarios.camera import camera_config
-from ft_sitl.transport.faces import ARDUPILOT_LOCKSTEP_ONLY, check_autopilot
 from ft_sitl.transport.sitl_bus import SitlBus
 from ft_sitl.transport.wire_trial import WireTrial, client_result
 from ft_sitl.wire.navigate import ClientResult, task_env
@@ -137,12 +136,11 @@ def run_trial_wire(spec: TrialSpec, *, speed_factor: float = 2.0, mqtt: str | No
                    bus_factory=None, autopilot: str = DEFAULT_AUTOPILOT,
                    pace_span_s: float | None = None) -> TrialOutcome:
     """Fly one trial with the navigator in another process (module docstring), served by
-    ``autopilot``'s face (the PX4 face only: :data:`~.faces.ARDUPILOT_LOCKSTEP_ONLY`);
-    with ``pace_span_s``, client-paced: the simulated clock never runs more than that past
+    ``autopilot``'s face (:mod:`~ft_sitl.transport.faces`; over the ArduCopter face the
+    client flies GUIDED and asks for its telemetry's rates itself); with ``pace_span_s``,
+    client-paced: the simulated clock never runs more than that past
     the navigator's last message (a starved navigator sees a slower world), the speed
     factor its ceiling (docs/mavlink.md, Pacing)."""
-    if check_autopilot(autopilot) != PX4:
-        raise TrialSpecError(ARDUPILOT_LOCKSTEP_ONLY)
     trial = WireTrial(spec, record=record, instance=instance, log_dir=log_dir,
                       autopilot=autopilot)
     plan, fleet, ref = trial.plan, trial.fleet, trial.ref

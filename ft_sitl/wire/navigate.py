@@ -1,12 +1,14 @@
 """``ft-sitl navigate``: a registered navigator flying a vehicle as a MAVSDK client.
 
 The navigator runs in its own process and talks to the flight controller only through
-MAVLink (MAVSDK 4.x): it waits until the vehicle is armable, arms and takes off (MAVSDK
+MAVLink (MAVSDK 4.x): on an ArduPilot vehicle (the ArduCopter face) it first asks for the
+telemetry it needs (:data:`ARDUPILOT_RATES_HZ`: ArduPilot streams nothing but HEARTBEAT
+until a client asks), then it waits until the vehicle is armable, arms and takes off (MAVSDK
 Action) to the start altitude, flies to the start in offboard position mode and holds it
 until stable (within 0.3 m, slower than 0.3 m/s for 1 s: the protocol's criterion), then
 calls the navigator at its rate and streams every setpoint with MAVSDK Offboard
 (position + velocity + acceleration + yaw in local NED, NaN where the navigator leaves an
-axis to the next control level).
+axis to the next control level; on ArduPilot MAVSDK's take-off and offboard are GUIDED).
 
 State and time. With an MQTT bus (``--mqtt``), observations come from the vehicle's bus
 telemetry (world ENU, simulated time stamps) and depth frames from its depth topic (the
@@ -93,6 +95,36 @@ def task_from_json(text: str) -> Task:
     except json.JSONDecodeError as exc:
         raise TaskError(f"task: not JSON ({exc})") from None
     return Task.from_dict(doc)
+
+
+#: the telemetry the client asks an ArduPilot vehicle for before it waits for the health,
+#: as a MAVSDK user on ArduPilot does (MAVSDK telemetry's ``set_rate_<name>``, Hz): the
+#: health and home (SYS_STATUS, HOME_POSITION) for MAVSDK's armable check, the position,
+#: velocity and attitude the client reads (without a bus: ``_mavsdk_state`` raises the
+#: position and attitude to 50 Hz). The PX4 face streams these unasked (PX4's onboard
+#: link rates), so nothing is asked of it.
+ARDUPILOT_RATES_HZ = {"health": 2.0, "home": 1.0, "gps_info": 2.0, "battery": 1.0,
+                      "in_air": 5.0, "position": 10.0, "velocity_ned": 10.0,
+                      "position_velocity_ned": 30.0, "attitude_euler": 30.0,
+                      "attitude_quaternion": 30.0}
+
+
+async def ask_ardupilot_rates(drone) -> bool:
+    """On an ArduPilot vehicle, ask for :data:`ARDUPILOT_RATES_HZ` (a refused request is
+    logged and skipped: a rate request is a wish); whether the vehicle is one."""
+    # MAVSDK: loaded only by the navigator client that flies over it
+    from mavsdk.asyncio import Autopilot
+    from mavsdk.asyncio.plugins.telemetry import TelemetryAsync
+
+    if await drone.autopilot_type() != Autopilot.ARDUPILOT:
+        return False
+    tel = TelemetryAsync(drone)
+    for name, hz in ARDUPILOT_RATES_HZ.items():
+        try:
+            await getattr(tel, f"set_rate_{name}")(hz)
+        except Exception as exc:  # noqa: BLE001 - a rate request is a wish
+            log.debug("rate request %s refused: %s", name, exc)
+    return True
 
 
 class NavigateError(RuntimeError):
@@ -231,6 +263,7 @@ async def fly(nav, task: Task, connect: str, *, mqtt: str | None = None,
         drone = await m.first_autopilot(timeout_s=connect_timeout_s)
         if drone is None:
             raise NavigateError(f"no autopilot at {connect} within {connect_timeout_s:g} s")
+        await ask_ardupilot_rates(drone)
         state = _State()
         origin = np.array(task.origin, dtype=float)
         if mqtt:
