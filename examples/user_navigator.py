@@ -11,9 +11,10 @@ ft-sitl: MAVSDK for the flight controller and, if it wants them, aiomqtt for the
     FT_SITL_START_YAW_DEG  heading to hold at the start (deg, 0 = north)
     FT_SITL_MAX_SPEED    the benchmark's speed cap, m/s
 
-What it does: arm, take off to the start altitude, hold the start, then fly toward the goal
-at ``SPEED`` with position + velocity setpoints, a little higher than the start (a crude
-"climb over it" strategy), then hold the goal. Campaign entry:
+What it does (on PX4, or on ArduPilot after asking for its telemetry's rates): arm, take
+off to the start altitude, hold the start, then fly toward the goal at ``SPEED`` with
+position + velocity setpoints, a little higher than the start (a crude "climb over it"
+strategy), then hold the goal. Campaign entry:
 
     [[algorithms]]
     label = "user-climb"
@@ -25,7 +26,7 @@ import math
 import os
 
 from mavsdk import ComponentType
-from mavsdk.asyncio import Configuration, Mavsdk
+from mavsdk.asyncio import Autopilot, Configuration, Mavsdk
 from mavsdk.asyncio.plugins.action import ActionAsync
 from mavsdk.asyncio.plugins.offboard import OffboardAsync
 from mavsdk.asyncio.plugins.telemetry import TelemetryAsync
@@ -51,6 +52,11 @@ async def main() -> None:
     if drone is None:
         raise SystemExit(f"no autopilot at {url}")
     action, off, tel = ActionAsync(drone), OffboardAsync(drone), TelemetryAsync(drone)
+    if await drone.autopilot_type() == Autopilot.ARDUPILOT:
+        # ArduPilot streams nothing but HEARTBEAT until asked (PX4 streams unasked)
+        for rate in (tel.set_rate_health, tel.set_rate_home, tel.set_rate_position,
+                     tel.set_rate_position_velocity_ned, tel.set_rate_attitude_euler):
+            await rate(10.0)
     async for health in tel.subscribe_health():
         if health.is_armable:
             break
