@@ -99,7 +99,7 @@ def task_from_json(text: str) -> Task:
 
 #: the telemetry the client asks an ArduPilot vehicle for before it waits for the health,
 #: as a MAVSDK user on ArduPilot does (MAVSDK telemetry's ``set_rate_<name>``, Hz): the
-#: health and home (SYS_STATUS, HOME_POSITION) for MAVSDK's armable check, the position,
+#: health (SYS_STATUS, whose pre-arm bit is MAVSDK's armable flag) and home, the position,
 #: velocity and attitude the client reads (without a bus: ``_mavsdk_state`` raises the
 #: position and attitude to 50 Hz). The PX4 face streams these unasked (PX4's onboard
 #: link rates), so nothing is asked of it.
