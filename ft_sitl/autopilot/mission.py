@@ -5,7 +5,11 @@ reached) is the commander's, because the MAVLink layer reports it whatever the m
 :class:`MissionExecutor` is the logic that advances it while AUTO.MISSION flies, and the
 few facts about the item in progress (started, holding until, climbing first). Items are
 MAVLink's MAV_CMD ids with positions already converted to local ENU metres, so the same
-executor runs a mission uploaded over MAVLink and one a trial builds in-process.
+executor runs a mission uploaded over MAVLink and one a trial builds in-process. Two
+ArduCopter behaviours are there for the items that ask for them (only the ArduCopter face
+makes such items): a waypoint with ``spline`` flies a curve (:mod:`.spline`), and an item
+with a ``condition`` runs, with the DO items after it, beside the next navigation item
+(:mod:`.conditions`).
 """
 
 from __future__ import annotations
@@ -18,9 +22,11 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from ft_sitl.autopilot.auto import NavTarget
+from ft_sitl.autopilot.conditions import Condition, DoQueue
 from ft_sitl.autopilot.modes import MAIN_AUTO, SUB_LOITER, SUB_MISSION
 from ft_sitl.autopilot.orbit import ORBIT_DEFAULT_SPEED_M_S, circle_setpoint, circle_speed
 from ft_sitl.autopilot.setpoints import Setpoint
+from ft_sitl.autopilot.spline import SplineLegs
 from ft_sitl.autopilot.status import LandedState, Result, Severity, VehicleState
 
 if TYPE_CHECKING:  # the commander owns this object; only its type is needed here
@@ -70,6 +76,11 @@ class MissionItem:
     #: positive clockwise seen from above); ``speed_m_s`` the speed on the circle
     turns: float = 0.0
     radius_m: float = 0.0
+    #: a waypoint flown as a curve through it (ArduCopter's NAV_SPLINE_WAYPOINT, :mod:`.spline`)
+    spline: bool = False
+    #: an ArduCopter CONDITION_* item: it and the DO items after it run beside the next
+    #: navigation item (:mod:`.conditions`)
+    condition: Condition | None = None
 
 
 class MissionExecutor:
@@ -88,6 +99,10 @@ class MissionExecutor:
         self.roi: np.ndarray | None = None
         #: a NAV_LOITER_TURNS item on its circle: [bearing last step, angle swept] (rad)
         self.circling: list[float] | None = None
+        #: the curves of spline waypoints (only items with ``spline`` fly them)
+        self.spline = SplineLegs(cmdr)
+        #: the condition and DO items running beside the navigation item (ArduCopter's)
+        self.queue = DoQueue(self)
 
     def load(self, items: list[MissionItem]) -> None:
         """A new mission replaces the old one; an empty one in AUTO.MISSION holds."""
@@ -96,6 +111,8 @@ class MissionExecutor:
         self.takeoff = None
         self.jumps = {}
         self.roi = None
+        self.spline.reset()
+        self.queue.clear()
         c.mission_seq = 0
         c.mission_state = MissionState.NOT_STARTED if items else MissionState.NO_MISSION
         self.item_started = False
@@ -111,6 +128,8 @@ class MissionExecutor:
         c.mission_seq = seq
         self.item_started = False
         self.item_hold_until = None
+        self.spline.reset()
+        self.queue.clear()
         if c.mission_state == MissionState.COMPLETE:
             c.mission_state = MissionState.NOT_STARTED
         return Result.ACCEPTED
@@ -126,6 +145,8 @@ class MissionExecutor:
         c.mission_state = MissionState.ACTIVE
         self.item_started = False
         self.item_hold_until = None
+        self.spline.reset()
+        self.queue.clear()
 
     def setpoint(self, s: VehicleState) -> Setpoint:
         c = self.cmdr
@@ -141,8 +162,13 @@ class MissionExecutor:
             return Setpoint.position(auto.nav.target, yaw=auto.nav.yaw)
         c.mission_state = MissionState.ACTIVE
         item = c.mission[c.mission_seq]
+        if item.condition is not None:  # (it waits beside the next navigation item)
+            c.mission_seq = self.queue.take(c.mission_seq)
+            self.item_started = False
+            return self.setpoint(s)
         if not self.item_started:
             self._start_item(item, s)
+        self.queue.tick(s, auto.nav.target)
         if self.takeoff is not None:  # started on the ground: climb first (PX4)
             tko = self.takeoff
             if s.position[2] >= tko[2] - 0.2 and not s.on_ground:
@@ -156,7 +182,7 @@ class MissionExecutor:
         done = False
         sp: Setpoint
         if item.command == CMD_DO_CHANGE_SPEED:
-            c.change_speed(item.speed_m_s)
+            self.run_do(item)
             done = True
             sp = c.last_setpoint
         elif item.command == CMD_DO_JUMP and 0 <= item.jump_to < len(c.mission) and \
@@ -175,11 +201,14 @@ class MissionExecutor:
                                      velocity=[math.nan, math.nan, c.params["MPC_TKO_SPEED"]],
                                      yaw=nav.yaw)
         elif item.command == CMD_NAV_WAYPOINT:
-            radius = item.acceptance_radius_m if item.acceptance_radius_m > 0 \
-                else c.params["NAV_ACC_RAD"]
-            dist = float(np.linalg.norm(nav.target - s.position))
-            sp = auto.fly_to(s, nav.target, self._heading(s, nav.yaw))
-            if dist <= radius or self.item_hold_until is not None:
+            if item.spline:
+                sp, arrived = self.spline.step(s, self._heading(s, math.nan))
+            else:
+                radius = item.acceptance_radius_m if item.acceptance_radius_m > 0 \
+                    else c.params["NAV_ACC_RAD"]
+                arrived = float(np.linalg.norm(nav.target - s.position)) <= radius
+                sp = auto.fly_to(s, nav.target, self._heading(s, nav.yaw))
+            if arrived or self.item_hold_until is not None:
                 if self.item_hold_until is None:
                     self.item_hold_until = c.time_us + int(item.hold_s * 1e6)
                     c.reached.append(c.mission_seq)
@@ -192,8 +221,7 @@ class MissionExecutor:
         elif item.command == CMD_NAV_LOITER_TURNS:
             sp, done = self._loiter_turns(item, s)
         elif item.command in ROI_COMMANDS:
-            p = np.array(item.position, dtype=float)
-            self.roi = p if np.all(np.isfinite(p[:2])) else None
+            self.run_do(item)
             done = True
             last = c.last_setpoint
             sp = last if last.kind != 0 else Setpoint.position(s.position, yaw=s.yaw)
@@ -221,8 +249,21 @@ class MissionExecutor:
             self.item_started = False
         return sp
 
+    def run_do(self, item: MissionItem) -> None:
+        """A DO item's effect: DO_CHANGE_SPEED's speed, DO_SET_ROI's point (none: no
+        longer); the others have none here."""
+        if item.command == CMD_DO_CHANGE_SPEED:
+            self.cmdr.change_speed(item.speed_m_s)
+        elif item.command in ROI_COMMANDS:
+            p = np.array(item.position, dtype=float)
+            self.roi = p if np.all(np.isfinite(p[:2])) else None
+
     def _heading(self, s: VehicleState, yaw: float) -> float:
-        """The front toward the region of interest when one is set, else ``yaw``."""
+        """The heading a CONDITION_YAW holds, else the front toward the region of interest
+        when one is set, else ``yaw``."""
+        held = self.queue.heading()
+        if held is not None:
+            return held
         if self.roi is None:
             return yaw
         d = self.roi[:2] - s.position[:2]
@@ -267,6 +308,7 @@ class MissionExecutor:
             d = target[:2] - p[:2]
             if np.linalg.norm(d) > 1.0:
                 yaw = math.atan2(d[1], d[0])  # PX4 default: head toward the waypoint
+        self.spline.leg_started(item, c.mission_seq, target)
         if item.command == CMD_NAV_RETURN_TO_LAUNCH:
             c.auto.start_rtl()
             return

@@ -6,10 +6,13 @@ does not fly. Items 1..n are the commander's mission 0..n-1, so every sequence n
 the wire (MISSION_CURRENT, MISSION_ITEM_REACHED, MISSION_SET_CURRENT, MISSION_START's
 first item, DO_JUMP's target) is the commander's plus one. ArduCopter's commands map onto
 the executor's (:mod:`ft_sitl.autopilot.mission`): NAV_LOITER_TIME is a waypoint held
-param1 seconds, NAV_SPLINE_WAYPOINT a waypoint flown straight, NAV_LOITER_TURNS param1
+param1 seconds, NAV_SPLINE_WAYPOINT a waypoint flown as ArduCopter's curve through it
+(:mod:`ft_sitl.autopilot.spline`, held param1 seconds), NAV_LOITER_TURNS param1
 turns round the point at radius param3 (none: CIRCLE_RADIUS's 10 m; negative:
 anticlockwise) at CIRCLE_RATE's 20 deg/s, DO_SET_ROI(_LOCATION) the front toward its point
-(at latitude and longitude 0: no longer), DO_JUMP jumps param2 times (-1: for ever).
+(at latitude and longitude 0: no longer), DO_JUMP jumps param2 times (-1: for ever);
+CONDITION_DELAY / CONDITION_DISTANCE / CONDITION_YAW run with the DO items after them
+beside the next nav item (:mod:`ft_sitl.autopilot.conditions`).
 Fences and rally points are the PX4 face's lists; an uploaded fence is kept and flown as
 FENCE_ENABLE/FENCE_TYPE say (:mod:`.fence`), RTL picks among the rally points by RALLY_*
 (:mod:`.rally`).
@@ -24,6 +27,7 @@ from pymavlink.dialects.v20 import ardupilotmega as apm
 
 from ft_sitl.autopilot import commander as cm
 from ft_sitl.autopilot.commander import MissionItem, Result
+from ft_sitl.autopilot.conditions import Condition
 from ft_sitl.autopilot.mission import (
     CMD_DO_JUMP,
     CMD_NAV_LOITER_TURNS,
@@ -50,6 +54,9 @@ _RUNNING = (MissionState.ACTIVE, MissionState.PAUSED)
 #: a LOITER_TURNS item's radius when it gives none, and the speed round it: ArduCopter's
 #: CIRCLE_RADIUS (1000 cm) and CIRCLE_RATE (20 deg/s) defaults (AC_Circle.cpp)
 CIRCLE_RADIUS_M, CIRCLE_RATE_DEG_S = 10.0, 20.0
+#: the CONDITION_* items ArduCopter flies in AUTO (ModeAuto::start_command)
+_CONDITIONS = (apm.MAV_CMD_CONDITION_DELAY, apm.MAV_CMD_CONDITION_DISTANCE,
+               apm.MAV_CMD_CONDITION_YAW)
 
 
 class ArduCopterMissionItems(MissionItems):
@@ -59,14 +66,19 @@ class ArduCopterMissionItems(MissionItems):
         if it.command == apm.MAV_CMD_NAV_LOITER_TIME:
             hold = it.param1 if math.isfinite(it.param1) else 0.0
             return MissionItem(CMD_NAV_WAYPOINT, self.position(it), hold_s=max(0.0, hold))
-        if it.command == apm.MAV_CMD_NAV_SPLINE_WAYPOINT:  # (flown straight, see docs)
+        if it.command == apm.MAV_CMD_NAV_SPLINE_WAYPOINT:  # a curve (autopilot.spline)
             hold = it.param1 if math.isfinite(it.param1) else 0.0
-            return MissionItem(CMD_NAV_WAYPOINT, self.position(it), hold_s=max(0.0, hold))
+            return MissionItem(CMD_NAV_WAYPOINT, self.position(it), hold_s=max(0.0, hold),
+                               spline=True)
         if it.command == apm.MAV_CMD_NAV_LOITER_TURNS:  # (AP_Mission, ModeAuto::do_circle)
             r = it.param3 if math.isfinite(it.param3) and it.param3 != 0 else CIRCLE_RADIUS_M
             return MissionItem(CMD_NAV_LOITER_TURNS, self.position(it),
                                turns=max(0.0, _finite(it.param1)), radius_m=r,
                                speed_m_s=math.radians(CIRCLE_RATE_DEG_S) * abs(r))
+        if it.command in _CONDITIONS:  # (beside the next nav item, autopilot.conditions)
+            return MissionItem(it.command, condition=Condition(
+                it.command, _finite(it.param1), rate_deg_s=_finite(it.param2),
+                direction=int(_finite(it.param3)), relative=_finite(it.param4) > 0))
         if it.command == CMD_DO_JUMP:
             target = int(it.param1) if math.isfinite(it.param1) else 0
             repeat = int(it.param2) if math.isfinite(it.param2) else 0
