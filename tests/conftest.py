@@ -48,17 +48,25 @@ from .lanes import pytest_runtest_call, pytest_runtest_setup  # noqa: E402, F401
 # Parallel runs (pytest-xdist; pyproject's addopts run `-n 2`, `-n 0` runs in this process
 # alone). Each test file is run whole by one worker, so a file's module fixtures are built
 # once. The files that serve or fly on the SITL's fixed MAVLink ports (an `ft-sitl sitl`
-# process, a server on a given instance, clients listening on 14540 + N) go to one worker
-# together: two of them at once would take the same ports. Trials over MAVLink pick free
-# instance numbers under a machine-wide lock (ft_sitl.mavlink.instances) and the bridge
-# tests use instance numbers of their own file, so those need nothing more.
+# process on a given instance or its default 0, a server on a given instance: the
+# harness's running_sitl, clients listening on 14540 + N) go to one worker together: two
+# of them at once would take the same ports. That is every file under FIXED_PORTS but
+# those in ALLOCATED, which take their instance numbers only through the machine-wide
+# allocation (ft_sitl.mavlink.instances: the ArduCopter face's harness free_ardupilot_sitl
+# and ardupilot_sitl_process, `--instance auto`, wire trials' InstanceLock) or open no
+# port at all, so they run on either worker like any other file (a new file under
+# FIXED_PORTS joins the group until it is listed). tests/test_parallel.py fails if a file
+# outside the group shows a fixed-port use. The group is handed out first: it is the
+# longest unit (about a third of the suite's test time), and xdist's own order (most tests
+# first) could leave it to start late and end last.
 #
-# This overrides a private method of xdist's (LoadScopeScheduling._split_scope), which is
-# why pyproject pins pytest-xdist below 4; tests/test_parallel.py drives the scheduler
-# on a made-up collection and fails if the grouping stops happening. What xdist supports
-# does not do it (tried 2026-12-07 with pytest 9.2.0 and pytest-xdist 3.8.0, the newest
-# on PyPI): `--dist loadgroup` with `@pytest.mark.xdist_group(name=...)` (also added from
-# a collection hook) groups nothing: xdist marks a test's group by assigning
+# This overrides private methods of xdist's (LoadScopeScheduling._split_scope and
+# _assign_work_unit), which is why pyproject pins pytest-xdist below 4;
+# tests/test_parallel.py drives the scheduler on a made-up collection and fails if the
+# grouping or the group's first place stops happening. What xdist supports does not do
+# it (tried 2026-12-07 with pytest 9.2.0 and pytest-xdist 3.8.0, the newest on PyPI):
+# `--dist loadgroup` with `@pytest.mark.xdist_group(name=...)` (also added from a
+# collection hook) groups nothing: xdist marks a test's group by assigning
 # `item._nodeid`, which pytest 9.2 no longer reads (node ids are `Node._id`), so the
 # grouped tests of four files were spread over both workers like ungrouped ones
 # (pytest-xdist issue 1386; the fix, PR 1388, is unreleased); and it would run every
@@ -69,13 +77,25 @@ from .lanes import pytest_runtest_call, pytest_runtest_setup  # noqa: E402, F401
 # refuses one, so it would fail while the other worker's harness holds it.
 FIXED_PORTS_GROUP = "sitl-ports"
 FIXED_PORTS = ("tests/mavlink/", "tests/wire/", "tests/cli/test_cli.py",
-               "tests/missions/test_axes.py", "tests/scenarios/test_movers_spec.py")
+               "tests/scenarios/test_movers_spec.py")
+ALLOCATED = (
+    "tests/mavlink/test_ardupilot_dronekit.py", "tests/mavlink/test_ardupilot_face.py",
+    "tests/mavlink/test_ardupilot_fence_rally.py", "tests/mavlink/test_ardupilot_mavproxy.py",
+    "tests/mavlink/test_ardupilot_mavsdk.py", "tests/mavlink/test_ardupilot_modes.py",
+    "tests/mavlink/test_ardupilot_params.py", "tests/mavlink/test_ardupilot_parity.py",
+    "tests/mavlink/test_ardupilot_robustness.py", "tests/mavlink/test_ardupilot_streams.py",
+    "tests/mavlink/test_ardupilot_waypoints.py",
+    "tests/wire/test_ardupilot_wire.py", "tests/wire/test_lockstep_order.py",
+    "tests/wire/test_convert_task.py",
+)
 
 
 def group_of(nodeid: str) -> str:
     """The unit a worker runs whole: the test's file, or the fixed-ports group."""
     path = nodeid.split("::", 1)[0]
-    return FIXED_PORTS_GROUP if path.startswith(FIXED_PORTS) else path
+    if path.startswith(FIXED_PORTS) and path not in ALLOCATED:
+        return FIXED_PORTS_GROUP
+    return path
 
 
 def pytest_xdist_make_scheduler(config, log):
@@ -84,5 +104,10 @@ def pytest_xdist_make_scheduler(config, log):
     class ByGroup(LoadScopeScheduling):
         def _split_scope(self, nodeid: str) -> str:
             return group_of(nodeid)
+
+        def _assign_work_unit(self, node) -> None:
+            if FIXED_PORTS_GROUP in self.workqueue:  # (the longest: first)
+                self.workqueue.move_to_end(FIXED_PORTS_GROUP, last=False)
+            super()._assign_work_unit(node)
 
     return ByGroup(config, log)
