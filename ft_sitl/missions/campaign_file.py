@@ -19,6 +19,9 @@ A campaign file (TOML or YAML) names what to run; every key is optional except
     protocol = 1                     # the trial protocol's version (default: the newest)
     gains = "bandwidth"              # controller-gain mode: "bandwidth" (FT_GAIN_MODE 0,
                                      # default) or "px4" (1: PX4's normalised rate gains)
+    thrust_floor = "px4"             # each trial's MPC_THR_MIN: "px4" (the parameters',
+                                     # default) or "weight" (per platform, at most 0.36
+                                     # of its weight: missions.thrust_floor)
     # axes, each one table or a list of them crossed with the matrix ({}: the default):
     # wind, params, actuators, perception, estimator, failures, fence (docs/missions.md)
     aggressiveness = ["gentle", "paper", {name = "fast", max_speed_m_s = 6.0,
@@ -78,6 +81,7 @@ from ft_sitl.missions.spec import (
     px4_params,
     wind_settings,
 )
+from ft_sitl.missions.thrust_floor import PX4, THRUST_FLOOR, thrust_min_override
 from ft_sitl.navigation.base import LIMITS, Limits
 from ft_sitl.navigation.registry import NavigatorError, available, create
 from ft_sitl.physics.catalog import PlatformRegistry
@@ -85,12 +89,13 @@ from ft_sitl.physics.platform import CATEGORIES, PlatformError
 from ft_sitl.scenarios.families import CATEGORY, FAMILIES, REGISTRY, resolve_family
 from ft_sitl.scenarios.io import load_scenario
 from ft_sitl.scenarios.scenario import ScenarioError
+from ft_sitl.schema import SchemaError
 
 PRESETS = ("quick", "paper", "gains")
 TOP_KEYS = ("name", "trials", "seed", "scenario_seed", "platforms", "platform_files",
             "scenarios", "indices", "physics_hz", "protocol", "gains", "algorithms", "limits",
             "weights", "description", "wind", "params", "actuators", "perception",
-            "estimator", "failures", "movers", "fence", "aggressiveness")
+            "estimator", "failures", "movers", "fence", "aggressiveness", "thrust_floor")
 LIMIT_KEYS = tuple(LIMITS.names())
 WEIGHT_KEYS = ("scenarios", "platforms", "beta")
 
@@ -134,6 +139,8 @@ class Campaign:
     physics_hz: int = 1000
     protocol: int = PROTOCOL_VERSION
     gains: str = DEFAULT_GAINS
+    #: whose MPC_THR_MIN the trials fly (missions.thrust_floor): "px4" or "weight"
+    thrust_floor: str = PX4
     source: str = ""
     doc: dict = field(default_factory=dict)
     #: what "all" left out and why (e.g. a navigator without its model weights)
@@ -178,6 +185,7 @@ class Campaign:
             **({"protocol": self.protocol} if self.protocol != 1 else {}),
             # (left out at the default: directories written before the key existed resume)
             **({"gains": self.gains} if self.gains != DEFAULT_GAINS else {}),
+            **({"thrust_floor": self.thrust_floor} if self.thrust_floor != PX4 else {}),
             **({"wind": [w or {} for w in self.winds]} if self.winds != [None] else {}),
             **({"gains": self.modes()} if len(self.modes()) > 1 else {}),
             **({"params": [p or {} for p in self.param_sets]}
@@ -201,12 +209,20 @@ class Campaign:
         """The controller-gain modes the matrix flies (the axis, or the one mode)."""
         return list(self.gain_modes) or [self.gains]
 
+    def trial_params(self, platform, params: dict | None) -> dict | None:
+        """A trial's PX4 parameters: ``params`` (a set of the axis), with the MPC_THR_MIN
+        the campaign's ``thrust_floor`` gives ``platform`` when it differs from theirs."""
+        floor = thrust_min_override(self.thrust_floor, platform, params)
+        return params if floor is None else {**(params or {}), "MPC_THR_MIN": floor}
+
     def trial_specs(self) -> list[TrialSpec]:
         """Every trial of the matrix, grouped by scenario configuration."""
         out = []
         for sc in self.scenarios:
             for a in self.algorithms:
                 for p in self.platforms:
+                    # (the axis's parameter sets as this platform flies them)
+                    param_sets = [self.trial_params(p, ps) for ps in self.param_sets]
                     for t in range(self.trials):
                         index = sc.indices[t % len(sc.indices)]
                         # (the same seed in every wind: the axis compares like with like)
@@ -226,7 +242,7 @@ class Campaign:
                             actuators=ac, perception=pe, estimator=es,
                             failures=[fa] if fa else None, movers=mo, fence=fe)
                             for lv in self.levels
-                            for g in self.modes() for ps in self.param_sets
+                            for g in self.modes() for ps in param_sets
                             for ac in self.actuator_sets for pe in self.perceptions
                             for es in self.estimators for fa in self.failure_sets
                             for mo in self.mover_sets for fe in self.fences
@@ -276,6 +292,11 @@ def parse_campaign(doc: dict, path: Path | None = None) -> Campaign:
                               f"different ones, got {gains!r}")
     gain_modes = modes if isinstance(gains, list) else []
     gains = modes[0]
+    thrust_floor = t.get("thrust_floor", THRUST_FLOOR.default)
+    try:
+        THRUST_FLOOR.check(thrust_floor, where)
+    except SchemaError as exc:
+        raise CampaignError(f"{exc} (docs/missions.md, \"Thrust floor\")") from None
     limits_t = t.table("limits", {})
     limits_t.check_keys(LIMIT_KEYS)
     try:
@@ -287,6 +308,7 @@ def parse_campaign(doc: dict, path: Path | None = None) -> Campaign:
     weights = _weights(t, platforms, scenarios)
     winds = _winds(t)
     param_sets = _param_sets(t)
+    _check_floor_not_set_twice(t, thrust_floor, param_sets)
     actuator_sets = _table_axis(t, "actuators", "actuator settings", actuator_settings)
     _check_motors(t, actuator_sets, platforms)
     perceptions = _table_axis(t, "perception", "perception settings", perception_settings)
@@ -304,8 +326,8 @@ def parse_campaign(doc: dict, path: Path | None = None) -> Campaign:
         name=name, algorithms=parse_algorithms(where, doc["algorithms"], notes),
         platforms=platforms, scenarios=scenarios, trials=trials, seed=seed,
         scenario_seed=scenario_seed, limits=limits, weights=weights, physics_hz=physics_hz,
-        protocol=protocol, gains=gains, source=str(path) if path is not None else "", doc=doc,
-        notes=notes)
+        protocol=protocol, gains=gains, thrust_floor=thrust_floor,
+        source=str(path) if path is not None else "", doc=doc, notes=notes)
 
 
 def _table_axis(t: Table, key: str, what: str, check) -> list:
@@ -383,6 +405,18 @@ def _param_sets(t: Table) -> list:
     """The ``params`` axis: PX4 parameters (autopilot.params: name = value), each set flown
     by every trial of the matrix; absent: the defaults."""
     return _table_axis(t, "params", "PX4 parameters", px4_params)
+
+
+def _check_floor_not_set_twice(t: Table, thrust_floor: str, param_sets: list) -> None:
+    """A ``thrust_floor`` mode that sets MPC_THR_MIN and a ``params`` set that sets it too
+    is a conflict, refused rather than one silently winning."""
+    if thrust_floor == PX4:
+        return
+    for k, ps in enumerate(param_sets):
+        if "MPC_THR_MIN" in (ps or {}):
+            owner = "params" if len(param_sets) == 1 else f"params[{k}]"
+            raise t.fail(owner, f"MPC_THR_MIN is set by thrust_floor = {thrust_floor!r} "
+                                f"(per platform); drop one of the two")
 
 
 def _check_motors(t: Table, actuator_sets: list, platforms, axis: str = "actuators",
