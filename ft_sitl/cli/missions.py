@@ -36,6 +36,7 @@ from ft_sitl.missions.store import (
     StoreError,
     load_rows,
 )
+from ft_sitl.missions.thrust_floor import THRUST_FLOOR
 from ft_sitl.missions.trial import run_trial
 from ft_sitl.navigation.registry import NavigatorError
 from ft_sitl.physics.platform import PlatformError
@@ -97,6 +98,21 @@ def _warn_unflown(c, source: str, flown) -> None:
                   f"{n}]); set trials = {n} to fly each once, or list only those that fly")
 
 
+def _floors_text(c) -> str:
+    """The MPC_THR_MIN each platform's trials fly under the campaign's thrust floor (with
+    the defaults of the params axis), grouped by value."""
+    by: dict = {}
+    for p in c.platforms:
+        floor = (c.trial_params(p, None) or {}).get("MPC_THR_MIN")
+        by.setdefault(floor, []).append(p.name)
+    changed = "; ".join(f"{v:g} on {', '.join(names)}" for v, names in by.items()
+                        if v is not None)
+    if not changed:
+        return "every platform as its parameters say"
+    return f"MPC_THR_MIN {changed}" + ("; the others as their parameters say"
+                                       if None in by else "")
+
+
 def cmd_campaign_check(args) -> int:
     c = _campaign(args.campaign)
     specs = c.trial_specs()
@@ -111,6 +127,7 @@ def cmd_campaign_check(args) -> int:
                           for s, (flies, never) in zip(c.scenarios, flown, strict=True)],
             "trials_per_combination": c.trials, "limits": c.limits.as_dict(),
             "wind": [w or {} for w in c.winds], "gains": c.modes(),
+            "thrust_floor": c.thrust_floor,
             "params": [p or {} for p in c.param_sets],
             "actuators": [a or {} for a in c.actuator_sets],
             "perception": [p or {} for p in c.perceptions],
@@ -141,6 +158,8 @@ def cmd_campaign_check(args) -> int:
             ", ".join(f"{k} {v}" for k, v in w.items()) if w else "calm" for w in c.winds))
     if len(c.modes()) > 1:
         print(f"  gains:      {', '.join(c.modes())}")
+    if c.thrust_floor != THRUST_FLOOR.default:
+        print(f"  thrust floor: {c.thrust_floor} ({_floors_text(c)})")
     for label, values, none in (("params", c.param_sets, "defaults"),
                                 ("actuators", c.actuator_sets, "as built"),
                                 ("perception", c.perceptions, "ideal"),

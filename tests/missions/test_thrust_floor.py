@@ -12,6 +12,7 @@ import pandas as pd
 import pytest
 
 from ft_sitl.autopilot import cascade
+from ft_sitl.cli import main
 from ft_sitl.missions.campaign_file import CampaignError, load_campaign, parse_campaign
 from ft_sitl.missions.thrust_floor import (
     WEIGHT_FRACTION,
@@ -150,6 +151,24 @@ def test_bad_modes_and_a_floor_set_twice_are_one_line_errors(tmp_path, text, mes
 def test_px4_mode_leaves_an_explicit_floor_to_the_parameters(tmp_path):
     path = campaign_file(tmp_path, "c.toml", BASE + 'params = {MPC_THR_MIN = 0.08}\n')
     assert [s.params for s in load_campaign(path).trial_specs()] == [{"MPC_THR_MIN": 0.08}]
+
+
+def test_campaign_check_shows_each_platforms_floor(tmp_path, capsys):
+    path = campaign_file(tmp_path, "c.toml", """\
+        algorithms = ["straight"]
+        platforms = ["series-0.55kg-UAV1-twr6.0", "series-0.55kg-UAV1-twr4.0",
+                     "series-0.55kg-UAV1-twr2.0"]
+        scenarios = ["forest"]
+        indices = [1]
+        trials = 1
+        thrust_floor = "weight"
+        """)
+    assert main(["campaign", "check", str(path)]) == 0
+    out = capsys.readouterr().out
+    assert ("  thrust floor: weight (MPC_THR_MIN 0.06 on series-0.55kg-UAV1-twr6.0; 0.09 on "
+            "series-0.55kg-UAV1-twr4.0; the others as their parameters say)\n") in out
+    assert main(["campaign", "check", "--json", str(path)]) == 0
+    assert json.loads(capsys.readouterr().out)["thrust_floor"] == "weight"
 
 
 # --- a flight -------------------------------------------------------------------------------
