@@ -54,7 +54,10 @@ def test_run_names_a_missing_binary_in_one_line(tmp_path, capsys):
 
 @pytest.mark.e2e  # (tests/lanes.py: a SITL and a TCP client)
 def test_the_session_runs_through_against_the_face():
-    with free_ardupilot_sitl(speed_factor=2.0) as (_server, k):
+    """The whole session, every step, against the face at four times real time (the
+    suite's time): what is checked, its answers and the flight's outcome, does not depend
+    on the speed (the script measures rates and heights over the vehicle's own clock)."""
+    with free_ardupilot_sitl(speed_factor=4.0) as (_server, k):
         obs = parity.observe(f"tcp:127.0.0.1:{parity.tcp_ports(k)[0]}", "ft-sitl")
     assert (obs["heartbeat"]["type"], obs["heartbeat"]["autopilot"]) == (2, 3)
     assert set(obs["streams_default"]["hz"]) == {"HEARTBEAT"}
