@@ -80,7 +80,8 @@ def test_check_prints_the_matrix(capsys, campaign, yard):
                        "never_flies": []}],
         "trials_per_combination": 2,
         "limits": {"max_speed_m_s": 4.0, "timeout_s": 90.0, "goal_radius_m": 2.0,
-                   "hold_s": 3.0}, "wind": [{}], "gains": ["bandwidth"], "params": [{}],
+                   "hold_s": 3.0}, "wind": [{}], "gains": ["bandwidth"],
+        "thrust_floor": "px4", "params": [{}],
         "actuators": [{}], "perception": [{}], "estimator": [{}], "failures": [{}],
         "movers": [{}], "fence": [{}], "aggressiveness": [], "notes": []}
 
@@ -409,7 +410,7 @@ def test_navigators_list_shows_plugins_and_broken_entry_points(capsys, plugins):
      "{tmp}/bad.toml: unknown key(s) 'trails' (did you mean 'trials'?); allowed: name, trials, "
      "seed, scenario_seed, platforms, platform_files, scenarios, indices, physics_hz, protocol, "
      "gains, algorithms, limits, weights, description, wind, params, actuators, perception, "
-     "estimator, failures, movers, fence, aggressiveness"),
+     "estimator, failures, movers, fence, aggressiveness, thrust_floor"),
     (["campaign", "report", "{tmp}"],
      "{tmp}: not a campaign result directory (no campaign.json)"),
     (["campaign", "report", "{tmp}/empty"], "{tmp}/empty: no finished trials yet"),
