@@ -19,7 +19,7 @@ import time
 from contextlib import contextmanager
 from pathlib import Path
 
-from ft_sitl.mavlink.ports import instance_ports
+from ft_sitl.mavlink.ports import instance_ports, taken_ports
 
 #: the numbers auto allocation takes, lowest first (module docstring)
 AUTO_INSTANCES = tuple(range(20, 40)) + tuple(range(80, 100))
@@ -161,10 +161,20 @@ def free_instances(count: int = 1, usable=lambda i: True, base: int | None = Non
                        f"machine, sharing a port with one, or with a port taken)")
 
 
+def ports_free(i: int) -> bool:
+    """Whether instance i's three UDP ports can be bound now, on every address: the locks
+    keep ft-sitl processes apart, not other programs (a test's or a user's socket, a PX4
+    SITL, a client left behind by a killed run), so a number is taken only when its ports
+    are free too."""
+    return not taken_ports(i, "0.0.0.0", client=True)
+
+
 class InstanceLock:
     """An exclusive instance number (ports 14580+i, 14540+i, 18570+i) among the processes
     of this machine, held with lock files: the lowest free one of :data:`AUTO_INSTANCES`
-    (or of ``base .. base + slots - 1``)."""
+    (or of ``base .. base + slots - 1``) whose ports no other program holds
+    (:func:`ports_free`; 2026-12-07: a wire trial took a number whose API port a program
+    outside the locks held, and its server could not bind)."""
 
     def __init__(self, base: int | None = None, slots: int | None = None):
         self.numbers = AUTO_INSTANCES if base is None else tuple(range(base, base + slots))
@@ -174,10 +184,15 @@ class InstanceLock:
     def __enter__(self) -> int:
         for i in self.numbers:
             claim, _ = _try_claim(i)
-            if claim is not None:
+            if claim is None:
+                continue
+            if ports_free(i):
                 self._held, self.instance = claim, i
                 return i
-        raise RuntimeError(f"no free SITL instance in {_ranges(self.numbers)}")
+            _release(claim)
+        raise RuntimeError(f"no free SITL instance in {_ranges(self.numbers)} (each held by "
+                           f"another ft-sitl process of this machine, or with a port "
+                           f"another program holds)")
 
     def __exit__(self, *exc) -> None:
         if self._held is not None:

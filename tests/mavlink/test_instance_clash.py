@@ -50,6 +50,7 @@ def test_a_held_number_makes_the_numbers_sharing_its_ports_busy(partner):
                 pass
 
 
+@pytest.mark.e2e  # (InstanceLock tries each number's ports: a bind)
 def test_automatic_picks_skip_numbers_sharing_a_port_with_a_held_one():
     with instances_held(BASE + 40):  # shares 14580+BASE with BASE
         with free_instances(1, base=BASE, slots=3) as first:
@@ -65,8 +66,28 @@ def test_automatic_picks_skip_numbers_sharing_a_port_with_a_held_one():
         assert first == BASE
 
 
+@pytest.mark.e2e  # (InstanceLock tries each number's ports: a bind)
 def test_a_trials_number_comes_from_the_auto_numbers():
     with InstanceLock() as i, free_instances(1) as j:
         assert i in AUTO_INSTANCES and j in AUTO_INSTANCES and i != j
         assert not _ports(i) & _ports(j)
         assert not any(_ports(i) & _ports(k) for k in range(20))
+
+
+@pytest.mark.e2e
+@pytest.mark.parametrize("role", ["api_listen", "gcs_listen", "client"])
+def test_a_trials_number_skips_one_whose_port_another_program_holds(role):
+    # (2026-12-07: a lockstep trial took a number by its locks while a socket outside them
+    # held its API port, and its server failed with "Address already in use")
+    import socket
+
+    with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as foreign:
+        foreign.bind(("127.0.0.1", instance_ports(BASE)[role]))
+        with InstanceLock(base=BASE, slots=3) as i:
+            assert i == BASE + 1
+        with pytest.raises(RuntimeError, match=rf"no free SITL instance in {BASE}..{BASE} "
+                                               r"\(.*a port another program holds\)"):
+            with InstanceLock(base=BASE, slots=1):
+                pass
+    with InstanceLock(base=BASE, slots=3) as i:  # let go: free again
+        assert i == BASE
