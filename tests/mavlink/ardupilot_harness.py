@@ -3,7 +3,8 @@ their TCP ports free), so tests never collide with each other or with a SITL or 
 this machine: in this process (:func:`free_ardupilot_sitl`) or as ``ft-sitl sitl
 --autopilot ardupilot --instance auto`` in a process of its own
 (:func:`ardupilot_sitl_process`, for clients that run their own threads: DroneKit, MAVSDK);
-MAVProxy, unmodified, typed at on such an instance (:func:`mavproxy_session`).
+MAVProxy, unmodified, typed at on such an instance (:func:`mavproxy_session`); a
+pymavlink link to its SERIAL0 (:func:`serial0`).
 Waits with deadlines that fail naming what was awaited (pymavlink's own
 ``motors_disarmed_wait`` waits for ever)."""
 
@@ -43,6 +44,18 @@ def free_ardupilot_sitl(**kwargs):
     with free_instances(1, serial_ports_free) as k, \
             _running_sitl(1, server_class=ArduPilotServer, base_instance=k, **kwargs) as s:
         yield s, k
+
+
+@contextmanager
+def serial0(k: int, timeout_s: float = 30.0):
+    """A pymavlink link (as ground station 250) to instance ``k``'s SERIAL0, its first
+    HEARTBEAT received (``conn.messages["HEARTBEAT"]``), closed at the end."""
+    conn = mavutil.mavlink_connection(f"tcp:127.0.0.1:{tcp_ports(k)[0]}", source_system=250)
+    try:
+        conn.wait_heartbeat(timeout=timeout_s)
+        yield conn
+    finally:
+        conn.close()
 
 
 @contextmanager

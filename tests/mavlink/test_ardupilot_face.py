@@ -11,11 +11,10 @@ import pytest
 os.environ.setdefault("MAVLINK20", "1")
 from pymavlink import mavutil  # noqa: E402
 
-from ft_sitl.mavlink.ardupilot.server import tcp_ports  # noqa: E402
-
 from .ardupilot_harness import (  # noqa: E402
     command_ack,
     free_ardupilot_sitl,
+    serial0,
     wait_armed,
     wait_disarmed,
     wait_for,
@@ -30,10 +29,8 @@ _wait, _ack = wait_for, command_ack  # (ardupilot_harness)
 def test_pymavlink_arducopter_helpers_fly_guided_takeoff_goto_land():
     mavutil.set_dialect("ardupilotmega")
     with free_ardupilot_sitl(speed_factor=4.0) as (server, k):
-        conn = mavutil.mavlink_connection(f"tcp:127.0.0.1:{tcp_ports(k)[0]}",
-                                          source_system=250)
-        try:
-            hb = conn.wait_heartbeat(timeout=30)
+        with serial0(k) as conn:
+            hb = conn.messages["HEARTBEAT"]
             assert hb.autopilot == mavutil.mavlink.MAV_AUTOPILOT_ARDUPILOTMEGA
             assert hb.type == mavutil.mavlink.MAV_TYPE_QUADROTOR
             modes = conn.mode_mapping()
@@ -77,17 +74,12 @@ def test_pymavlink_arducopter_helpers_fly_guided_takeoff_goto_land():
             m = _wait(conn, lambda m: True, 10.0, type="GLOBAL_POSITION_INT")
             assert m.relative_alt < 300
             assert server.agents[0].mode_name == "LAND"
-        finally:
-            conn.close()
 
 
 def test_parameters_by_arducopter_names_honoured_and_refused():
     mavutil.set_dialect("ardupilotmega")
     with free_ardupilot_sitl() as (server, k):
-        conn = mavutil.mavlink_connection(f"tcp:127.0.0.1:{tcp_ports(k)[0]}",
-                                          source_system=250)
-        try:
-            conn.wait_heartbeat(timeout=30)
+        with serial0(k) as conn:
             conn.param_fetch_one("WPNAV_SPEED")
             m = _wait(conn, lambda m: m.param_id == "WPNAV_SPEED", 10.0, type="PARAM_VALUE")
             assert m.param_value == 1000.0
@@ -102,8 +94,6 @@ def test_parameters_by_arducopter_names_honoured_and_refused():
                   type="STATUSTEXT")
             _wait(conn, lambda m: m.text == "ANGLE_MAX: 9000 not in 1000..8000 cdeg", 10.0,
                   type="STATUSTEXT")  # (the reason in one STATUSTEXT)
-        finally:
-            conn.close()
 
 
 def _upload(conn, loader) -> int:
@@ -130,10 +120,7 @@ def test_auto_mission_with_home_at_zero_flies_to_the_land_and_disarms():
     mavutil.set_dialect("ardupilotmega")
     mav = mavutil.mavlink
     with free_ardupilot_sitl(speed_factor=4.0) as (server, k):
-        conn = mavutil.mavlink_connection(f"tcp:127.0.0.1:{tcp_ports(k)[0]}",
-                                          source_system=250)
-        try:
-            conn.wait_heartbeat(timeout=30)
+        with serial0(k) as conn:
             conn.mav.request_data_stream_send(conn.target_system, conn.target_component,
                                               mav.MAV_DATA_STREAM_ALL, 10, 1)
             home = _wait(conn, lambda m: True, 10.0, type="GLOBAL_POSITION_INT")
@@ -217,8 +204,6 @@ def test_auto_mission_with_home_at_zero_flies_to_the_land_and_disarms():
             conn.waypoint_request_send(0)  # home can still be read (DroneKit asks for it)
             m = _wait(conn, lambda m: m.seq == 0, 10.0, type=["MISSION_ITEM", "MISSION_ITEM_INT"])
             assert m.command == mav.MAV_CMD_NAV_WAYPOINT and m.frame == 0
-        finally:
-            conn.close()
 
 
 def test_auto_mission_return_to_launch_item_lands_at_home_and_disarms():
@@ -229,10 +214,7 @@ def test_auto_mission_return_to_launch_item_lands_at_home_and_disarms():
     mavutil.set_dialect("ardupilotmega")
     mav = mavutil.mavlink
     with free_ardupilot_sitl(speed_factor=4.0) as (server, k):
-        conn = mavutil.mavlink_connection(f"tcp:127.0.0.1:{tcp_ports(k)[0]}",
-                                          source_system=250)
-        try:
-            conn.wait_heartbeat(timeout=30)
+        with serial0(k) as conn:
             conn.mav.request_data_stream_send(conn.target_system, conn.target_component,
                                               mav.MAV_DATA_STREAM_ALL, 10, 1)
             home = _wait(conn, lambda m: True, 10.0, type="GLOBAL_POSITION_INT")
@@ -265,5 +247,3 @@ def test_auto_mission_return_to_launch_item_lands_at_home_and_disarms():
             assert abs(p[0] - c.home[0]) < 2.0 and abs(p[1] - c.home[1]) < 2.0
             assert p[2] - c.home[2] < 0.5
             assert 2 in c.reached  # (the commander's index of item 3, RTL)
-        finally:
-            conn.close()

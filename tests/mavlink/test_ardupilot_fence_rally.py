@@ -27,7 +27,6 @@ from ft_sitl.autopilot.params import ParamSet  # noqa: E402
 from ft_sitl.mavlink.ardupilot.agent import ArduCopterVehicle  # noqa: E402
 from ft_sitl.mavlink.ardupilot.params import ApParamSet  # noqa: E402
 from ft_sitl.mavlink.ardupilot.rally import RallyRule  # noqa: E402
-from ft_sitl.mavlink.ardupilot.server import tcp_ports  # noqa: E402
 from ft_sitl.physics.catalog import get_platform  # noqa: E402
 from ft_sitl.sim.fleet import Fleet  # noqa: E402
 
@@ -35,6 +34,7 @@ from .ardupilot_harness import (  # noqa: E402
     command_ack,
     free_ardupilot_sitl,
     mavproxy_session,
+    serial0,
     wait_armed,
     wait_disarmed,
     wait_for,
@@ -186,10 +186,7 @@ def test_rtl_returns_to_the_rally_point_or_home_as_rally_params_say():
         agent = server.agents[0]
         c, geo = agent.cmd, agent.geo
         home = c.home.copy()
-        conn = mavutil.mavlink_connection(f"tcp:127.0.0.1:{tcp_ports(k)[0]}",
-                                          source_system=250)
-        try:
-            conn.wait_heartbeat(timeout=30)
+        with serial0(k) as conn:
             rally = geo.to_global((home[0], home[1] + 50.0, home[2]))
             assert _upload_rally(conn, [(rally[0], rally[1], 15.0)]) == \
                 _m.MAV_MISSION_ACCEPTED
@@ -229,5 +226,3 @@ def test_rtl_returns_to_the_rally_point_or_home_as_rally_params_say():
             assert math.hypot(dest[0] - home[0], dest[1] - home[1]) < 0.1
             conn.set_mode("LAND")
             wait_disarmed(conn)
-        finally:
-            conn.close()

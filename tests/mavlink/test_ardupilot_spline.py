@@ -14,10 +14,9 @@ import pytest
 os.environ.setdefault("MAVLINK20", "1")
 from pymavlink import mavutil, mavwp  # noqa: E402
 
-from ft_sitl.mavlink.ardupilot.server import tcp_ports  # noqa: E402
-
 from .ardupilot_harness import (  # noqa: E402
     free_ardupilot_sitl,
+    serial0,
     wait_armed,
     wait_for,
 )
@@ -113,10 +112,7 @@ def test_spline_waypoints_fly_a_curve_through_each_waypoint_and_straight_ones_do
     mavutil.set_dialect("ardupilotmega")
     mav = mavutil.mavlink
     with free_ardupilot_sitl(speed_factor=4.0) as (server, k):
-        conn = mavutil.mavlink_connection(f"tcp:127.0.0.1:{tcp_ports(k)[0]}",
-                                          source_system=250)
-        try:
-            conn.wait_heartbeat(timeout=30)
+        with serial0(k) as conn:
             conn.mav.request_data_stream_send(conn.target_system, conn.target_component,
                                               mav.MAV_DATA_STREAM_ALL, 50, 1)
             home = wait_for(conn, lambda m: True, 10.0, type="GLOBAL_POSITION_INT")
@@ -139,5 +135,3 @@ def test_spline_waypoints_fly_a_curve_through_each_waypoint_and_straight_ones_do
             assert reached == [1, 2, 3, 4, 5], reached
             straight_off = _off_chords(straight)
             assert straight_off < 2.0 < 3.0 < curve_off, (straight_off, curve_off)
-        finally:
-            conn.close()
