@@ -114,6 +114,18 @@ class MavproxySession:
         except AssertionError as exc:
             raise AssertionError(f"{exc}; MAVProxy said:\n{self.output()[-1500:]}") from None
 
+    def take_off(self, agent, metres: float = 10.0) -> None:
+        """``mode guided``, ``arm throttle``, ``takeoff METRES`` typed as a user does, each
+        awaited on the vehicle (``agent``: the face's agent), up to half a metre short."""
+        c = agent.cmd
+        ground = c.home[2]
+        self.type("mode guided")
+        self.until(lambda: agent.mode_name == "GUIDED", 30, "GUIDED")
+        self.type("arm throttle")
+        self.until(lambda: c.armed, 30, "armed")
+        self.type(f"takeoff {metres:g}")
+        self.until(lambda: c.position_now()[2] - ground > metres - 0.5, 60, f"{metres:g} m up")
+
 
 @contextmanager
 def mavproxy_session(k: int, workdir: Path):

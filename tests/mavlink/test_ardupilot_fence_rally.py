@@ -142,12 +142,7 @@ def test_mavproxy_fence_load_list_enable_and_a_breach_returns(tmp_path):
             mp.until(lambda: c.fence is v.fence.uploaded, 30, "the fence in force")
             mp.until(lambda: "fence enabled" in mp.output(), 30, "fence enabled")
 
-            mp.type("mode guided")
-            mp.until(lambda: agent.mode_name == "GUIDED", 30, "GUIDED")
-            mp.type("arm throttle")
-            mp.until(lambda: c.armed, 30, "armed")
-            mp.type("takeoff 10")
-            mp.until(lambda: c.position_now()[2] - home[2] > 9.5, 60, "10 m up")
+            mp.take_off(agent, 10.0)
             assert not c.fence_events
             lat, lon = latlon(0, 45).split("\t")
             mp.type(f"guided {lat} {lon} 10")

@@ -34,12 +34,7 @@ def test_mavproxy_session_flies_guided_a_waypoints_file_in_auto_and_rtl(tmp_path
             f"1\t0\t3\t16\t0\t0\t0\t0\t{latlon(0, 20)}\t10\t1\n"
             f"2\t0\t3\t16\t0\t0\t0\t0\t{latlon(20, 20)}\t12\t1\n")
         with mavproxy_session(k, tmp_path) as mp:
-            mp.type("mode guided")
-            mp.until(lambda: agent.mode_name == "GUIDED", 30, "GUIDED")
-            mp.type("arm throttle")
-            mp.until(lambda: c.armed, 30, "armed")
-            mp.type("takeoff 10")
-            mp.until(lambda: c.position_now()[2] - home[2] > 9.5, 60, "10 m up")
+            mp.take_off(agent, 10.0)
             assert agent.mode_name == "GUIDED"
 
             mp.type("param set WPNAV_SPEED 800")
