@@ -13,6 +13,7 @@ from ft_sitl.mavlink.instances import InstanceBusy, InstanceLock, instances_held
 FIRST = 960  # (numbers no test server or trial uses)
 
 
+@pytest.mark.e2e  # (InstanceLock tries each number's ports: a bind)
 def test_a_trial_skips_held_numbers_and_a_second_holder_is_refused_by_name():
     with instances_held(FIRST, 2) as held:
         assert held == [FIRST, FIRST + 1]
