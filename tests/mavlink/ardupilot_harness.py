@@ -185,6 +185,20 @@ def command_ack(conn, command: int, timeout_s: float = 10.0):
                     type="COMMAND_ACK")
 
 
+def upload_mission(conn, loader) -> int:
+    """The mission protocol's upload as a ground station drives it: MISSION_COUNT, each
+    item the vehicle asks for from ``loader`` (pymavlink's MAVWPLoader), the vehicle's
+    MISSION_ACK (its result)."""
+    conn.waypoint_count_send(loader.count())
+    while True:
+        m = wait_for(conn, lambda m: True, 10.0,
+                     type=["MISSION_REQUEST", "MISSION_REQUEST_INT", "MISSION_ACK"])
+        if m.get_type() == "MISSION_ACK":
+            return m.type
+        w = loader.wp(m.seq)
+        w.target_system, w.target_component = conn.target_system, conn.target_component
+        conn.mav.send(w)
+
 def wait_disarmed(conn, timeout_s: float = 180.0):
     """pymavlink's motors_disarmed_wait with a deadline: the vehicle's HEARTBEAT without
     the armed flag."""

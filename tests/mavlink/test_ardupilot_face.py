@@ -15,6 +15,7 @@ from .ardupilot_harness import (  # noqa: E402
     command_ack,
     free_ardupilot_sitl,
     serial0,
+    upload_mission,
     wait_armed,
     wait_disarmed,
     wait_for,
@@ -96,20 +97,6 @@ def test_parameters_by_arducopter_names_honoured_and_refused():
                   type="STATUSTEXT")  # (the reason in one STATUSTEXT)
 
 
-def _upload(conn, loader) -> int:
-    """The mission protocol's upload as a ground station drives it: MISSION_COUNT, each
-    requested item from the loader, the vehicle's MISSION_ACK (its result)."""
-    conn.waypoint_count_send(loader.count())
-    while True:
-        m = _wait(conn, lambda m: True, 10.0,
-                  type=["MISSION_REQUEST", "MISSION_REQUEST_INT", "MISSION_ACK"])
-        if m.get_type() == "MISSION_ACK":
-            return m.type
-        w = loader.wp(m.seq)
-        w.target_system, w.target_component = conn.target_system, conn.target_component
-        conn.mav.send(w)
-
-
 def test_auto_mission_with_home_at_zero_flies_to_the_land_and_disarms():
     """A mission built with pymavlink's MAVWPLoader (item 0 a placeholder for home):
     TAKEOFF, DO_CHANGE_SPEED, a waypoint with a delay, LOITER_TIME, DO_JUMP back once,
@@ -146,7 +133,7 @@ def test_auto_mission_with_home_at_zero_flies_to_the_land_and_disarms():
                       item(5, mav.MAV_CMD_DO_JUMP, 3, 1),
                       item(6, mav.MAV_CMD_NAV_LAND, lat=lat0, lon=lon0 + 20 * east)):
                 loader.add(w)
-            assert _upload(conn, loader) == mav.MAV_MISSION_ACCEPTED
+            assert upload_mission(conn, loader) == mav.MAV_MISSION_ACCEPTED
             assert len(server.fleet.commanders[0].mission) == 6  # (home is not flown)
 
             # read back: item 0 is home as the vehicle holds it, the rest as uploaded
@@ -230,7 +217,7 @@ def test_auto_mission_return_to_launch_item_lands_at_home_and_disarms():
                 loader.add(mav.MAVLink_mission_item_message(
                     conn.target_system, conn.target_component, seq, rel, command, 0, 1,
                     0, 0, 0, 0, lat, lon, alt))
-            assert _upload(conn, loader) == mav.MAV_MISSION_ACCEPTED
+            assert upload_mission(conn, loader) == mav.MAV_MISSION_ACCEPTED
             conn.waypoint_set_current_send(1)
             mc = _wait(conn, lambda m: True, 10.0, type="MISSION_CURRENT")
             assert mc.seq == 1 and mc.total == 4

@@ -17,6 +17,7 @@ from pymavlink import mavutil, mavwp  # noqa: E402
 from .ardupilot_harness import (  # noqa: E402
     free_ardupilot_sitl,
     serial0,
+    upload_mission,
     wait_armed,
     wait_for,
 )
@@ -26,19 +27,6 @@ pytestmark = pytest.mark.e2e  # (tests/lanes.py)
 #: the corners, metres north and east of where the vehicle starts, at 5 m
 CORNERS = [(0.0, 20.0), (20.0, 20.0), (20.0, 0.0)]
 ALT_M = 5.0
-
-
-def _upload(conn, loader) -> int:
-    """MISSION_COUNT, each item the vehicle asks for, its MISSION_ACK's result."""
-    conn.waypoint_count_send(loader.count())
-    while True:
-        m = wait_for(conn, lambda m: True, 10.0,
-                     type=["MISSION_REQUEST", "MISSION_REQUEST_INT", "MISSION_ACK"])
-        if m.get_type() == "MISSION_ACK":
-            return m.type
-        w = loader.wp(m.seq)
-        w.target_system, w.target_component = conn.target_system, conn.target_component
-        conn.mav.send(w)
 
 
 def _fly(conn, command: int, home, start_ned) -> tuple[np.ndarray, list]:
@@ -64,7 +52,7 @@ def _fly(conn, command: int, home, start_ned) -> tuple[np.ndarray, list]:
         loader.add(item(2 + k, command, lat0 + (n + start_ned[0]) * per_m_north,
                         lon0 + (e + start_ned[1]) * per_m_east, ALT_M))
     loader.add(item(5, mav.MAV_CMD_NAV_LAND))
-    assert _upload(conn, loader) == mav.MAV_MISSION_ACCEPTED
+    assert upload_mission(conn, loader) == mav.MAV_MISSION_ACCEPTED
     conn.set_mode("GUIDED")
     wait_for(conn, lambda m: m.custom_mode == 4, 10.0, type="HEARTBEAT")
     conn.arducopter_arm()
