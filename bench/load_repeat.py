@@ -7,10 +7,12 @@ busy (issue 45's acceptance: the MAVLink trial tests and the MAVSDK example test
 
 Starts ``--burners`` CPU burners (default one per core: each a process spinning in a loop
 at this script's own priority, as another job of the machine would) before the first run
-and stops them after the last, then runs ``pytest -p no:cacheprovider -n 0 -q`` on the
+and stops them after the last (or, with ``--load-cmd``, runs that command as the load
+instead: a campaign is useful work that keeps the cores as busy), then runs ``pytest -p no:cacheprovider -n 0 -q`` on the
 selection ``--runs`` times in a row. Each run's line in the log: its number, start (UTC),
 duration, passed/failed/error/skipped counts from pytest's summary, the load averages at
-its start and end, pytest's exit status; a failed run's last lines of output follow it.
+its start and end, how many cores the load kept busy on average while the run went on (its
+process groups' CPU seconds over the run's duration, from /proc), pytest's exit status; a failed run's last lines of output follow it.
 The log ends with the summary line "N of K runs passed"; the exit status is 1 when any run
 failed. Nothing is timed or asserted on speed: the durations are for the record.
 
@@ -70,12 +72,45 @@ def start_burners(n: int) -> list[subprocess.Popen]:
             for _ in range(n)]
 
 
+def start_load_command(cmd: str) -> subprocess.Popen:
+    """``cmd`` (a shell command) as the load, in its own process group at this priority."""
+    return subprocess.Popen(["bash", "-c", cmd], stdin=subprocess.DEVNULL,
+                            stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL,
+                            start_new_session=True)
+
+
+def group_cpu_s(pgids: set[int]) -> float:
+    """CPU seconds (user + system, with reaped children's) of the live processes whose
+    process group is one of ``pgids``, from /proc; 0 where /proc is not readable."""
+    tick = os.sysconf("SC_CLK_TCK")
+    total = 0
+    for entry in os.scandir("/proc"):
+        if not entry.name.isdigit():
+            continue
+        try:
+            with open(f"/proc/{entry.name}/stat") as f:
+                fields = f.read().rsplit(")", 1)[1].split()
+        except OSError:
+            continue
+        # after the command's ")": state ppid pgrp ... utime(12) stime(13) cutime cstime
+        if int(fields[2]) in pgids:
+            total += sum(int(x) for x in fields[11:15])
+    return total / tick
+
+
 def stop_burners(burners: list[subprocess.Popen]) -> None:
     for p in burners:
         if p.poll() is None:
-            p.kill()
+            try:  # a load command's whole group; a burner is its own process
+                os.killpg(p.pid, signal.SIGTERM) if os.getpgid(p.pid) == p.pid else p.kill()
+            except ProcessLookupError:
+                pass
     for p in burners:
-        p.wait()
+        try:
+            p.wait(timeout=60)
+        except subprocess.TimeoutExpired:
+            os.killpg(p.pid, signal.SIGKILL)
+            p.wait()
 
 
 def load() -> str:
@@ -95,6 +130,8 @@ def one_run(k: int, runs: int, tests: list[str], extra: list[str],
             burners: list[subprocess.Popen], log, tree: Path, env: dict) -> bool:
     """Run pytest once; its line (and a failure's tail) in the log. True when it passed."""
     alive = sum(p.poll() is None for p in burners)
+    pgids = {os.getpgid(p.pid) for p in burners if p.poll() is None}
+    cpu0 = group_cpu_s(pgids)
     started, load0, t0 = utc_now(), load(), time.monotonic()
     # its own process group: stopping this script stops the run's processes too
     proc = subprocess.Popen([sys.executable, "-m", "pytest", "-p", "no:cacheprovider", "-n",
@@ -108,11 +145,14 @@ def one_run(k: int, runs: int, tests: list[str], extra: list[str],
         proc.wait()
         raise
     duration = time.monotonic() - t0
+    # how many cores the load kept busy on average while this run went on
+    busy = (group_cpu_s(pgids) - cpu0) / duration if duration > 0 else 0.0
     c = counts(out)
     ok = proc.returncode == 0 and c["failed"] == 0 and c["error"] == 0 and c["passed"] > 0
     line = (f"run {k:2d}/{runs}  start {started}  {duration:7.1f} s  passed {c['passed']:3d}"
             f"  failed {c['failed']}  error {c['error']}  skipped {c['skipped']}"
-            f"  load {load0} -> {load()}  burners {alive}/{len(burners)}"
+            f"  load {load0} -> {load()}  load procs {alive}/{len(burners)}"
+            f"  load-cores {busy:.2f}"
             f"  exit {proc.returncode}  {'PASS' if ok else 'FAIL'}")
     print(line, flush=True)
     log.write(line + "\n")
@@ -129,6 +169,11 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--burners", type=int, default=os.cpu_count() or 1,
                     help="CPU burners kept running for the whole run (default: one per "
                          "core, here %(default)s)")
+    ap.add_argument("--load-cmd", metavar="CMD",
+                    help="a shell command to keep the cores busy instead of the burners (e.g. "
+                         "a campaign: useful work as the load); started before the first "
+                         "run at this script's priority, its process group stopped after "
+                         "the last. Each run's line says how many cores it kept busy")
     ap.add_argument("--tests", nargs="+", default=list(DEFAULT_TESTS), metavar="PATH",
                     help="the test selection, as pytest takes it (default: "
                          + " ".join(DEFAULT_TESTS) + ")")
@@ -170,13 +215,16 @@ def main(argv: list[str] | None = None) -> int:
         source = f"a snapshot of commit {commit}"
     passed = done = 0
     with open(args.log, "a") as log:
+        what = (f"the load command {args.load_cmd!r}" if args.load_cmd
+                else f"{args.burners} CPU burners")
         head = (f"# load_repeat {utc_now()}: {args.runs} runs of pytest -p no:cacheprovider "
-                f"-n 0 -q {' '.join(args.pytest_arg + args.tests)}; {args.burners} CPU "
-                f"burners on {os.cpu_count()} cores (nice {os.nice(0)}); {source}; "
+                f"-n 0 -q {' '.join(args.pytest_arg + args.tests)}; {what} "
+                f"on {os.cpu_count()} cores (nice {os.nice(0)}); {source}; "
                 f"host {os.uname().nodename}")
         print(head, flush=True)
         log.write(head + "\n")
-        burners = start_burners(args.burners)
+        burners = ([start_load_command(args.load_cmd)] if args.load_cmd
+                   else start_burners(args.burners))
         t0 = time.monotonic()
         try:
             for k in range(1, args.runs + 1):
@@ -188,7 +236,7 @@ def main(argv: list[str] | None = None) -> int:
             stop_burners(burners)
             early = "" if done == args.runs else f"; stopped after {done} runs"
             summary = (f"{passed} of {args.runs} runs passed ({time.monotonic() - t0:.0f} s; "
-                       f"burners alive at the end: {alive}/{len(burners)}{early})")
+                       f"load processes alive at the end: {alive}/{len(burners)}{early})")
             print(summary, flush=True)
             log.write(summary + "\n")
             if tree != REPO:
