@@ -5,16 +5,17 @@ busy (issue 45's acceptance: the MAVLink trial tests and the MAVSDK example test
     FT_SITL_NAVRL_CHECKPOINT=/path/to/navrl_checkpoint.pt \\
         .venv/bin/python bench/load_repeat.py --runs 30 --log docs/results/load-repeat/run.log
 
-Starts ``--burners`` CPU burners (default one per core: each a process spinning in a loop
-at this script's own priority, as another job of the machine would) before the first run
-and stops them after the last (or, with ``--load-cmd``, runs that command as the load
-instead: a campaign is useful work that keeps the cores as busy), then runs ``pytest -p no:cacheprovider -n 0 -q`` on the
-selection ``--runs`` times in a row. Each run's line in the log: its number, start (UTC),
-duration, passed/failed/error/skipped counts from pytest's summary, the load averages at
-its start and end, how many cores the load kept busy on average while the run went on (its
-process groups' CPU seconds over the run's duration, from /proc), pytest's exit status; a failed run's last lines of output follow it.
-The log ends with the summary line "N of K runs passed"; the exit status is 1 when any run
-failed. Nothing is timed or asserted on speed: the durations are for the record.
+Starts ``--burners`` CPU burners (default one per core: each a process spinning in a loop at
+this script's own priority, as another job of the machine would) before the first run and
+stops them after the last (or, with ``--load-cmd``, runs that command as the load instead: a
+campaign is useful work that keeps the cores as busy), then runs ``pytest -p
+no:cacheprovider -n 0 -q`` on the selection ``--runs`` times in a row. Each run's line in
+the log: its number, start (UTC), duration, passed/failed/error/skipped counts from pytest's
+summary, the load averages at its start and end, how many cores the load kept busy on
+average while the run went on (its process groups' CPU seconds over the run's duration, from
+/proc), pytest's exit status; a failed run's last lines of output follow it. The log ends
+with the summary line "N of K runs passed"; the exit status is 1 when any run failed.
+Nothing is timed or asserted on speed: the durations are for the record.
 
 The runs use a snapshot of a commit (``--commit``, default HEAD; ``git archive`` into a
 temporary directory, put first on every process's PYTHONPATH, the tests run from there), so
