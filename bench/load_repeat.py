@@ -13,9 +13,10 @@ no:cacheprovider -n 0 -q`` on the selection ``--runs`` times in a row. Each run'
 the log: its number, start (UTC), duration, passed/failed/error/skipped counts from pytest's
 summary, the load averages at its start and end, how many cores the load kept busy on
 average while the run went on (its process groups' CPU seconds over the run's duration, from
-/proc), pytest's exit status; a failed run's last lines of output follow it. The log ends
-with the summary line "N of K runs passed"; the exit status is 1 when any run failed.
-Nothing is timed or asserted on speed: the durations are for the record.
+/proc), the share of the machine's CPU time left idle, pytest's exit status; a failed run's
+last lines of output follow it. The log ends with the summary line "N of K runs passed"; the
+exit status is 1 when any run failed. Nothing is timed or asserted on speed: the durations
+are for the record.
 
 The runs use a snapshot of a commit (``--commit``, default HEAD; ``git archive`` into a
 temporary directory, put first on every process's PYTHONPATH, the tests run from there), so
@@ -99,6 +100,13 @@ def group_cpu_s(pgids: set[int]) -> float:
     return total / tick
 
 
+def cpu_idle_s() -> float:
+    """The machine's idle CPU seconds so far, over all cores (/proc/stat's idle + iowait)."""
+    with open("/proc/stat") as f:
+        fields = f.readline().split()  # cpu user nice system idle iowait ...
+    return (int(fields[4]) + int(fields[5])) / os.sysconf("SC_CLK_TCK")
+
+
 def stop_burners(burners: list[subprocess.Popen]) -> None:
     for p in burners:
         if p.poll() is None:
@@ -132,7 +140,7 @@ def one_run(k: int, runs: int, tests: list[str], extra: list[str],
     """Run pytest once; its line (and a failure's tail) in the log. True when it passed."""
     alive = sum(p.poll() is None for p in burners)
     pgids = {os.getpgid(p.pid) for p in burners if p.poll() is None}
-    cpu0 = group_cpu_s(pgids)
+    cpu0, idle0 = group_cpu_s(pgids), cpu_idle_s()
     started, load0, t0 = utc_now(), load(), time.monotonic()
     # its own process group: stopping this script stops the run's processes too
     proc = subprocess.Popen([sys.executable, "-m", "pytest", "-p", "no:cacheprovider", "-n",
@@ -148,12 +156,14 @@ def one_run(k: int, runs: int, tests: list[str], extra: list[str],
     duration = time.monotonic() - t0
     # how many cores the load kept busy on average while this run went on
     busy = (group_cpu_s(pgids) - cpu0) / duration if duration > 0 else 0.0
+    # ... and the share of the machine's CPU time nobody used
+    idle = (cpu_idle_s() - idle0) / (duration * (os.cpu_count() or 1)) if duration > 0 else 0.0
     c = counts(out)
     ok = proc.returncode == 0 and c["failed"] == 0 and c["error"] == 0 and c["passed"] > 0
     line = (f"run {k:2d}/{runs}  start {started}  {duration:7.1f} s  passed {c['passed']:3d}"
             f"  failed {c['failed']}  error {c['error']}  skipped {c['skipped']}"
             f"  load {load0} -> {load()}  load procs {alive}/{len(burners)}"
-            f"  load-cores {busy:.2f}"
+            f"  load-cores {busy:.2f}  idle {100 * idle:.0f}%"
             f"  exit {proc.returncode}  {'PASS' if ok else 'FAIL'}")
     print(line, flush=True)
     log.write(line + "\n")
