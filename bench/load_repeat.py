@@ -174,6 +174,30 @@ def one_run(k: int, runs: int, tests: list[str], extra: list[str],
     return ok
 
 
+def runs_so_far(log_path: Path, key: str) -> int:
+    """How many runs of the count whose header ends in ``key`` the log holds, all passed and
+    numbered 1..K in order (``--resume``): the count is the last header with that key and
+    the resumptions after it. Raises ValueError naming what breaks it."""
+    lines = log_path.read_text().splitlines() if log_path.exists() else []
+    heads = [i for i, ln in enumerate(lines) if ln.startswith("# load_repeat ")]
+    start = next((i for i in reversed(heads) if "(resumed at run" not in lines[i]), None)
+    if start is None or lines[start].split(": ", 1)[1] != key:
+        raise ValueError(f"{log_path}'s last count is not this one (the same runs, tests, load "
+                         "and snapshot: pass --commit with the commit it names)")
+    k = 0
+    for ln in lines[start + 1:]:
+        if ln.startswith("# load_repeat ") and ln.split(": ", 1)[1] != key:
+            raise ValueError(f"{log_path}: another count began after this one's header")
+        m = re.match(r"run +(\d+)/\d+ .* (PASS|FAIL)$", ln)
+        if m:
+            if int(m.group(1)) != k + 1 or m.group(2) != "PASS":
+                raise ValueError(f"{log_path}: run {m.group(1)} of the count "
+                                 f"{'failed' if m.group(2) == 'FAIL' else 'is out of order'}"
+                                 ": the count cannot go on; start a new one")
+            k += 1
+    return k
+
+
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--runs", type=int, default=30, help="consecutive runs (default 30)")
@@ -194,6 +218,10 @@ def main(argv: list[str] | None = None) -> int:
                     help="the commit whose snapshot the runs use (default HEAD)")
     ap.add_argument("--live", action="store_true",
                     help="run the working tree as it is, not a snapshot of --commit")
+    ap.add_argument("--resume", action="store_true",
+                    help="go on with the log's last count (same runs, tests, load and "
+                         "--commit) from the run after its last one, when every run so far "
+                         "passed: an interrupted count is resumed, never restarted quietly")
     ap.add_argument("--log", type=Path, default=REPO / "docs" / "results" / "load-repeat"
                     / "load_repeat.log", help="the log file (appended to; default %(default)s)")
     args = ap.parse_args(argv)
@@ -224,21 +252,30 @@ def main(argv: list[str] | None = None) -> int:
         env["PYTHONPATH"] = os.pathsep.join([str(tree)] + (
             [env["PYTHONPATH"]] if env.get("PYTHONPATH") else []))
         source = f"a snapshot of commit {commit}"
-    passed = done = 0
+    what = (f"the load command {args.load_cmd!r}" if args.load_cmd
+            else f"{args.burners} CPU burners")
+    key = (f"{args.runs} runs of pytest -p no:cacheprovider -n 0 -q "
+           f"{' '.join(args.pytest_arg + args.tests)}; {what} on {os.cpu_count()} cores "
+           f"(nice {os.nice(0)}); {source}; host {os.uname().nodename}")
+    first = 1
+    if args.resume:
+        try:
+            first = runs_so_far(args.log, key) + 1
+        except ValueError as e:
+            if tree != REPO:
+                shutil.rmtree(tree, ignore_errors=True)
+            ap.error(f"--resume: {e}")
+    passed, done = first - 1, first - 1
     with open(args.log, "a") as log:
-        what = (f"the load command {args.load_cmd!r}" if args.load_cmd
-                else f"{args.burners} CPU burners")
-        head = (f"# load_repeat {utc_now()}: {args.runs} runs of pytest -p no:cacheprovider "
-                f"-n 0 -q {' '.join(args.pytest_arg + args.tests)}; {what} "
-                f"on {os.cpu_count()} cores (nice {os.nice(0)}); {source}; "
-                f"host {os.uname().nodename}")
+        resumed = f" (resumed at run {first})" if args.resume else ""
+        head = f"# load_repeat {utc_now()}{resumed}: {key}"
         print(head, flush=True)
         log.write(head + "\n")
         burners = ([start_load_command(args.load_cmd)] if args.load_cmd
                    else start_burners(args.burners))
         t0 = time.monotonic()
         try:
-            for k in range(1, args.runs + 1):
+            for k in range(first, args.runs + 1):
                 passed += one_run(k, args.runs, args.tests, args.pytest_arg, burners, log,
                                   tree, env)
                 done = k
@@ -246,7 +283,8 @@ def main(argv: list[str] | None = None) -> int:
             alive = sum(p.poll() is None for p in burners)
             stop_burners(burners)
             early = "" if done == args.runs else f"; stopped after {done} runs"
-            summary = (f"{passed} of {args.runs} runs passed ({time.monotonic() - t0:.0f} s; "
+            summary = (f"{passed} of {args.runs} runs passed ({time.monotonic() - t0:.0f} s"
+                       f"{' for this part' if args.resume else ''}; "
                        f"load processes alive at the end: {alive}/{len(burners)}{early})")
             print(summary, flush=True)
             log.write(summary + "\n")
