@@ -234,7 +234,8 @@ def cmd_campaign_run(args) -> int:
     previous = signal.signal(signal.SIGTERM, _interrupt)
     try:
         summary = run_campaign(c, out, executor=executor, progress=not args.quiet,
-                               limit=args.limit, transport=transport)
+                               limit=args.limit, transport=transport,
+                               reuse=args.reuse or ())
     except (StoreError, ExecutorError, CampaignError) as exc:
         raise CliError(str(exc)) from None
     except KeyboardInterrupt:

@@ -286,6 +286,11 @@ def _add_missions(sub) -> None:
     cr.add_argument("--csv", action="store_true", help="also write trials.csv")
     cr.add_argument("--no-report", action="store_true", help="do not write the report")
     cr.add_argument("--limit", type=int, metavar="N", help="stop after N new trials")
+    cr.add_argument("--reuse", action="append", metavar="DIR",
+                    help="take the rows of this campaign's trials that the result directory "
+                         "DIR already holds (the same trial id: the same spec) instead of "
+                         "flying them again, e.g. from a campaign that differs only in "
+                         "some trials; repeatable")
     cr.add_argument("--quiet", action="store_true", help="no progress bar")
     cr.add_argument("--transport", choices=("inprocess", "mavlink"), default="inprocess",
                     help="inprocess (default): navigators called in lockstep; mavlink: each "

@@ -23,7 +23,7 @@ import threading
 import time
 import traceback
 from collections import Counter, defaultdict
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from contextlib import contextmanager
 from dataclasses import dataclass
 from pathlib import Path
@@ -47,6 +47,7 @@ from ft_sitl.missions.progress import RemainingTime, reference_cost_s
 from ft_sitl.missions.protocol import failed_row
 from ft_sitl.missions.resources import RESOURCES
 from ft_sitl.missions.results import Outcome
+from ft_sitl.missions.reuse import check_sources, reuse_rows
 from ft_sitl.missions.spec import TrialSpec, platform_for
 from ft_sitl.missions.store import ResultStore
 from ft_sitl.missions.trial import run_trial
@@ -223,11 +224,14 @@ def _signals_deferred():
 
 def run_campaign(campaign: Campaign, out_dir: str | Path, *, workers: int = 1,
                  executor: Executor | None = None, progress: bool = True,
-                 limit: int | None = None, transport: Transport | None = None) -> RunSummary:
+                 limit: int | None = None, transport: Transport | None = None,
+                 reuse: Sequence[str | Path] = ()) -> RunSummary:
     """Run (or resume) a campaign into out_dir. ``executor``: where trials fly (default:
     in this process for ``workers=1``, else a :class:`LocalExecutor` of that many
     processes); ``limit``: stop after that many new trials (tests, smoke runs);
-    ``transport``: in-process (default) or over MAVLink."""
+    ``transport``: in-process (default) or over MAVLink; ``reuse``: result directories
+    whose rows of this campaign's trials are taken instead of flown
+    (:mod:`~ft_sitl.missions.reuse`)."""
 
     try:
         budget = wall_budget_from_env()  # a bad value is one clear error, not one per trial
@@ -244,9 +248,19 @@ def run_campaign(campaign: Campaign, out_dir: str | Path, *, workers: int = 1,
                             "transport=ft_sitl.transport.transport(...)")
     meta = {"spec": campaign.spec_dict(), "total_trials": len(specs),
             "code_version": __version__}
+    check_sources(reuse, out_dir)
     store = ResultStore(out_dir)
     for note in store.open(meta, trial_ids=[s.trial_id for s in specs]):
         print(f"warning: {note}", file=sys.stderr)
+    try:
+        reused = reuse_rows(store, reuse, [s.trial_id for s in specs],
+                            append=_append_deferred(store))
+    except BaseException:
+        store.close()
+        raise
+    for src, n in reused.items():
+        print(f"note: {n} trial{'s' if n != 1 else ''} taken from {src} (--reuse)",
+              file=sys.stderr)
     todo = [s for s in specs if s.trial_id not in store.done]
     skipped = len(specs) - len(todo)
     if limit is not None:
@@ -313,6 +327,7 @@ def run_campaign(campaign: Campaign, out_dir: str | Path, *, workers: int = 1,
             "finished_utc": time.strftime("%Y-%m-%dT%H:%M:%SZ", time.gmtime()),
             "wall_time_s": round(wall, 3), "trials_run": ran, "trials_skipped": skipped,
             "errors": len(errors), "workers": described.get("workers", workers),
+            **({"trials_reused": reused} if reused else {}),
             "interrupted": not completed,
             **{k: v for k, v in described.items() if k != "workers"},
             "throughput": throughput(per_worker),
@@ -325,6 +340,14 @@ def run_campaign(campaign: Campaign, out_dir: str | Path, *, workers: int = 1,
     if store.done:
         store.write_tables()
     return RunSummary(len(specs), skipped, ran, errors, wall)
+
+
+def _append_deferred(store: ResultStore) -> Callable[[dict], None]:
+    """``store.append`` with a SIGINT/SIGTERM arriving mid-write acted on after it."""
+    def append(row: dict) -> None:
+        with _signals_deferred():
+            store.append(row)
+    return append
 
 
 def _left(seconds: float) -> str:
