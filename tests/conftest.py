@@ -45,8 +45,9 @@ def navrl_checkpoint() -> Path:
 # opens a network socket or starts a process.
 from .lanes import pytest_runtest_call, pytest_runtest_setup  # noqa: E402, F401, I001
 
-# Parallel runs (pytest-xdist; pyproject's addopts run `-n 2`, `-n 0` runs in this process
-# alone). Each test file is run whole by one worker, so a file's module fixtures are built
+# Parallel runs (pytest-xdist; pyproject's addopts run `-n 3`, `-n 0` runs in this process
+# alone: three workers on two cores, since the fixed-ports group below waits on the wall
+# clock most of the time and the other two workers fill the cores meanwhile). Each test file is run whole by one worker, so a file's module fixtures are built
 # once. The files that serve or fly on the SITL's fixed MAVLink ports (an `ft-sitl sitl`
 # process on a given instance or its default 0, a server on a given instance: the
 # harness's running_sitl, clients listening on 14540 + N) go to one worker together: two
