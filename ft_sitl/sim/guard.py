@@ -53,17 +53,15 @@ from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from enum import StrEnum
 
-import fcl
 import numpy as np
 from numba import njit
 
-from ft_sitl import G
 from ft_sitl.physics import dynamics as d
 from ft_sitl.physics.body import VehicleBody
 from ft_sitl.rotations import matrix_from_quat
-from ft_sitl.scenarios import movers as mv
 from ft_sitl.scenarios.collision import BodyProbe, CollisionMonitor, CollisionWorld, Contact
 from ft_sitl.scenarios.distance_grid import GM_H, GRID_META_N, DistanceGrid, grid_lower_bound
+from ft_sitl.sim.guard_movers import MoverChecks
 
 # --- the guard row (one per vehicle) and the meta row ----------------------------------------
 # G_ON: check obstacles (0/1); G_R: collision radius (m); G_ANCHOR: lower bound of the
@@ -182,10 +180,6 @@ def guard_step(g, grid, meta, px, py, pz, qx, qy, qz, x):
 SEPARATION_M = 1e-3
 #: Coulomb friction coefficient of a contact with an obstacle
 FRICTION = 0.5
-#: the longest the simulation runs between two checks against moving obstacles (s)
-MOVER_HORIZON_S = 0.1
-#: a vehicle's acceleration is bounded by this times (1 + TWR_max) g in the mover checks
-MOVER_ACCEL_MARGIN = 1.5
 #: a contact normal this close to vertical supports a crashed vehicle (it rests on it)
 SUPPORT_NZ = 0.7
 
@@ -262,8 +256,8 @@ class CollisionGuard:
         self.queries = 0  # exact (fcl) steps resolved
         self.trips = 0
         self._margin = CollisionMonitor(world).margin_m
-        #: the moving obstacles (scenarios.movers.Movers; None: none), see set_movers
-        self.movers = None
+        #: the checks against moving obstacles (None: none), see set_movers
+        self._mover_checks: MoverChecks | None = None
 
     @classmethod
     def for_scenario(cls, scenario, radii: Sequence[float], **kw) -> CollisionGuard:
@@ -504,7 +498,7 @@ class CollisionGuard:
         g[G_QW:G_QZ + 1] = x[d.X_QUAT:d.X_QUAT + 4]
         self._anchor(g, a, -math.inf)
 
-    # --- moving obstacles -------------------------------------------------------------
+    # --- moving obstacles (sim.guard_movers) -----------------------------------------
     def set_movers(self, movers) -> None:
         """Check every vehicle against these moving obstacles too (a
         :class:`~ft_sitl.scenarios.movers.Movers`; None or an empty one: none).
@@ -514,104 +508,35 @@ class CollisionGuard:
         :meth:`mover_horizon` (within which no vehicle can reach a mover) and calls
         :meth:`check_movers` after each, so a vehicle near a mover is checked after every
         physics step and one far from all of them costs one query per chunk."""
-        if movers is None or not movers.count:
-            self.movers = None
-            return
-        self.movers = movers
-        self._mover_objs = []
-        for k, dims in zip(movers.kind, movers.dims):
-            if k == mv.CYLINDER:
-                shape = fcl.Cylinder(dims[0], 2.0 * dims[1])
-            elif k == mv.BOX:
-                shape = fcl.Box(*(2.0 * dims))
-            else:
-                shape = fcl.Sphere(dims[0])
-            self._mover_objs.append(fcl.CollisionObject(shape, fcl.Transform()))
-        self._mposes = np.empty((movers.count, 4))
-        self._mgap = np.empty(movers.count)
-        self._dreq = fcl.DistanceRequest()
-        self.mover_queries = 0
+        self._mover_checks = MoverChecks(movers) if movers is not None and movers.count \
+            else None
 
-    def _vehicle_accel_bound(self, sim, i: int) -> float:
-        """An upper bound (m/s^2) of vehicle i's acceleration: full thrust plus gravity,
-        with a margin for drag and contact responses."""
-        p = sim.platforms[i]
-        return MOVER_ACCEL_MARGIN * (G + p.thrust_max_n / p.mass_kg)
+    @property
+    def movers(self):
+        """The moving obstacles checked (scenarios.movers.Movers; None: none)."""
+        return self._mover_checks.movers if self._mover_checks is not None else None
+
+    @property
+    def mover_queries(self) -> int:
+        """The fcl body-mover distance queries made since :meth:`set_movers`."""
+        return self._mover_checks.queries if self._mover_checks is not None else 0
 
     def mover_horizon(self, sim, time_us: int) -> int:
-        """How many physics steps from ``time_us`` no vehicle can touch a mover in: the gap
-        between each bounding sphere and each mover shape against the closing distance
-        (|v| + mover speed) T + a T^2 / 2, at most :data:`MOVER_HORIZON_S`; at least 1."""
-        m = self.movers
-        m.poses(time_us, self._mposes)
-        horizon = MOVER_HORIZON_S
-        speed = float(m.speed.max())
-        for i in range(sim.n):
-            if self.crashed[i]:
-                continue
-            x = sim.x[i]
-            mv.mover_distances(m.kind, m.dims, self._mposes, x[d.X_POS:d.X_POS + 3],
-                               self._mgap)
-            gap = float(self._mgap.min()) - self.radii[i]
-            if gap <= 0.0:
-                return 1
-            v = float(np.linalg.norm(x[d.X_VEL:d.X_VEL + 3])) + speed
-            a = self._vehicle_accel_bound(sim, i)
-            t = (-v + math.sqrt(v * v + 2.0 * a * gap)) / a  # (v T + a T^2 / 2 = gap)
-            horizon = min(horizon, t)
-        return max(1, int(horizon / sim.dt))
+        """How many physics steps from ``time_us`` no vehicle can touch a mover in
+        (:meth:`MoverChecks.horizon <ft_sitl.sim.guard_movers.MoverChecks.horizon>`)."""
+        return self._mover_checks.horizon(sim, time_us, self.radii, self.crashed)
 
     def check_movers(self, sim, time_us: int) -> None:
-        """Check every vehicle against the movers at ``time_us``: where its bounding sphere
-        touches a mover's shape, its body (fcl) or its sphere settles it; a contact crashes
-        the vehicle (a :attr:`GuardEventKind.MOVER_COLLISION` event naming the mover) and
-        takes away its velocity towards the mover. A crashed vehicle is not checked again
-        (movers are kinematic: one passing a wreck goes through it)."""
-        m = self.movers
-        m.poses(time_us, self._mposes)
-        tol = self.world.contact_tol
-        for i in range(sim.n):
-            if self.crashed[i]:
-                continue
-            x = sim.x[i]
-            p = x[d.X_POS:d.X_POS + 3].copy()
-            mv.mover_distances(m.kind, m.dims, self._mposes, p, self._mgap)
-            for j in np.flatnonzero(self._mgap - self.radii[i] <= tol):
-                probe = self.probes[i]
-                if probe is not None and self._body_mover_distance(i, p, int(j)) > tol:
-                    continue
-                self.crashed[i] = True
-                c = self._mposes[j, :3]
-                n = p - c
-                if m.kind[j] != mv.SPHERE:
-                    n[2] = 0.0
-                nn = float(np.linalg.norm(n))
-                n = n / nn if nn > 0.0 else np.array([1.0, 0.0, 0.0])
-                v_rel = x[d.X_VEL:d.X_VEL + 3] - m.velocities(time_us)[j]
-                speed = float(np.linalg.norm(v_rel))
-                vn = float(v_rel @ n)
-                if vn < 0.0:
-                    x[d.X_VEL:d.X_VEL + 3] -= vn * n
-                self._emit(GuardEvent(time_us, i, GuardEventKind.MOVER_COLLISION,
-                                      m.names[j], p, speed))
-                break
+        """Check every vehicle against the movers at ``time_us`` (:meth:`MoverChecks.check
+        <ft_sitl.sim.guard_movers.MoverChecks.check>`): a contact crashes the vehicle (a
+        :attr:`GuardEventKind.MOVER_COLLISION` event naming the mover). A crashed vehicle
+        is not checked again (movers are kinematic: one passing a wreck goes through it)."""
+        def hit(i: int, what: str, p: np.ndarray, speed: float) -> None:
+            self.crashed[i] = True
+            self._emit(GuardEvent(time_us, i, GuardEventKind.MOVER_COLLISION, what, p, speed))
 
-    def _body_mover_distance(self, i: int, p: np.ndarray, j: int) -> float:
-        """Distance (m) between vehicle i's body at p and mover j (fcl; <= 0 in contact)."""
-        pose = self._mposes[j]
-        obj = self._mover_objs[j]
-        ch, sh = math.cos(pose[3]), math.sin(pose[3])
-        obj.setTransform(fcl.Transform(np.array([[ch, -sh, 0.0], [sh, ch, 0.0],
-                                                 [0.0, 0.0, 1.0]]), pose[:3].copy()))
-        rot = self._rot(i)
-        best = math.inf
-        for part, offset in zip(self.probes[i].objects, self.probes[i].offsets):
-            part.setTransform(fcl.Transform(rot, p + rot @ offset))
-            self.mover_queries += 1
-            best = min(best, fcl.distance(part, obj, self._dreq))
-            if best <= self.world.contact_tol:
-                break
-        return best
+        self._mover_checks.check(sim, time_us, self.radii, self.probes, self.crashed,
+                                 self.world.contact_tol, hit)
 
     def clearance_bound(self, i: int) -> float:
         """A lower bound (m) of vehicle i's obstacle clearance now, from the guard's
