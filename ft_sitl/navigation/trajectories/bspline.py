@@ -49,11 +49,12 @@ knots).
 :meth:`BSpline.fit` is EGO's ``parameterizeToBspline``: a least-squares fit to points
 sampled at the knots plus start/end velocity and acceleration. :func:`fit_samples` produces
 those samples from a trajectory the way EGO's planner manager does (see its docstring).
+Both are in :mod:`~ft_sitl.navigation.trajectories.bspline_fit`; the knots of
+Fast-Planner's re-timings are computed in :mod:`~ft_sitl.navigation.trajectories.bspline_retime`.
 """
 
 from __future__ import annotations
 
-import math
 from dataclasses import dataclass
 from enum import Enum
 from functools import lru_cache
@@ -64,16 +65,16 @@ from numba import njit
 from scipy.interpolate import BSpline as ScipyBSpline
 
 from ft_sitl.navigation.trajectories.base import Trajectory
+from ft_sitl.navigation.trajectories.bspline_fit import fit_control_points, fit_samples
+from ft_sitl.navigation.trajectories.bspline_retime import (
+    CUBIC,
+    START_INTERVALS,
+    lengthened_knots,
+    reallocated_knots,
+)
 
 __all__ = ["START_INTERVALS", "BSpline", "Evaluation", "Feasibility", "basis_matrix",
            "fit_samples"]
-
-#: the degree Fast-Planner's re-timings (:meth:`BSpline.reallocate_time`,
-#: :meth:`BSpline.lengthen_time`) are written for
-CUBIC = 3
-#: knot intervals 0 .. 4 of a cubic B-spline shape its state (position, velocity,
-#: acceleration) at the start of its domain, u[3]
-START_INTERVALS = 5
 
 
 class Evaluation(Enum):
@@ -461,56 +462,15 @@ class BSpline(Trajectory):
                         keep_start: bool = True) -> tuple[BSpline, bool]:
         """One pass of Fast-Planner's ``reallocateTime`` (cubic only): returns the re-timed
         spline (``DE_BOOR``, non-uniform knots) and whether this pass found everything
-        feasible (nothing changed).
-
-        Every velocity control point ``p (Q[i+1] - Q[i]) / (u[i+4] - u[i+1])`` beyond
-        ``vmax`` on an axis lengthens the three knot intervals it spans, together by
-        ``min(max|V| / vmax + 1e-4, limit_ratio)``; every acceleration control point beyond
-        ``amax`` its two intervals by ``min(sqrt(max|A| / amax) + 1e-4, limit_ratio)`` (the
-        original's special case for ``i = 1, 2`` included: it lengthens the first four
-        intervals); later knots shift. One interval belongs to up to three control points,
-        so one pass can lengthen it by more than ``limit_ratio``. ``vel_norm`` bounds the
-        velocity control points' norm instead of each axis; ``keep_start`` leaves the knot
-        intervals that shape the start state (the first ``START_INTERVALS``) as they are, so
-        the re-timed curve starts in the same position, velocity and acceleration (the
-        original stretches them too). The control points' arithmetic is this method's own
-        whatever the spline's evaluation."""
+        feasible (nothing changed). The knot intervals under each velocity or acceleration
+        control point beyond ``vmax`` / ``amax`` are lengthened, by at most ``limit_ratio``
+        each (:func:`~ft_sitl.navigation.trajectories.bspline_retime.reallocated_knots`);
+        ``keep_start`` keeps the start state. The control points' arithmetic is that
+        function's own whatever the spline's evaluation."""
         self._require_cubic("reallocate_time")
-        c = self._q
-        h = np.diff(self._u)  # knot intervals; interval k is [u[k], u[k+1]]
-        n = c.shape[0]
-        p = CUBIC
-        frozen = START_INTERVALS if keep_start else 0
-
-        def grow(k: int, dt: float) -> None:
-            if k >= frozen:
-                h[k] += dt
-
-        feasible = True
-        for i in range(n - 1):  # velocity control point i spans intervals i+1 .. i+3
-            span = h[i + 1] + h[i + 2] + h[i + 3]
-            v = p * (c[i + 1] - c[i]) / span
-            vm = float(np.linalg.norm(v)) if vel_norm else float(np.max(np.abs(v)))
-            if vm > vmax + 1e-4:
-                feasible = False
-                ratio = min(vm / vmax + 1e-4, limit_ratio)
-                for k in range(i + 1, i + p + 1):
-                    grow(k, (ratio - 1.0) * span / p)
-        for i in range(n - 2):  # acceleration control point i spans intervals i+2, i+3
-            v0 = (c[i + 1] - c[i]) / (h[i + 1] + h[i + 2] + h[i + 3])
-            v1 = (c[i + 2] - c[i + 1]) / (h[i + 2] + h[i + 3] + h[i + 4])
-            span = h[i + 2] + h[i + 3]
-            a = p * (p - 1) * (v1 - v0) / span
-            am = float(np.max(np.abs(a)))
-            if am > amax + 1e-4:
-                feasible = False
-                ratio = min(math.sqrt(am / amax) + 1e-4, limit_ratio)
-                inc = (ratio - 1.0) * span / (p - 1)
-                # the original's special case for i = 1, 2: the first four intervals
-                for k in (range(1, 5) if i in (1, 2) else range(i + 2, i + p)):
-                    grow(k, inc)
-        u = np.concatenate([[self._u[0]], self._u[0] + np.cumsum(h)])
-        return BSpline(c, degree=CUBIC, knots=u, evaluation=Evaluation.DE_BOOR), feasible
+        u, feasible = reallocated_knots(self._q, self._u, vmax, amax, limit_ratio, vel_norm,
+                                        keep_start)
+        return BSpline(self._q, degree=CUBIC, knots=u, evaluation=Evaluation.DE_BOOR), feasible
 
     def retimed(self, vmax: float, amax: float, limit_ratio: float = 1.1, passes: int = 3,
                 vel_norm: bool = False, keep_start: bool = True) -> tuple[BSpline, int]:
@@ -537,16 +497,8 @@ class BSpline(Trajectory):
         self._require_cubic("lengthen_time")
         if not (np.isfinite(ratio) and ratio > 0):
             raise ValueError(f"ratio must be a positive number, got {ratio!r}")
-        knots = np.array(self._u)
-        num1, num2 = 5, knots.shape[0] - 1 - 5
-        if num2 > num1:
-            delta = (float(ratio) - 1.0) * (knots[num2] - knots[num1])
-            inc = delta / (num2 - num1)
-            knots[num1 + 1:num2 + 1] += np.arange(1, num2 - num1 + 1) * inc
-            knots[num2 + 1:] += delta
-        else:  # too few knots to keep the ends: stretch uniformly
-            knots = knots * float(ratio)
-        return BSpline(self._q, degree=CUBIC, knots=knots, evaluation=Evaluation.DE_BOOR)
+        return BSpline(self._q, degree=CUBIC, knots=lengthened_knots(self._u, ratio),
+                       evaluation=Evaluation.DE_BOOR)
 
     # ---- fitting -----------------------------------------------------------------------
     @classmethod
@@ -569,59 +521,5 @@ class BSpline(Trajectory):
         degree = int(degree)
         if degree < 2:
             raise ValueError("fit needs degree >= 2 (acceleration constraints)")
-        m = basis_matrix(degree)
-        n_pts, dim = pts.shape
-        n_seg = n_pts - 1
-        n_cp = n_seg + degree
-        a = np.zeros((n_pts + 4, n_cp))
-        b = np.zeros((n_pts + 4, dim))
-        # positions at the start of every segment (s = 0) ...
-        for k in range(n_seg):
-            a[k, k:k + degree + 1] = m[0]
-        # ... and at the end of the last one (s = 1)
-        last = n_seg - 1
-        ones = np.ones(degree + 1)
-        a[n_seg, last:last + degree + 1] = ones @ m
-        b[:n_pts] = pts
-        ds = np.arange(degree + 1, dtype=float)  # d/ds s^i at s=1 is i; d2 is i (i-1)
-        rows = (
-            (m[1] / dt, 0, v0),
-            ((ds @ m) / dt, last, v1),
-            (2.0 * m[2] / dt ** 2, 0, a0),
-            (((ds * (ds - 1)) @ m) / dt ** 2, last, a1),
-        )
-        for r, (w, k, rhs) in enumerate(rows):
-            a[n_pts + r, k:k + degree + 1] = w
-            b[n_pts + r] = np.asarray(rhs, dtype=float).reshape(dim)
-        q, *_ = np.linalg.lstsq(a, b, rcond=None)
-        return cls(q, dt, degree)
-def fit_samples(position_fn, duration: float, max_vel: float, ctrl_pt_dist: float = 0.4,
-                min_points: int = 7) -> tuple[np.ndarray, float]:
-    """Sample a trajectory for :meth:`BSpline.fit` the way EGO's planner does.
-
-    EGO takes the knot span ``dt = ctrl_pt_dist / max_vel * 1.2`` (0.4 m control-point
-    spacing at 1/1.2 of the speed cap) and samples the initial polynomial every ``dt``;
-    while two samples are more than ``1.5 ctrl_pt_dist`` apart, or there are fewer than
-    ``min_points`` (7) samples, it divides ``dt`` by 1.5 and samples again.
-
-    Difference from the original: EGO samples ``t = 0, dt, ... < duration`` and so drops the
-    end of the polynomial (the local target) unless it falls on a sample; here the number
-    of spans is rounded up so that the last sample is the end point exactly
-    (``dt = duration / ceil(duration / dt)``, never longer than the nominal span).
-    ``position_fn(t_array) -> (M, 3)``. Returns ``(points (K, 3), dt)``.
-    """
-    if not (duration > 0 and max_vel > 0 and ctrl_pt_dist > 0):
-        raise ValueError("duration, max_vel and ctrl_pt_dist must be positive")
-    if min_points < 2:
-        raise ValueError(f"min_points must be >= 2, got {min_points}")
-    dt_nominal = ctrl_pt_dist / max_vel * 1.2
-    for _ in range(64):
-        n_seg = max(min_points - 1, int(np.ceil(duration / dt_nominal - 1e-9)), 1)
-        t = np.linspace(0.0, duration, n_seg + 1)
-        pts = np.asarray(position_fn(t), dtype=float)
-        gaps = np.linalg.norm(np.diff(pts, axis=0), axis=1)
-        if gaps.size == 0 or float(gaps.max()) <= 1.5 * ctrl_pt_dist:
-            return pts, duration / n_seg
-        dt_nominal /= 1.5
-    raise ValueError("fit_samples: the trajectory moves too fast to sample "
-                     f"(> {1.5 * ctrl_pt_dist} m per {dt_nominal:.3g} s)")
+        return cls(fit_control_points(pts, dt, v0, v1, a0, a1, basis_matrix(degree)), dt,
+                   degree)
