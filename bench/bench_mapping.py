@@ -132,7 +132,7 @@ def bench_esdf(sc, frames, cam_cfg, repeats: int) -> dict:
         m.update_esdf()
         for box in (None, 4.0):
             t = timed(lambda m=m, box=box: m.update_esdf(half_extent_m=box), repeats)
-            shape = m._esdf.shape
+            shape = m.update_esdf(half_extent_m=box).shape  # the field just timed (cached)
             out[f"{label}, {'whole window' if box is None else f'+-{box:g} m box'}"] = {
                 **t, "shape": list(shape), "voxels": int(np.prod(shape)),
                 "ns_per_voxel": t["median_s"] / np.prod(shape) * 1e9}

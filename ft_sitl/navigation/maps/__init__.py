@@ -1,2 +1,3 @@
 """The planners' view of the world: the local occupancy map fused from the depth camera
-(:mod:`.mapping`) and the snapshot of its ESDF a plan reads (:mod:`.esdf`)."""
+(:mod:`.mapping`), its signed ESDF (:mod:`.map_esdf`) and the snapshot of that ESDF a plan
+reads (:mod:`.esdf`)."""

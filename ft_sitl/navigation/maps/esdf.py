@@ -20,7 +20,7 @@ import numpy as np
 from numba import njit
 from scipy.ndimage import distance_transform_edt
 
-from ft_sitl.navigation.maps.mapping import esdf_eval, trilinear_point
+from ft_sitl.navigation.maps.map_esdf import esdf_eval, trilinear_point
 
 __all__ = ["ESDF_HALF_HEIGHT_M", "EsdfGrid", "as_path", "blocked", "coarse_distance", "inside",
            "path_free", "trilinear", "voxel_value"]

@@ -110,7 +110,9 @@ remedy. NavRL's map (its deployment's ``map_manager``) removes the boxes of the 
 obstacles its detector tracks: :meth:`LocalMap.fuse` leaves out the end points in given
 boxes (``exclude_boxes``) and :meth:`LocalMap.set_free` makes the voxels of boxes free.
 
-All kernels are numba ``@njit(cache=True)`` and live in this module.
+All kernels are numba ``@njit(cache=True)``; the ESDF's (the distance transform, the
+trilinear read) and the field's cache live in :mod:`~ft_sitl.navigation.maps.map_esdf`, the
+others in this module.
 """
 
 from __future__ import annotations
@@ -124,6 +126,7 @@ import numpy as np
 from numba import njit
 
 from ft_sitl.navigation.base import Task
+from ft_sitl.navigation.maps.map_esdf import MapEsdf, box_xy, esdf_eval
 from ft_sitl.scenarios.camera import CameraConfig, DepthFrame
 
 __all__ = ["FuseStats", "LocalMap", "MapConfig", "logit"]
@@ -614,124 +617,6 @@ def _recount_box(logodds3, l_occ, radius, out3, x0, x1, y0, y1):
 
 
 @njit(cache=True)
-def _envelope_1d(f, n, out, v, hv, zb, inv2):
-    """Felzenszwalb-Huttenlocher 1-D squared distance transform of f[:n] into out[:n]
-    (inf in f: no site). inv2[d] = 1 / (2 d): a product by the exact reciprocal instead of
-    a division; intersections of distinct parabolas differ by >= 1 / (4 n^2), far more than
-    the rounding, so the envelope (and the integer output) is the same."""
-    k = -1
-    s = 0.0
-    for q in range(n):
-        fq = f[q]
-        if fq == np.inf:
-            continue
-        hq = fq + q * q
-        if k < 0:
-            k = 0
-            v[0] = q
-            hv[0] = hq
-            zb[0] = -np.inf
-            zb[1] = np.inf
-            continue
-        while True:
-            s = (hq - hv[k]) * inv2[q - v[k]]
-            if s <= zb[k]:
-                k -= 1
-            else:
-                break
-        k += 1
-        v[k] = q
-        hv[k] = hq
-        zb[k] = s
-        zb[k + 1] = np.inf
-    if k < 0:
-        for q in range(n):
-            out[q] = np.inf
-        return
-    k = 0
-    for q in range(n):
-        while zb[k + 1] < q:
-            k += 1
-        p = v[k]
-        out[q] = (q - p) * (q - p) + (hv[k] - p * p)
-
-
-@njit(cache=True)
-def _edt_sq(sites3, want, out3):
-    """Squared EDT (voxel units) to the nearest voxel where sites3 == want (inf if none)."""
-    nx, ny, nz = sites3.shape
-    nmax = max(nx, max(ny, nz))
-    g = np.empty(nmax)
-    v = np.empty(nmax, np.int64)
-    hv = np.empty(nmax)
-    zb = np.empty(nmax + 1)
-    inv2 = np.empty(nmax)
-    inv2[0] = np.inf
-    for d in range(1, nmax):
-        inv2[d] = 1.0 / (2.0 * d)
-    # pass 1 along z (contiguous): 1-D distance to the nearest site, two scans
-    for x in range(nx):
-        for y in range(ny):
-            dist = np.inf
-            for z in range(nz):
-                if sites3[x, y, z] == want:
-                    dist = 0.0
-                else:
-                    dist += 1.0
-                out3[x, y, z] = dist
-            dist = np.inf
-            for z in range(nz - 1, -1, -1):
-                if sites3[x, y, z] == want:
-                    dist = 0.0
-                else:
-                    dist += 1.0
-                m = min(dist, np.float64(out3[x, y, z]))
-                out3[x, y, z] = m * m
-    # passes 2 (along y) and 3 (along x), one (.., z) block at a time, transposed into buf
-    # (out3's dtype: float32 holds these integer squared distances exactly) so each line is
-    # contiguous; each line is worked in float64
-    buf = np.empty((nz, nmax), out3.dtype)
-    line = np.empty(nmax)
-    for x in range(nx):
-        for y in range(ny):
-            for z in range(nz):
-                buf[z, y] = out3[x, y, z]
-        for z in range(nz):
-            _line_edt(buf[z], line, ny, g, v, hv, zb, inv2)
-        for y in range(ny):
-            for z in range(nz):
-                out3[x, y, z] = buf[z, y]
-    for y in range(ny):
-        for x in range(nx):
-            for z in range(nz):
-                buf[z, x] = out3[x, y, z]
-        for z in range(nz):
-            _line_edt(buf[z], line, nx, g, v, hv, zb, inv2)
-        for x in range(nx):
-            for z in range(nz):
-                out3[x, y, z] = buf[z, x]
-
-
-@njit(cache=True)
-def _line_edt(row, line, n, g, v, hv, zb, inv2):
-    """In-place 1-D pass over row[:n] (through the float64 line), skipped when the row is
-    constant (all zeros, all inf, or any one value: then every minimum is the point's own)."""
-    first = row[0]
-    same = True
-    for i in range(1, n):
-        if row[i] != first:
-            same = False
-            break
-    if same:
-        return
-    for i in range(n):
-        line[i] = row[i]
-    _envelope_1d(line, n, g, v, hv, zb, inv2)
-    for i in range(n):
-        row[i] = g[i]
-
-
-@njit(cache=True)
 def _planning_grid(infl3, k0, k_floor, k_ceil, out3):
     """1 where planning-occupied: inflated occupancy or the floor/ceiling layers."""
     nx, ny, nz = infl3.shape
@@ -740,24 +625,6 @@ def _planning_grid(infl3, k0, k_floor, k_ceil, out3):
             for z in range(nz):
                 k = k0 + z
                 out3[x, y, z] = 1 if (infl3[x, y, z] > 0 or k < k_floor or k >= k_ceil) else 0
-
-
-@njit(cache=True)
-def _signed_esdf(plan3, res, pos3, neg3, out3):
-    """Fast-Planner's signed field into out3 (float64): free -> distance to the nearest
-    occupied voxel centre; occupied -> res - distance to the nearest free voxel centre.
-    pos3 / neg3: work arrays (float32: the squared voxel distances are exact in it)."""
-    _edt_sq(plan3, 1, pos3)
-    _edt_sq(plan3, 0, neg3)
-    nx, ny, nz = plan3.shape
-    for x in range(nx):
-        for y in range(ny):
-            for z in range(nz):
-                p = res * math.sqrt(np.float64(pos3[x, y, z]))
-                nd = np.float64(neg3[x, y, z])
-                if nd > 0.0:
-                    p += res - res * math.sqrt(nd)
-                out3[x, y, z] = p
 
 
 @njit(cache=True)
@@ -871,75 +738,6 @@ def _query_log_odds(points, inv_res, origin, logodds3, l_unknown, out):
     return bad
 
 
-@njit(cache=True)
-def _trilinear_axis(g, n):
-    """Lower voxel index, fraction and whether g (in voxel-centre units) was clamped onto
-    the field's 0 .. n-1 range."""
-    clamped = False
-    if g < 0.0:
-        g = 0.0
-        clamped = True
-    elif g > n - 1.0:
-        g = n - 1.0
-        clamped = True
-    j = int(math.floor(g))
-    if j > n - 2:
-        j = n - 2
-    return j, g - j, clamped
-
-
-@njit(cache=True)
-def trilinear_point(esdf3, origin, inv_res, px, py, pz, grad):
-    """Trilinear distance at (px, py, pz) between the voxel centres of ``esdf3`` (global
-    index of its first voxel: ``origin``) and its analytic gradient, written into
-    ``grad``; a point outside is clamped onto the field and the gradient along a clamped
-    axis is 0. Shared by :meth:`LocalMap.esdf` and the planners' kernels."""
-    nx, ny, nz = esdf3.shape
-    x, dx, cx = _trilinear_axis(px * inv_res - origin[0] - 0.5, nx)
-    y, dy, cy = _trilinear_axis(py * inv_res - origin[1] - 0.5, ny)
-    z, dz, cz = _trilinear_axis(pz * inv_res - origin[2] - 0.5, nz)
-    v000 = esdf3[x, y, z]
-    v100 = esdf3[x + 1, y, z]
-    v010 = esdf3[x, y + 1, z]
-    v110 = esdf3[x + 1, y + 1, z]
-    v001 = esdf3[x, y, z + 1]
-    v101 = esdf3[x + 1, y, z + 1]
-    v011 = esdf3[x, y + 1, z + 1]
-    v111 = esdf3[x + 1, y + 1, z + 1]
-    v00 = (1.0 - dx) * v000 + dx * v100
-    v01 = (1.0 - dx) * v001 + dx * v101
-    v10 = (1.0 - dx) * v010 + dx * v110
-    v11 = (1.0 - dx) * v011 + dx * v111
-    v0 = (1.0 - dy) * v00 + dy * v10
-    v1 = (1.0 - dy) * v01 + dy * v11
-    gz = (v1 - v0) * inv_res
-    gy = ((1.0 - dz) * (v10 - v00) + dz * (v11 - v01)) * inv_res
-    gx = ((1.0 - dz) * (1.0 - dy) * (v100 - v000) + (1.0 - dz) * dy * (v110 - v010)
-          + dz * (1.0 - dy) * (v101 - v001) + dz * dy * (v111 - v011)) * inv_res
-    grad[0] = 0.0 if cx else gx
-    grad[1] = 0.0 if cy else gy
-    grad[2] = 0.0 if cz else gz
-    return (1.0 - dz) * v0 + dz * v1
-
-
-@njit(cache=True)
-def esdf_eval(esdf3, origin, inv_res, points, dist, grad):
-    """Trilinear ESDF value and its analytic gradient; returns the number of non-finite
-    points (NaN results)."""
-    bad = 0
-    for i in range(points.shape[0]):
-        px, py, pz = points[i, 0], points[i, 1], points[i, 2]
-        if not (np.isfinite(px) and np.isfinite(py) and np.isfinite(pz)):
-            bad += 1
-            dist[i] = np.nan
-            grad[i, 0] = np.nan
-            grad[i, 1] = np.nan
-            grad[i, 2] = np.nan
-            continue
-        dist[i] = trilinear_point(esdf3, origin, inv_res, px, py, pz, grad[i])
-    return bad
-
-
 # --- the map ----------------------------------------------------------------------------------
 def _as_points(points) -> tuple[np.ndarray, tuple]:
     p = np.asarray(points, dtype=np.float64)
@@ -951,6 +749,64 @@ def _as_points(points) -> tuple[np.ndarray, tuple]:
 def _shaped(out: np.ndarray, shape: tuple):
     out = out.reshape(shape)
     return out[()] if shape == () else out
+
+
+def _frame_arrays(frame: DepthFrame,
+                  camera: CameraConfig) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """A depth frame's depth image, camera position and rotation, checked against the
+    map's ``camera``."""
+    if not isinstance(frame, DepthFrame):
+        raise TypeError(f"frame must be a DepthFrame, got {type(frame).__name__}")
+    depth = np.asarray(frame.depth)
+    cam = camera
+    if depth.shape != (cam.height, cam.width):
+        raise ValueError(f"frame.depth has shape {depth.shape}, the map's camera is "
+                         f"{cam.height} x {cam.width} (pass camera= to LocalMap)")
+    p = np.asarray(frame.p_world_camera, dtype=np.float64).reshape(-1)
+    r = np.ascontiguousarray(frame.r_world_optical, dtype=np.float64)
+    if p.shape != (3,) or not np.all(np.isfinite(p)):
+        raise ValueError(f"frame.p_world_camera must be 3 finite numbers, got {p}")
+    if r.shape != (3, 3) or not np.all(np.isfinite(r)):
+        raise ValueError("frame.r_world_optical must be a finite 3x3 rotation")
+    return depth, p, r
+
+
+def _as_boxes(boxes) -> tuple[np.ndarray, np.ndarray]:
+    """Boxes given as a pair (lower corners, upper corners) of (K, 3) arrays, checked."""
+    try:
+        lo, hi = (np.ascontiguousarray(np.asarray(b, dtype=np.float64).reshape(-1, 3))
+                  for b in boxes)
+    except (TypeError, ValueError):
+        raise ValueError("boxes must be a pair (lower corners, upper corners) of (K, 3) "
+                         "arrays") from None
+    if lo.shape != hi.shape or not (np.all(np.isfinite(lo)) and np.all(np.isfinite(hi))):
+        raise ValueError("boxes: lower and upper corners must be finite and as many")
+    return lo, hi
+
+
+def _shift_window(logodds, infl, new_l, new_i, dx: int, dy: int, radius: int,
+                  l_unknown: float, l_occ: float) -> None:
+    """Fill ``new_l`` / ``new_i`` with the log-odds and dilation counts of a window moved
+    by (dx, dy) voxels: what stays inside keeps its world position, the rest is unknown,
+    and the dilation counts along the cut edges and the new strips (``radius`` voxels wide)
+    are recounted."""
+    nx, ny, _ = logodds.shape
+    r = radius
+    new_l.fill(l_unknown)
+    new_i.fill(0)
+    if abs(dx) < nx and abs(dy) < ny:
+        xs, xe = max(0, -dx), nx - max(0, dx)
+        ys, ye = max(0, -dy), ny - max(0, dy)
+        new_l[xs:xe, ys:ye] = logodds[xs + dx:xe + dx, ys + dy:ye + dy]
+        new_i[xs:xe, ys:ye] = infl[xs + dx:xe + dx, ys + dy:ye + dy]
+        # dilation counts that lost neighbours (the cut edge) or have none yet (the new
+        # strip next to the kept content) are recounted
+        if dx != 0:
+            for lo, hi in ((0, xs + r), (xe - r, nx)):
+                _recount_box(new_l, l_occ, r, new_i, lo, hi, 0, ny)
+        if dy != 0:
+            for lo, hi in ((0, ys + r), (ye - r, ny)):
+                _recount_box(new_l, l_occ, r, new_i, 0, nx, lo, hi)
 
 
 class LocalMap:
@@ -1024,10 +880,7 @@ class LocalMap:
         self._frames = 0
         self.last_t_us: int | None = None
         self.last_camera_m: np.ndarray | None = None
-        self._esdf: np.ndarray | None = None
-        self._esdf_key: tuple | None = None
-        self._esdf_origin: np.ndarray | None = None
-        self._esdf_frame = -1
+        self._esdf = MapEsdf()
 
     # -- properties ----------------------------------------------------------------------------
     @property
@@ -1065,11 +918,6 @@ class LocalMap:
     @property
     def window_center_m(self) -> np.ndarray:
         return (self._origin + np.array(self.shape) / 2.0) * self.resolution_m
-
-    @property
-    def esdf_frame(self) -> int:
-        """``frames_fused`` when the ESDF was last computed (-1: never)."""
-        return self._esdf_frame
 
     # -- index helpers -------------------------------------------------------------------------
     def voxel_index(self, points) -> np.ndarray:
@@ -1110,25 +958,9 @@ class LocalMap:
         dx, dy = ox - int(self._origin[0]), oy - int(self._origin[1])
         if dx == 0 and dy == 0:
             return
-        nx, ny, _ = self.shape
-        r = self.config.inflation_voxels
         new_l, new_i = self._spare_logodds, self._spare_infl
-        new_l.fill(self._l["l_unknown"])
-        new_i.fill(0)
-        if abs(dx) < nx and abs(dy) < ny:
-            xs, xe = max(0, -dx), nx - max(0, dx)
-            ys, ye = max(0, -dy), ny - max(0, dy)
-            new_l[xs:xe, ys:ye] = self._logodds[xs + dx:xe + dx, ys + dy:ye + dy]
-            new_i[xs:xe, ys:ye] = self._infl[xs + dx:xe + dx, ys + dy:ye + dy]
-            # dilation counts that lost neighbours (the cut edge) or have none yet (the new
-            # strip next to the kept content) are recounted
-            l_occ = self._l["l_occ"]
-            if dx != 0:
-                for lo, hi in ((0, xs + r), (xe - r, nx)):
-                    _recount_box(new_l, l_occ, r, new_i, lo, hi, 0, ny)
-            if dy != 0:
-                for lo, hi in ((0, ys + r), (ye - r, ny)):
-                    _recount_box(new_l, l_occ, r, new_i, 0, nx, lo, hi)
+        _shift_window(self._logodds, self._infl, new_l, new_i, dx, dy,
+                      self.config.inflation_voxels, self._l["l_unknown"], self._l["l_occ"])
         self._spare_logodds, self._logodds = self._logodds, new_l
         self._spare_infl, self._infl = self._infl, new_i
         self._origin[0], self._origin[1] = ox, oy
@@ -1141,24 +973,8 @@ class LocalMap:
         n = self._project(frame)
         return self._pts[:n].copy(), self._hit[:n].astype(bool)
 
-    def _check_frame(self, frame: DepthFrame) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        if not isinstance(frame, DepthFrame):
-            raise TypeError(f"frame must be a DepthFrame, got {type(frame).__name__}")
-        depth = np.asarray(frame.depth)
-        cam = self.camera
-        if depth.shape != (cam.height, cam.width):
-            raise ValueError(f"frame.depth has shape {depth.shape}, the map's camera is "
-                             f"{cam.height} x {cam.width} (pass camera= to LocalMap)")
-        p = np.asarray(frame.p_world_camera, dtype=np.float64).reshape(-1)
-        r = np.ascontiguousarray(frame.r_world_optical, dtype=np.float64)
-        if p.shape != (3,) or not np.all(np.isfinite(p)):
-            raise ValueError(f"frame.p_world_camera must be 3 finite numbers, got {p}")
-        if r.shape != (3, 3) or not np.all(np.isfinite(r)):
-            raise ValueError("frame.r_world_optical must be a finite 3x3 rotation")
-        return depth, p, r
-
     def _project(self, frame: DepthFrame) -> int:
-        depth, p, r = self._check_frame(frame)
+        depth, p, r = _frame_arrays(frame, self.camera)
         cfg, cam = self.config, self.camera
         return _project(depth, float(cam.fx), float(cam.fy), float(cam.cx), float(cam.cy), r,
                         p, cfg.skip_pixel, cfg.depth_margin_px, cfg.min_depth_m,
@@ -1174,8 +990,8 @@ class LocalMap:
         (K, 3) arrays of lower and upper corners, world m): end points inside any of these
         boxes are left out, neither hits nor rays (NavRL's map does this in the boxes of
         the moving obstacles its detector tracks)."""
-        depth, p, r = self._check_frame(frame)
-        boxes = None if exclude_boxes is None else self._boxes(exclude_boxes)
+        depth, p, r = _frame_arrays(frame, self.camera)
+        boxes = None if exclude_boxes is None else _as_boxes(exclude_boxes)
         shifted = self._recentre(p)
         n = self._project(frame)
         if boxes is not None and len(boxes[0]):
@@ -1199,25 +1015,13 @@ class LocalMap:
         return FuseStats(rays=int(n), hit_rays=int(n_hit), voxels_updated=int(nt),
                          shifted=shifted)
 
-    @staticmethod
-    def _boxes(boxes) -> tuple[np.ndarray, np.ndarray]:
-        try:
-            lo, hi = (np.ascontiguousarray(np.asarray(b, dtype=np.float64).reshape(-1, 3))
-                      for b in boxes)
-        except (TypeError, ValueError):
-            raise ValueError("boxes must be a pair (lower corners, upper corners) of (K, 3) "
-                             "arrays") from None
-        if lo.shape != hi.shape or not (np.all(np.isfinite(lo)) and np.all(np.isfinite(hi))):
-            raise ValueError("boxes: lower and upper corners must be finite and as many")
-        return lo, hi
-
     def set_free(self, boxes) -> int:
         """Make every voxel of the window from the one holding a box's lower corner to the
         one holding its upper corner known free (log-odds at the lower clamp), for each of
         ``boxes`` (a pair of (K, 3) arrays of lower and upper corners, world m), as the
         original NavRL map's ``freeRegions`` does for the moving obstacles its detector
         reports. Returns how many occupied voxels it freed."""
-        lo, hi = self._boxes(boxes)
+        lo, hi = _as_boxes(boxes)
         if not len(lo):
             return 0
         d_occ, freed = _set_free(lo, hi, self._inv_res, self._origin, self._logodds.reshape(-1),
@@ -1235,9 +1039,7 @@ class LocalMap:
         self._infl.fill(0)
         self._occupied_count = 0
         self._revision += 1
-        self._esdf = None
-        self._esdf_origin = None
-        self._esdf_frame = -1
+        self._esdf.forget()
 
     # -- queries -------------------------------------------------------------------------------
     def _ask(self, points, kind: int):
@@ -1326,7 +1128,7 @@ class LocalMap:
         _planning_grid(self._infl, int(self._origin[2]), self.k_floor, self.k_ceil, out)
         return out
 
-    # -- ESDF ----------------------------------------------------------------------------------
+    # -- ESDF (maps.map_esdf) -----------------------------------------------------------------
     def update_esdf(self, center_m=None, half_extent_m: float | None = None,
                     half_extent_z_m: float | None = None) -> np.ndarray:
         """Recompute the signed ESDF from the planning occupancy; returns the field
@@ -1347,89 +1149,36 @@ class LocalMap:
         ``revision``), it returns the field it computed then, the same array: callers must
         not modify it.
         """
-        nx, ny, nz = self.shape
-        x0, x1, y0, y1 = 0, nx, 0, ny
-        z0, z1 = 0, nz
-        if half_extent_z_m is not None:
-            hz = float(half_extent_z_m)
-            if not (math.isfinite(hz) and hz > 0):
-                raise ValueError(f"half_extent_z_m must be a positive number, got "
-                                 f"{half_extent_z_m!r}")
-            cz = None
-            if center_m is not None and np.asarray(center_m).reshape(-1).shape == (3,):
-                cz = float(np.asarray(center_m, dtype=np.float64).reshape(-1)[2])
-            elif self.last_camera_m is not None:
-                cz = float(self.last_camera_m[2])
-            if cz is not None and math.isfinite(cz):
-                ck = math.floor(cz * self._inv_res) - int(self._origin[2])
-                nhz = int(round(hz * self._inv_res))
-                z0, z1 = max(0, ck - nhz), min(nz, ck + nhz + 1)
-                if z1 - z0 < 2:
-                    z0, z1 = 0, nz
-        if half_extent_m is not None:
-            h = float(half_extent_m)
-            if not (math.isfinite(h) and h > 0):
-                raise ValueError(f"half_extent_m must be a positive number, got {half_extent_m!r}")
-            if center_m is None:
-                c = self.window_center_m[:2] if self.last_camera_m is None \
-                    else self.last_camera_m[:2]
-            else:
-                c = np.asarray(center_m, dtype=np.float64).reshape(-1)[:2]
-                if c.shape != (2,) or not np.all(np.isfinite(c)):
-                    raise ValueError(f"center_m must be finite (x, y), got {center_m!r}")
-            x0, x1, y0, y1 = self._esdf_box_xy(c, h)
-            if x1 - x0 < 2 or y1 - y0 < 2:
-                raise ValueError("the ESDF box does not overlap the window (by >= 2 voxels)")
-        key = (self._revision, int(self._origin[0]), int(self._origin[1]), x0, x1, y0, y1,
-               z0, z1)
-        if self._esdf is not None and key == self._esdf_key:
-            # the same box of the same planning occupancy: the same field
-            self._esdf_frame = self._frames
-            return self._esdf
-        plan = np.ascontiguousarray(self.planning_grid()[x0:x1, y0:y1, z0:z1])
-        pos = np.empty(plan.shape)
-        _signed_esdf(plan, self.resolution_m, np.empty(plan.shape, np.float32),
-                     np.empty(plan.shape, np.float32), pos)
-        self._esdf = pos
-        self._esdf_key = key
-        self._esdf_origin = self._origin + np.array([x0, y0, z0])
-        self._esdf_frame = self._frames
-        return pos
-
-    def _esdf_box_xy(self, c, h: float) -> tuple[int, int, int, int]:
-        """Window voxel range x0, x1, y0, y1 of the horizontal ESDF box of half extent h
-        (m) centred on the voxel of c (x, y), clipped to the window."""
-        nx, ny = self.shape[:2]
-        ci = np.floor(np.asarray(c, dtype=np.float64)[:2] * self._inv_res).astype(np.int64) \
-            - self._origin[:2]
-        nh = int(round(h * self._inv_res))
-        lo, hi = ci - nh, ci + nh + 1  # 2 nh + 1 voxels centred on c's voxel
-        x0, y0 = (int(v) for v in np.clip(lo, 0, [nx, ny]))
-        x1, y1 = (int(v) for v in np.clip(hi, 0, [nx, ny]))
-        return x0, x1, y0, y1
+        return self._esdf.update(self, center_m, half_extent_m, half_extent_z_m)
 
     def esdf_box_overlaps(self, center_m, half_extent_m: float) -> bool:
         """Whether :meth:`update_esdf` can take the box ``center_m (x, y) +-
         half_extent_m``: it overlaps the window by at least 2 voxels each way."""
-        x0, x1, y0, y1 = self._esdf_box_xy(center_m, float(half_extent_m))
+        x0, x1, y0, y1 = box_xy(self.shape, self._origin, self._inv_res, center_m,
+                                float(half_extent_m))
         return x1 - x0 >= 2 and y1 - y0 >= 2
 
     @property
     def esdf_origin_index(self) -> np.ndarray | None:
         """Global voxel index of the ESDF field's first voxel (None before the first
         :meth:`update_esdf`)."""
-        return None if self._esdf_origin is None else self._esdf_origin.copy()
+        return None if self._esdf.origin is None else self._esdf.origin.copy()
+
+    @property
+    def esdf_frame(self) -> int:
+        """``frames_fused`` when the ESDF was last computed (-1: never)."""
+        return self._esdf.frame
 
     def esdf(self, points) -> tuple:
         """(distance, gradient) at points (..., 3): trilinear interpolation of the last
         :meth:`update_esdf` field between voxel centres and its analytic gradient
         (shapes (...) and (..., 3)). Raises RuntimeError before the first update."""
-        if self._esdf is None:
+        if self._esdf.field is None:
             raise RuntimeError("call update_esdf() before querying the ESDF")
         p, shape = _as_points(points)
         dist = np.empty(len(p))
         grad = np.empty((len(p), 3))
-        bad = esdf_eval(self._esdf, self._esdf_origin, self._inv_res, p, dist, grad)
+        bad = esdf_eval(self._esdf.field, self._esdf.origin, self._inv_res, p, dist, grad)
         if bad:
             raise ValueError(f"points must be finite ({bad} are not)")
         return _shaped(dist, shape), grad.reshape(shape + (3,))

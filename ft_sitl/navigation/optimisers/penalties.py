@@ -26,7 +26,7 @@ import math
 import numpy as np
 from numba import njit
 
-from ft_sitl.navigation.maps.mapping import trilinear_point
+from ft_sitl.navigation.maps.map_esdf import trilinear_point
 
 ORDER = 3  # cubic B-splines; the first (and last) ORDER control points are fixed
 
