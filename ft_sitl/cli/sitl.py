@@ -208,60 +208,62 @@ def _serve(args, geo, loopback, p, scenario, spawn, fleet, wind, estimator, actu
     for u, b in zip(urls, buses):
         u["mqtt"] = b.pub.url
         u["bus_vehicle"] = b.pub.vehicle
-    if args.json:
-        out = {"platform": p.name, "vehicles": urls}
-        if scenario is not None:
-            out["scenario"] = scenario.summary()
-            out["spawn_enu"] = spawn
-        print(json.dumps(out, indent=2), flush=True)
-    else:
-        paced = "" if server.pace_span_s is None else \
-            f", paced by its clients (at most {server.pace_span_s:g} s ahead)"
-        print(f"ft-sitl {__version__}: {args.instances} x {p.name}, speed factor "
-              f"{args.speed_factor:g}{paced}, home {geo.lat_deg:.6f}, {geo.lon_deg:.6f}, "
-              f"{geo.alt_m:.1f} m", flush=True)
-        if not loopback:
-            print(f"warning: listening on {args.bind}, reachable from other machines",
-                  flush=True)
-        if wind is not None:
-            print("wind: " + ", ".join(f"{k} {v:g}" if isinstance(v, float) else f"{k} {v}"
-                                       for k, v in wind.items()), flush=True)
-        if actuators is not None:
-            print("actuators: " + ", ".join(f"{k} {v:g}" for k, v in actuators.items()),
-                  flush=True)
-        if estimator is not None:
-            print("estimator: " + ", ".join(f"{k} {v}" for k, v in estimator.items()),
-                  flush=True)
-        for u in urls:
-            if args.autopilot == "ardupilot":
-                outs = f"   out {', '.join(u['out'])}" if u["out"] else ""
-                print(f"  vehicle sysid {u['sysid']} (ArduCopter): SERIAL0 {u['serial'][0]}"
-                      f"   SERIAL1/2 {', '.join(u['serial'][1:])}{outs}", flush=True)
-                continue
-            print(f"  vehicle sysid {u['sysid']}: MAVSDK {u['mavsdk']}   pymavlink "
-                  f"{u['pymavlink']}   GCS {u['gcs']}", flush=True)
-        if buses:
-            where = "embedded broker" if broker is not None else "broker"
-            print(f"MQTT bus ({where}) {buses[0].pub.url}: topics ft-sitl/v1/<vehicle>/..., "
-                  f"vehicles {', '.join(b.pub.vehicle for b in buses)}", flush=True)
-        if scenario is not None:
-            o = scenario.takeoff
-            print(f"scenario {scenario.name}: {scenario.obstacle_count} obstacles, ceiling "
-                  f"{scenario.ceiling:g} m; in vehicle 1's local NED frame (origin = its "
-                  f"takeoff point) start {_ned(enu_to_ned(scenario.start - o))}, goal "
-                  f"{_ned(enu_to_ned(scenario.goal - o))}, start heading "
-                  f"{_heading_deg(scenario.start_yaw):.1f} deg", flush=True)
-            if scenario.movers is not None:
-                m = scenario.movers
-                kinds = {}
-                for d in m.describe():
-                    kinds[d["shape"]] = kinds.get(d["shape"], 0) + 1
-                shown = ", ".join(f"{n} x {k}" for k, n in kinds.items()) or "none placed"
-                where = "on the bus (topic ft-sitl/v1/<vehicle>/movers) and " if buses \
-                    else ""
-                print(f"movers: {m.count} ({shown}), moving from simulated time 0; their "
-                      f"state {where}as ADSB_VEHICLE", flush=True)
-        print("Ctrl-C stops.", flush=True)
+
+    def announce():  # once the server listens: a script may connect as soon as it reads this
+        if args.json:
+            out = {"platform": p.name, "vehicles": urls}
+            if scenario is not None:
+                out["scenario"] = scenario.summary()
+                out["spawn_enu"] = spawn
+            print(json.dumps(out, indent=2), flush=True)
+        else:
+            paced = "" if server.pace_span_s is None else \
+                f", paced by its clients (at most {server.pace_span_s:g} s ahead)"
+            print(f"ft-sitl {__version__}: {args.instances} x {p.name}, speed factor "
+                  f"{args.speed_factor:g}{paced}, home {geo.lat_deg:.6f}, {geo.lon_deg:.6f}, "
+                  f"{geo.alt_m:.1f} m", flush=True)
+            if not loopback:
+                print(f"warning: listening on {args.bind}, reachable from other machines",
+                      flush=True)
+            if wind is not None:
+                print("wind: " + ", ".join(f"{k} {v:g}" if isinstance(v, float) else f"{k} {v}"
+                                           for k, v in wind.items()), flush=True)
+            if actuators is not None:
+                print("actuators: " + ", ".join(f"{k} {v:g}" for k, v in actuators.items()),
+                      flush=True)
+            if estimator is not None:
+                print("estimator: " + ", ".join(f"{k} {v}" for k, v in estimator.items()),
+                      flush=True)
+            for u in urls:
+                if args.autopilot == "ardupilot":
+                    outs = f"   out {', '.join(u['out'])}" if u["out"] else ""
+                    print(f"  vehicle sysid {u['sysid']} (ArduCopter): SERIAL0 {u['serial'][0]}"
+                          f"   SERIAL1/2 {', '.join(u['serial'][1:])}{outs}", flush=True)
+                    continue
+                print(f"  vehicle sysid {u['sysid']}: MAVSDK {u['mavsdk']}   pymavlink "
+                      f"{u['pymavlink']}   GCS {u['gcs']}", flush=True)
+            if buses:
+                where = "embedded broker" if broker is not None else "broker"
+                print(f"MQTT bus ({where}) {buses[0].pub.url}: topics ft-sitl/v1/<vehicle>/..., "
+                      f"vehicles {', '.join(b.pub.vehicle for b in buses)}", flush=True)
+            if scenario is not None:
+                o = scenario.takeoff
+                print(f"scenario {scenario.name}: {scenario.obstacle_count} obstacles, ceiling "
+                      f"{scenario.ceiling:g} m; in vehicle 1's local NED frame (origin = its "
+                      f"takeoff point) start {_ned(enu_to_ned(scenario.start - o))}, goal "
+                      f"{_ned(enu_to_ned(scenario.goal - o))}, start heading "
+                      f"{_heading_deg(scenario.start_yaw):.1f} deg", flush=True)
+                if scenario.movers is not None:
+                    m = scenario.movers
+                    kinds = {}
+                    for d in m.describe():
+                        kinds[d["shape"]] = kinds.get(d["shape"], 0) + 1
+                    shown = ", ".join(f"{n} x {k}" for k, n in kinds.items()) or "none placed"
+                    where = "on the bus (topic ft-sitl/v1/<vehicle>/movers) and " if buses \
+                        else ""
+                    print(f"movers: {m.count} ({shown}), moving from simulated time 0; their "
+                          f"state {where}as ADSB_VEHICLE", flush=True)
+            print("Ctrl-C stops.", flush=True)
 
     async def main():
         try:
@@ -270,6 +272,7 @@ def _serve(args, geo, loopback, p, scenario, spawn, fleet, wind, estimator, actu
             server.close()
             _check_ports(args)
             raise CliError(f"cannot listen on {args.bind}: {exc.strerror}") from None
+        announce()
         loop = asyncio.get_running_loop()
         for sig in (signal.SIGINT, signal.SIGTERM):
             loop.add_signal_handler(sig, server.stop)

@@ -12,7 +12,13 @@ import time
 import pytest
 
 from ft_sitl.mavlink.instances import InstanceBusy, free_instances, instances_held
-from ft_sitl.mavlink.ports import instance_ports, port_holders, taken_message, taken_ports
+from ft_sitl.mavlink.ports import (
+    instance_ports,
+    port_holders,
+    taken_message,
+    taken_ports,
+    udp_port_free,
+)
 
 # numbers far above the SITLs' own (0..59): no other test or program uses them
 HIGH = 900
@@ -81,7 +87,8 @@ def _start_auto(*args):
 
 
 def _read_json(proc) -> dict:
-    """The JSON the sitl prints once its numbers are held (before it simulates)."""
+    """The JSON the sitl prints once its numbers are held and its ports bound (before it
+    simulates)."""
     text = ""
     for line in proc.stdout:
         text += line
@@ -103,6 +110,11 @@ def test_concurrent_auto_sitls_take_different_numbers_and_skip_taken_ports():
         procs = [_start_auto("--instances", "2"), _start_auto()]
         outs = [_read_json(p) for p in procs]
         numbers = [v["instance"] for o in outs for v in o["vehicles"]]
+        # the JSON comes once the server listens: a script may connect as soon as it reads
+        # it (before, it came first and the ports were bound after it)
+        for v in outs[0]["vehicles"] + outs[1]["vehicles"]:
+            assert not udp_port_free("127.0.0.1", v["ports"]["api_listen"]), v
+            assert not udp_port_free("127.0.0.1", v["ports"]["gcs_listen"]), v
         assert len(set(numbers)) == 3, numbers
         assert first not in numbers
         a, b = outs
