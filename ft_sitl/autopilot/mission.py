@@ -111,11 +111,9 @@ class MissionExecutor:
         self.takeoff = None
         self.jumps = {}
         self.roi = None
-        self.spline.reset()
-        self.queue.clear()
+        self._item_afresh()
         c.mission_seq = 0
         c.mission_state = MissionState.NOT_STARTED if items else MissionState.NO_MISSION
-        self.item_started = False
         if not items and c.main_mode == MAIN_AUTO and c.sub_mode == SUB_MISSION:
             c.switch_mode(MAIN_AUTO, SUB_LOITER)
             c.auto.hold_here()
@@ -126,10 +124,7 @@ class MissionExecutor:
         if not 0 <= seq < max(1, len(c.mission)):
             return Result.DENIED
         c.mission_seq = seq
-        self.item_started = False
-        self.item_hold_until = None
-        self.spline.reset()
-        self.queue.clear()
+        self._item_afresh()
         if c.mission_state == MissionState.COMPLETE:
             c.mission_state = MissionState.NOT_STARTED
         return Result.ACCEPTED
@@ -143,6 +138,12 @@ class MissionExecutor:
                 c.mission_seq = 0
                 self.jumps = {}  # (a restarted mission jumps again, as ArduPilot's)
         c.mission_state = MissionState.ACTIVE
+        self._item_afresh()
+
+    def _item_afresh(self) -> None:
+        """The current item starts from its beginning: not begun, no hold running, no
+        spline curve and no DO/condition item queued from before (a new mission, a jump
+        to an item, AUTO.MISSION entered)."""
         self.item_started = False
         self.item_hold_until = None
         self.spline.reset()
