@@ -141,7 +141,9 @@ def navigator_params(spec: TrialSpec, cls=_LOOK_UP) -> dict:
     """The navigator's parameters in this trial: the spec's, plus what the trial's protocol
     version fixed that the navigator's defaults have changed since (versions 1 and 2 flew
     the benchmark camera at 15 Hz; before 7 NavRL saw no moving obstacles; before 8 its
-    shield clustered within 0.2 m). ``cls`` as for :func:`navigator_camera`."""
+    shield clustered within 0.2 m; before 11 EGO planned with one initial path and
+    stopped at once on a collision less than 0.8 s ahead). ``cls`` as for
+    :func:`navigator_camera`."""
     params = dict(spec.algorithm_params)
     rules = PROTOCOLS[spec.protocol]
     if cls is _LOOK_UP:
@@ -157,6 +159,10 @@ def navigator_params(spec: TrialSpec, cls=_LOOK_UP) -> dict:
     if rules.navrl_shield_cluster_m is not None and "shield_cluster_radius_m" in names and \
             "shield_cluster_radius_m" not in params:
         params["shield_cluster_radius_m"] = rules.navrl_shield_cluster_m
+    if rules.ego_replan is not None and "replan_rule" in names and \
+            "replan_rule" not in params:
+        params["replan_rule"] = rules.ego_replan[0]
+        params.setdefault("emergency_time_s", rules.ego_replan[1])
     return params
 
 

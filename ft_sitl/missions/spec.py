@@ -88,6 +88,11 @@ class ProtocolRules:
     #: degrees), so that a lockstep wire trial flies the same numbers; before, in full
     #: float64 precision
     setpoints_as_on_the_wire: bool = False
+    #: EGO's replanning rule and emergency time (``replan_rule``, ``emergency_time_s``)
+    #: where the spec does not set them; None: the navigator's defaults, the original's
+    #: (three initial paths per plan; a collision replanned before any stop, which waits
+    #: for standstill; 1.0 s)
+    ego_replan: tuple[str, float] | None = ("single", 0.8)
 
 
 def _versions(first: ProtocolRules, *changes: tuple[str, dict]) -> dict[int, ProtocolRules]:
@@ -148,6 +153,15 @@ PROTOCOLS = _versions(
      "degrees), so that a navigator flown over MAVLink in lockstep gives the in-process "
      "row column for column but the wall times; observations and depth frames are as in 9",
      {"setpoints_as_on_the_wire": True}),
+    ("EGO replans as the original (ego_replan_fsm.cpp, planner_manager.cpp): a plan from "
+     "the trajectory tries three initial paths in turn (the rest of the trajectory, a "
+     "polynomial, a random one), a plan from rest a polynomial and then random ones; a "
+     "collision on the trajectory is replanned at once, and only when that plan fails less "
+     "than emergency_time 1.0 s before the collision does the vehicle stop, planning anew "
+     "from its own state once slower than 0.1 m/s (before: one initial path, and a "
+     "collision less than 0.8 s ahead stopped it at once, planning from rest at the stop "
+     "point in the same step); the rest as in 10",
+     {"ego_replan": None}),
 )
 #: the version new trials and campaigns fly unless they name another
 PROTOCOL_VERSION = max(PROTOCOLS)

@@ -87,13 +87,14 @@ def test_the_shipped_policy_says_how_it_was_trained():
     assert json.loads(m["software"])["torch"]
     # trained under protocol 7, whose rules the environment still has: 8 changed only the
     # geofence arming check and NavRL's shield, 9 only the wire's random streams, 10 only
-    # the precision of the trial driver's setpoints, none of which a Gym episode has
+    # the precision of the trial driver's setpoints, 11 only EGO's replanning, none of
+    # which a Gym episode has
     trained = PROTOCOLS[m["protocol"]]
-    assert m["protocol"] == 7 and PROTOCOL_VERSION == 10
-    assert dataclasses.replace(PROTOCOLS[10], version=7, summary=trained.summary,
+    assert m["protocol"] == 7 and PROTOCOL_VERSION == 11
+    assert dataclasses.replace(PROTOCOLS[11], version=7, summary=trained.summary,
                                arm_fence_check=False, navrl_shield_cluster_m=0.2,
-                               wire_streams_shared=False,
-                               setpoints_as_on_the_wire=False) == trained
+                               wire_streams_shared=False, setpoints_as_on_the_wire=False,
+                               ego_replan=("single", 0.8)) == trained
 
 
 def _gym_and_navigator():

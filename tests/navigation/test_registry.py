@@ -14,9 +14,11 @@ CAMERA = {"camera": "benchmark", "camera_width": None, "camera_height": None,
 # 5da4228): a changed default changes how a planner flies
 DEFAULTS = {
     "straight": {"speed_m_s": None},
+    # (EGO's replanning rule and emergency time: the original's from protocol 11, which
+    # protocols 1-10 pin back to "single" and 0.8 s through missions.plan.navigator_params)
     "ego": {"max_acc_m_s2": 3.0, "planning_horizon_m": 7.5, "replan_threshold_m": 1.5,
-            "no_replan_threshold_m": 2.0, "emergency_time_s": 0.8, "latency_s": 0.01,
-            "measured_latency": False, **CAMERA},
+            "no_replan_threshold_m": 2.0, "emergency_time_s": 1.0, "latency_s": 0.01,
+            "measured_latency": False, **CAMERA, "replan_rule": "original"},
     "fast": {"max_acc_m_s2": 2.0, "planning_horizon_m": 7.0, "replan_threshold_m": 1.5,
              "no_replan_threshold_m": 2.0, "emergency_time_s": 0.8, "latency_s": 0.02,
              "measured_latency": False, **CAMERA},

@@ -61,7 +61,7 @@ def test_inprocess_and_mavlink_transports_agree(tmp_path, navrl_checkpoint, monk
     assert a.keys() == b.keys() and len(a) == 3
     for key in a:
         here, there = a[key], b[key]
-        assert here["protocol_version"] == 10
+        assert here["protocol_version"] == 11
         differ = {k: (here[k], there.get(k)) for k in here
                   if k not in WALL_COLUMNS and json.dumps(here[k]) != json.dumps(there.get(k))}
         assert not differ, (key, differ)
