@@ -10,6 +10,10 @@ Joins OUT's rows with TABLE's by trial id and prints, as Markdown:
 - whether the order of the algorithms by success, overall and in each family, is the same.
 
     PYTHONPATH=$PWD .venv/bin/python scripts/compare_refly.py TABLE OUT > OUT/comparison.md
+
+``--pair-on-spec`` pairs rows whose specs are the same but for the protocol version (two
+samples of refly_sample.py ``--protocol``, whose trial ids differ); ``--labels A B`` names
+the two sides in the tables (default: stored, re-flown under the pins).
 """
 
 from __future__ import annotations
@@ -54,13 +58,23 @@ def paired(a: pd.Series, b: pd.Series) -> str:
     return f"{p:.2f} ({down} lost, {up} gained)"
 
 
+LABELS = ["stored", "re-flown under the pins"]
+
+
+def spec_key(spec: str) -> str:
+    """A trial's spec without its protocol version: the pairing key of --pair-on-spec."""
+    d = json.loads(spec)
+    d.pop("protocol", None)
+    return json.dumps(d, sort_keys=True)
+
+
 def table(both: pd.DataFrame, by: list[str]) -> list[str]:
     rows = []
     for key, g in both.groupby(by, sort=True):
         key = key if isinstance(key, tuple) else (key,)
         rows.append([*key, rate(g.success_s), rate(g.success_n),
                      paired(g.success_s, g.success_n)])
-    return md.table([*by, "stored", "re-flown under the pins", "McNemar p"], rows,
+    return md.table([*by, *LABELS, "McNemar p"], rows,
                     [""] * len(by) + ["r"] * 3).split("\n")
 
 
@@ -74,16 +88,27 @@ def main() -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("table", type=Path)
     ap.add_argument("out", type=Path)
+    ap.add_argument("--pair-on-spec", action="store_true",
+                    help="pair rows by their spec without the protocol version")
+    ap.add_argument("--labels", nargs=2, metavar=("A", "B"), default=None)
     args = ap.parse_args()
-    stored = read(args.table).set_index("trial_id")
-    new = read(args.out).set_index("trial_id")
+    if args.labels:
+        LABELS[:] = args.labels
+    key = (lambda df: df["spec"].map(spec_key)) if args.pair_on_spec else \
+        (lambda df: df["trial_id"])
+    stored, new = read(args.table), read(args.out)
+    stored = stored.set_index(key(stored), drop=False)
+    new = new.set_index(key(new), drop=False)
     missing = [t for t in new.index if t not in stored.index]
     if missing:
         raise SystemExit(f"{len(missing)} re-flown rows are not in {args.table}")
     rows = []
-    for tid, r in new.iterrows():
-        s = stored.loc[tid]
+    for k, r in new.iterrows():
+        s = stored.loc[k]
+        tid = r["trial_id"]
         d = differences({**r.to_dict(), "trial_id": tid}, {**s.to_dict(), "trial_id": tid})
+        if args.pair_on_spec:  # (the version and what names it differ by construction)
+            d = [c for c in d if c.split(" ")[0] not in ("spec", "protocol_version")]
         rows.append({"trial_id": tid, "algorithm": r.algorithm, "family": r.family,
                      "success_s": bool(s.success), "success_n": bool(r.success),
                      "reason_s": s.reason, "reason_n": r.reason, "identical": not d})

@@ -7,7 +7,12 @@ ft_sitl.numeric_env). The re-flown rows keep their trial ids: OUT's rows compare
 one with TABLE's (scripts/compare_refly.py).
 
     PYTHONPATH=$PWD .venv/bin/python scripts/refly_sample.py TABLE OUT \
-        [--per-stratum 7] [--seed 0] [--workers 2]
+        [--per-stratum 7] [--seed 0] [--workers 2] [--algorithm A ...] [--protocol N]
+
+``--algorithm`` keeps only that algorithm's rows (repeatable). ``--protocol N`` flies the
+picked specs under protocol version N instead of their own: what a protocol change does,
+measured on the same trials (their ids change with the version; pair two such samples
+with ``scripts/compare_refly.py A B --pair-on-spec``).
 
 Issue 41: the paper's 12,600 rows were made before the pins; this re-flies at least 700
 of them under the pins to see whether the committed rates survive another machine.
@@ -16,6 +21,7 @@ of them under the pins to see whether the committed rates survive another machin
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import json
 from pathlib import Path
 
@@ -45,10 +51,10 @@ class SampleCampaign:
     """The few things run_campaign asks of a campaign, for a fixed list of specs."""
 
     def __init__(self, name: str, specs: list[TrialSpec], source: str, seed: int,
-                 per_stratum: int):
+                 per_stratum: int, **more):
         self.name, self._specs = name, specs
         self._doc = {"name": name, "refly_of": source, "sample_seed": seed,
-                     "per_stratum": per_stratum, "trials": len(specs)}
+                     "per_stratum": per_stratum, "trials": len(specs), **more}
 
     def trial_specs(self) -> list[TrialSpec]:
         return list(self._specs)
@@ -64,13 +70,26 @@ def main() -> int:
     ap.add_argument("--per-stratum", type=int, default=7)
     ap.add_argument("--seed", type=int, default=0)
     ap.add_argument("--workers", type=int, default=2)
+    ap.add_argument("--algorithm", action="append", default=None,
+                    help="only this algorithm's rows (repeatable)")
+    ap.add_argument("--protocol", type=int, default=None,
+                    help="fly the picked specs under this protocol version")
     args = ap.parse_args()
     table = pd.read_parquet(args.table / "trials.parquet")
+    if args.algorithm:
+        unknown = sorted(set(args.algorithm) - set(table["algorithm"].astype(str)))
+        if unknown:
+            raise SystemExit(f"--algorithm: {', '.join(unknown)} not in {args.table}")
+        table = table[table["algorithm"].isin(args.algorithm)]
     picked = pick(table, args.per_stratum, args.seed)
     specs = [TrialSpec.from_dict(json.loads(s)) for s in picked["spec"]]
     assert [s.trial_id for s in specs] == list(picked["trial_id"]), "ids do not re-hash"
+    more = {}
+    if args.protocol is not None:
+        specs = [dataclasses.replace(s, protocol=args.protocol) for s in specs]
+        more = {"protocol": args.protocol, "algorithms": args.algorithm}
     camp = SampleCampaign(f"refly-{args.table.name}", specs, str(args.table), args.seed,
-                          args.per_stratum)
+                          args.per_stratum, **more)
     summary = run_campaign(camp, args.out, workers=args.workers)
     print(summary)
     return 0
