@@ -115,13 +115,14 @@ def main() -> int:
     both = pd.DataFrame(rows)
     n = len(both)
     same_end = int((both.reason_s == both.reason_n).sum())
-    lines = [f"{n} rows re-flown: {int(both.identical.sum())} identical to the stored row, "
-             f"{same_end} ending the same way ({same_end / n:.1%}), "
+    a_side, b_side = LABELS
+    lines = [f"{n} rows paired: {int(both.identical.sum())} identical ({b_side} against "
+             f"{a_side}), {same_end} ending the same way ({same_end / n:.1%}), "
              f"{int((both.success_s != both.success_n).sum())} changing success.", ""]
     flips = both[both.reason_s != both.reason_n].groupby(
         ["algorithm", "reason_s", "reason_n"]).size()
     if len(flips):
-        lines += ["| algorithm | stored | re-flown | rows |", "|---|---|---|---:|"]
+        lines += [f"| algorithm | {a_side} | {b_side} | rows |", "|---|---|---|---:|"]
         lines += [f"| {a} | {rs} | {rn} | {k} |" for (a, rs, rn), k in flips.items()]
         lines.append("")
     for by in (["algorithm"], ["family"], ["algorithm", "family"]):
@@ -129,9 +130,9 @@ def main() -> int:
     agree = []
     for fam in [None, *sorted(both.family.unique())]:
         a, b = order(both, "success_s", fam), order(both, "success_n", fam)
-        agree.append(f"- {fam or 'all families'}: stored {' > '.join(a)}; re-flown "
+        agree.append(f"- {fam or 'all families'}: {a_side} {' > '.join(a)}; {b_side} "
                      f"{' > '.join(b)}{'' if a == b else '  (ORDER CHANGED)'}")
-    lines += ["Order of the algorithms by success (ties in the order of the stored table):",
+    lines += [f"Order of the algorithms by success (ties in the order of {a_side}):",
               *agree]
     print("\n".join(lines))
     summary = {"rows": n, "identical": int(both.identical.sum()), "same_end": same_end}
