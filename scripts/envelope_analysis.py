@@ -4,7 +4,12 @@ their rows together, the tables of missions/envelope_report.py as CSV and Markdo
 figures as PNG and SVG, and each row's time-optimal bound (the scenario's shortest path
 for the platform's body, cached in ``--cache``)::
 
-    .venv/bin/python scripts/envelope_analysis.py DIR [DIR ...] --out docs/results/envelope/analysis
+    .venv/bin/python scripts/envelope_analysis.py DIR [DIR ...] \
+        --out docs/results/envelope/analysis [--protocol ego=11]
+
+``--protocol ALGO=N`` takes that algorithm's rows only from protocol N: the envelope
+campaigns fly protocol 9, and EGO's cells again under 11 (its original replanning), whose
+directories are given too.
 """
 
 # isort: off
@@ -42,8 +47,20 @@ def main() -> None:
     ap.add_argument("--n-boot", type=int, default=envelope.N_BOOT)
     ap.add_argument("--families", nargs="+", metavar="FAMILY",
                     help="only these scenario families (e.g. the ones flown complete)")
+    ap.add_argument("--protocol", action="append", default=[], metavar="ALGO=N",
+                    help="take ALGO's rows only from protocol N (repeatable), e.g. ego=11")
     args = ap.parse_args()
+    versions = {}
+    for item in args.protocol:
+        name, _, version = item.partition("=")
+        if not name or not version.isdigit():
+            ap.error(f"--protocol {item!r}: expected ALGO=N, e.g. ego=11")
+        versions[name] = int(version)
     df = to_frame([r for d in args.dirs for r in _rows(d)])
+    try:
+        df = envelope.of_protocols(df, versions).reset_index(drop=True)
+    except ValueError as exc:
+        ap.error(f"--protocol: {exc}")
     if args.families:
         df = df[df["family"].astype(str).isin(args.families)].reset_index(drop=True)
     print(f"{len(df)} rows from {len(args.dirs)} directories")

@@ -96,6 +96,25 @@ def with_levels(df: pd.DataFrame) -> pd.DataFrame:
     return out[out[LEVEL_COLUMN] != ""]
 
 
+def of_protocols(df: pd.DataFrame, versions: dict[str, int]) -> pd.DataFrame:
+    """The rows with each algorithm named in ``versions`` kept only where flown under that
+    protocol version (the others' rows as they are): how a study whose campaigns began
+    under one version takes one navigator's rows from a later one (docs/results/envelope:
+    EGO from protocol 11) without mixing two versions of it in one fit. ValueError names
+    an algorithm with no row of its version."""
+    keep = pd.Series(True, index=df.index)
+    algo = df["algorithm"].astype(str)
+    for name, version in versions.items():
+        mine = algo == name
+        chosen = mine & (df["protocol_version"] == version)
+        if not chosen.any():
+            flown = sorted(int(v) for v in pd.unique(df.loc[mine, "protocol_version"]))
+            raise ValueError(f"no {name} rows of protocol {version} (its rows: protocols "
+                             f"{flown or 'none'})")
+        keep &= ~mine | chosen
+    return df[keep]
+
+
 def series_members(df: pd.DataFrame) -> pd.DataFrame:
     """The series rows with their series: ``base`` (the base body's name without
     spaces), ``kind`` (twr or axy) and ``value`` (the varied indicator's value)."""

@@ -266,3 +266,14 @@ def test_over_the_series_the_body_holds_the_size_and_twr_is_fitted():
     assert got.loc["log TWR_max", "coef_per_sd"] > 0.5 and got.loc["log TWR_max", "p"] < 0.01
     assert math.isnan(got.loc["half span", "coef_per_sd"])
     assert got["note"].str.contains("platforms").all()
+
+
+def test_one_algorithm_s_rows_are_taken_from_one_protocol_version():
+    df = pd.DataFrame({"algorithm": ["ego", "ego", "fast", "fast", "ego"],
+                       "protocol_version": [9, 11, 9, 9, 11], "x": range(5)})
+    out = envelope.of_protocols(df, {"ego": 11})
+    assert list(out["x"]) == [1, 2, 3, 4]  # EGO's 11 rows, Fast's as they are
+    assert list(envelope.of_protocols(df, {})["x"]) == [0, 1, 2, 3, 4]
+    with pytest.raises(ValueError, match=r"no fast rows of protocol 11 \(its rows: "
+                                         r"protocols \[9\]\)"):
+        envelope.of_protocols(df, {"fast": 11})
