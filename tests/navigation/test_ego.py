@@ -140,8 +140,9 @@ IDENTITY = np.array([1.0, 0.0, 0.0, 0.0])
 
 
 def test_a_collision_is_replanned_from_the_trajectory_before_any_stop():
-    # a pillar on the line, discovered in flight: the original's rule (protocol 11) replans around it from the current trajectory
-    # and never stops; protocols 1-10's rule stopped at once and planned from rest
+    # a pillar on the line, discovered in flight: the original's rule (protocol 11)
+    # replans around it from the current trajectory and never stops; protocols 1-10's
+    # rule stopped at once and planned from rest
     pillar = _box([5.6, -0.3, 0.0], [6.0, 0.3, 3.0])
     nav, states = _fly_into(pillar, "original", seen_from_s=1.2)
     assert nav.stops == [] and not any(holding for _, holding, _, _ in states[1:])

@@ -14,8 +14,9 @@ What it does each call (``rate_hz`` 100, the original's command rate), in simula
    * a new plan when the vehicle is more than ``replan_threshold_m`` (1.5 m) from the
      current trajectory's start, unless the goal is within ``no_replan_threshold_m`` (2 m);
    * a collision check of the trajectory ahead against the map at 20 Hz, every 0.01 s of
-     it from now to 2/3 of its duration, or to its end once past 2/3. A collision is replanned from the current trajectory at once, whatever the back-off
-     (the original's "make a chance"); only when that plan fails and the collision is
+     it from now to 2/3 of its duration, or to its end once past 2/3. A collision is
+     replanned from the current trajectory at once, whatever the back-off (the
+     original's "make a chance"); only when that plan fails and the collision is
      less than ``emergency_time_s`` (1.0 s, the original's ``fsm/emergency_time_``)
      ahead is it an emergency stop: hover where the vehicle is, and once it is slower than
      :data:`STILL_M_S` plan anew from its position and velocity (the original's
